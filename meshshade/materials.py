@@ -53,7 +53,7 @@ def _rgb(name: str, value) -> np.ndarray:
     return arr
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # the generated __eq__/__hash__ fail on ndarray fields; defined below
 class Material:
     """A homogeneous translucent material.
 
@@ -109,6 +109,15 @@ class Material:
                 DiffusionValidityWarning,
                 stacklevel=3,
             )
+
+    def _key(self) -> tuple:
+        return (tuple(self.sigma_s_prime.tolist()), tuple(self.sigma_a.tolist()), self.eta, self.g, self.name)
+
+    def __eq__(self, other):
+        return self._key() == other._key() if isinstance(other, Material) else NotImplemented
+
+    def __hash__(self):
+        return hash(self._key())
 
     # --- constructors -------------------------------------------------------------------------------
     @classmethod
