@@ -11,8 +11,8 @@ Reading meshes
   ``(0, i, i+1)``, with a warning, because that changes the face count.
 * **PLY, OFF** are read by trimesh with ``process=False, maintain_order=True``: the file's vertex and face order
   are kept.
-* **GLB / glTF** scenes are concatenated in the scene graph's node order (the file's order), each instance moved
-  by its node transform (faces are re-wound under a mirroring transform). glTF positions are metres by
+* **GLB / glTF** scenes are concatenated in the file's mesh order (instances of one mesh by node name), each
+  instance moved by its node transform (faces are re-wound under a mirroring transform). glTF positions are metres by
   specification; a warning says so when ``units`` is not ``"m"`` (the unit is still the caller's choice).
 * **STL** stores three independent corners per facet, so it has no shared vertices and no vertex order to keep.
   Corners with bitwise-equal positions are merged, numbered in order of first appearance (deterministic, exact:
@@ -174,7 +174,10 @@ def _scene_arrays(scene, path: Path):
     import trimesh
 
     verts, faces, offset, skipped = [], [], 0, 0
-    for node in scene.graph.nodes_geometry:
+    # trimesh's graph traversal order is not the file's; the geometry dict is in the file's mesh order
+    rank = {name: i for i, name in enumerate(scene.geometry)}
+    nodes = sorted(scene.graph.nodes_geometry, key=lambda node: (rank[scene.graph[node][1]], str(node)))
+    for node in nodes:
         transform, name = scene.graph[node]
         geom = scene.geometry[name]
         if not isinstance(geom, trimesh.Trimesh):
