@@ -419,7 +419,10 @@ def write_mesh_ply(path, mesh: Mesh, vertex_float_props=None, vertex_colors=None
 
     The PLY then overlays the input in a viewer. The header records ``comment meshshade mm_per_unit <f>``
     (multiply positions by it for mm) and the source path. Faces are the validated (possibly re-wound) faces.
+    Refuses (``OutputError``) to overwrite the mesh's own source file.
     """
+    if mesh.source and Path(mesh.source).exists():
+        check_output_path(path, [mesh.source])
     head = [f"meshshade mm_per_unit {mesh.mm_per_unit!r} (positions in source units; times mm_per_unit = mm)"]
     if mesh.source:
         head.append(f"meshshade source {mesh.source}")

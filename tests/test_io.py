@@ -395,6 +395,15 @@ def test_write_mesh_ply_writes_source_units(tmp_path, shape):
     np.testing.assert_allclose(again.vertices, mesh.vertices, rtol=1e-6, atol=1e-5)
 
 
+def test_write_mesh_ply_refuses_to_overwrite_its_source(tmp_path, shape):
+    src = write_ply(tmp_path / "in.ply", *shape)
+    before = src.read_bytes()
+    mesh = load_mesh(src)
+    with pytest.raises(OutputError, match="same file as input"):
+        write_mesh_ply(src, mesh, {"value": np.zeros(mesh.n_vertices)})
+    assert src.read_bytes() == before
+
+
 def test_write_ply_header_layout_is_exact(tmp_path):
     out = write_ply(tmp_path / "t.ply", np.eye(3), [[0, 1, 2]], {"q": np.ones(3)}, None)
     data = out.read_bytes()
