@@ -180,9 +180,8 @@ def principal_curvatures(vertices, faces, *, radius_mm: float | None = None) -> 
     Vc, Fc = V[used], np.ascontiguousarray(remap[Fg])
 
     # area-weighted vertex normals
-    acc = np.zeros((used.size, 3))
-    for k in range(3):
-        np.add.at(acc, Fc[:, k], cross)
+    rep = np.repeat(cross, 3, axis=0)
+    acc = np.stack([np.bincount(Fc.reshape(-1), weights=rep[:, j], minlength=used.size) for j in range(3)], 1)
     nn = np.linalg.norm(acc, axis=1, keepdims=True)
     normals = np.divide(acc, nn, out=np.zeros_like(acc), where=nn > 0)
 

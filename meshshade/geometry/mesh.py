@@ -323,10 +323,9 @@ class Mesh:
     @cached_property
     def vertex_normals(self) -> np.ndarray:
         """(n, 3) float64 unit normals, area-weighted mean of the incident face normals; 0 where undefined."""
-        acc = np.zeros((self.n_vertices, 3))
-        cross = self._face_cross[0]
-        for k in range(3):
-            np.add.at(acc, self.faces[:, k], cross)
+        idx = self.faces.reshape(-1)
+        cross = np.repeat(self._face_cross[0], 3, axis=0)  # |cross| = 2 * area: area weighting
+        acc = np.stack([np.bincount(idx, weights=cross[:, j], minlength=self.n_vertices) for j in range(3)], 1)
         norm = np.linalg.norm(acc, axis=1, keepdims=True)
         return _readonly(np.divide(acc, norm, out=np.zeros_like(acc), where=norm > 0))
 

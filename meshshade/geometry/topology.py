@@ -230,7 +230,9 @@ def _nesting_parity(V, Ft, patch, n_patch, ids, vol) -> np.ndarray:
 def orient_outward(vertices, faces, topo: EdgeTopology | None = None, *, rel_volume_tol: float = 1e-9):
     """Flip closed patches so that normals point out of the enclosed material (see module docstring).
 
-    Expects consistently wound faces (``consistent_winding`` first). Open patches are left as they are: their
+    Expects consistently wound faces (``consistent_winding`` first). ``topo`` may be the edge table of the faces
+    *before* that repair: only its undirected information (edges, adjacency) is used, which flips do not change.
+    Open patches are left as they are: their
     inside is undefined. A closed patch whose |signed volume| is below ``rel_volume_tol * scale**3`` (a flat,
     doubly covered sheet) is also left alone; ``scale`` is the bounding-box diagonal of the referenced vertices.
 
