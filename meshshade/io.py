@@ -26,6 +26,8 @@ Writing
 Every output is written atomically (``atomic_write``: a temporary file in the target directory, then
 ``os.replace``; the temporary file is removed on any exception, KeyboardInterrupt included), so a failed or
 interrupted run never leaves a partial file. ``check_output_path`` refuses an output that is one of the inputs.
+Writers: ``write_ply`` / ``write_mesh_ply`` (binary PLY with per-vertex float properties and colours),
+``write_npz``, ``write_text`` (CSV tables) and ``write_figure`` (matplotlib, format from the extension).
 ``write_mesh_ply`` writes positions in the **source file's units** (so the result overlays the input in Blender or
 MeshLab) and records the factor as a ``comment meshshade mm_per_unit <f>`` header line.
 """
@@ -45,7 +47,7 @@ from .geometry.mesh import Mesh, MeshDefectWarning
 from .units import mm_per_unit
 
 __all__ = ["SUPPORTED_MESH_FORMATS", "load_mesh", "read_mesh_arrays", "atomic_write", "check_output_path",
-           "write_ply", "write_mesh_ply", "write_npz", "PLY_RESERVED_NAMES"]
+           "write_ply", "write_mesh_ply", "write_npz", "write_text", "write_figure", "PLY_RESERVED_NAMES"]
 
 #: file extension -> format name
 SUPPORTED_MESH_FORMATS = {".obj": "obj", ".ply": "ply", ".off": "off", ".stl": "stl", ".glb": "glb",
@@ -428,6 +430,33 @@ def write_mesh_ply(path, mesh: Mesh, vertex_float_props=None, vertex_colors=None
         head.append(f"meshshade source {mesh.source}")
     return write_ply(path, mesh.vertices_in_source_units(), mesh.faces, vertex_float_props, vertex_colors,
                      comments=[*head, *comments])
+
+
+def write_text(path, text: str) -> Path:
+    """Write ``text`` (UTF-8, e.g. a CSV table) atomically."""
+    path = Path(path)
+    with atomic_write(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def write_figure(path, figure, *, dpi: int = 150) -> Path:
+    """Save a matplotlib ``figure`` atomically, in the format named by the extension (.png, .pdf, .svg, ...),
+    then close it."""
+    path = Path(path)
+    fmt = path.suffix[1:].lower()
+    supported = figure.canvas.get_supported_filetypes()
+    if fmt not in supported:
+        raise OutputError(f"unsupported figure format {path.suffix or '(no extension)'!r} for {path}; "
+                          f"use one of {', '.join('.' + k for k in sorted(supported))}")
+    try:
+        with atomic_write(path) as tmp:
+            figure.savefig(tmp, format=fmt, dpi=dpi, bbox_inches="tight")
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(figure)
+    return path
 
 
 def write_npz(path, **arrays) -> Path:

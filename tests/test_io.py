@@ -13,8 +13,8 @@ import trimesh
 from meshshade.errors import MeshValidationError, OutputError, UnitsError
 from meshshade.geometry import procedural
 from meshshade.geometry.mesh import MeshDefectWarning
-from meshshade.io import (atomic_write, check_output_path, load_mesh, read_mesh_arrays, write_mesh_ply, write_npz,
-                          write_ply)
+from meshshade.io import (atomic_write, check_output_path, load_mesh, read_mesh_arrays, write_figure,
+                          write_mesh_ply, write_npz, write_ply, write_text)
 
 
 @pytest.fixture(scope="module")
@@ -313,6 +313,31 @@ def test_write_npz_round_trip(tmp_path):
         np.testing.assert_array_equal(data["k1"], np.arange(5.0))
         assert data["faces"].dtype == np.int64
     assert sorted(p.name for p in tmp_path.iterdir()) == ["arrays.npz"]
+
+
+def test_write_text_atomic(tmp_path):
+    out = write_text(tmp_path / "table.csv", "a,b\n1,2\n")
+    assert out.read_text() == "a,b\n1,2\n"
+    with pytest.raises(OutputError, match="output directory does not exist"):
+        write_text(tmp_path / "no" / "t.csv", "x")
+
+
+def test_write_figure_by_extension(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [1, 0])
+    out = write_figure(tmp_path / "plot.png", fig)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not plt.fignum_exists(fig.number)  # closed
+    fig, _ = plt.subplots()
+    with pytest.raises(OutputError, match="unsupported figure format '.xyz'"):
+        write_figure(tmp_path / "plot.xyz", fig)
+    plt.close(fig)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plot.png"]
 
 
 # ------------------------------------------------------------------------------------------------- PLY
