@@ -24,13 +24,13 @@ Float32 precision (why the offsets below are enough)
 ----------------------------------------------------
 Before casting to float32 the scene is translated to its bounding-box centre ``c``, and every ray origin outside
 the bounding sphere (centre ``c``, radius half the bbox diagonal) is first advanced in float64 to just before
-that sphere. Hence every float32 coordinate Embree sees is at most ~1.1 x scale in magnitude, its rounding error
-is below ``2**-24 * 1.1 * scale ~ 7e-8 scale``, and this holds wherever the mesh sits in space and however far
-the light is. :meth:`offset_origins` moves points by
+that sphere (radius x 1.01). Hence every float32 coordinate Embree sees is at most ~0.51 x scale in magnitude,
+its rounding error is below ``2**-24 * 0.51 * scale ~ 3e-8 scale``, and this holds wherever the mesh sits in
+space and however far the light is. :meth:`offset_origins` moves points by
 
     eps(p) = 1e-6 * (scale + |p - c|) + 1e-12 * |p|        [mm]
 
-* ``1e-6 * scale`` is about 15x that float32 error (and 1e-10 scale would be plenty for the float64 twin);
+* ``1e-6 * scale`` is about 30x that float32 error (and 1e-10 scale would be plenty for the float64 twin);
 * ``1e-6 * |p - c|`` makes it grow for points away from the mesh (the rounding of an origin relative to c);
 * ``1e-12 * |p|`` covers the float64 rounding of the world coordinates themselves (~1e4 ulps): it only matters
   for a mesh many orders of magnitude smaller than its distance from the world origin (1e-3 mm at 1e3 mm
@@ -385,7 +385,8 @@ class NumpyScene(_SceneBase):
     Moller & Trumbore (1997), "Fast, minimum storage ray-triangle intersection", J. Graphics Tools 2(1).
     Triangles are widened by 1e-12 in barycentric units (``u, v >= -1e-12``, ``u + v <= 1 + 1e-12``) so that a
     ray through a shared edge or vertex hits one of its faces despite rounding (watertight, like Embree's robust
-    mode); the reported (u, v) are clipped back onto the triangle. Ties go to the lowest face index. ``chunk`` bounds the number of ray-triangle pairs held in memory at once.
+    mode); the reported (u, v) are clipped back onto the triangle. Ties go to the lowest face index. ``chunk``
+    bounds the number of ray-triangle pairs held in memory at once.
     """
 
     backend = "numpy"
