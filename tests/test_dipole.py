@@ -276,3 +276,29 @@ def test_dipole_profile_ketchup_material_warns_but_is_finite():
     assert any(issubclass(w.category, DiffusionValidityWarning) for w in caught)
     R = dipole_profile(np.array([0.0, 1.0, 1e3]), albedo_prime=m.albedo_prime[2], eta=m.eta)
     assert np.all(np.isfinite(R)) and R[0] > R[1] > R[2] >= 0
+
+
+# --- tail and cutoff (used to choose neighbourhood radii) ---------------------------------------------------
+@pytest.mark.parametrize("albedo,eta", [(1 / 1.01, 1.3), (0.999, 1.0), (0.5, 2.0), (0.02, 1.3)])
+def test_dipole_tail_reflectance_matches_quadrature(albedo, eta):
+    from scipy.integrate import quad
+
+    from meshshade.kernels.dipole import dipole_tail_reflectance
+
+    for r in (0.0, 0.7, 3.0, 12.0):
+        num, _ = quad(lambda x: 2 * np.pi * x * dipole_profile(x, albedo_prime=albedo, eta=eta), r, np.inf,
+                      epsabs=0, epsrel=1e-12, limit=400)
+        assert dipole_tail_reflectance(r, albedo_prime=albedo, eta=eta) == pytest.approx(num, rel=1e-9)
+    assert dipole_tail_reflectance(0.0, albedo_prime=albedo, eta=eta) == pytest.approx(
+        dipole_total_reflectance(albedo_prime=albedo, eta=eta), rel=1e-15)
+
+
+@pytest.mark.parametrize("tol", [1e-2, 1e-4, 1e-6])
+def test_dipole_cutoff_radius_leaves_tol_of_energy(tol):
+    from meshshade.kernels.dipole import dipole_cutoff_radius, dipole_tail_reflectance
+
+    kw = dict(albedo_prime=1 / 1.01, eta=1.3)
+    r = dipole_cutoff_radius(tol, **kw)
+    total = dipole_total_reflectance(**kw)
+    assert dipole_tail_reflectance(r, **kw) <= tol * total * (1 + 1e-9)
+    assert dipole_tail_reflectance(r * (1 - 1e-6), **kw) > tol * total

@@ -44,3 +44,39 @@ def dipole_total_reflectance(*, albedo_prime, eta):
     """
     p = diffusion_params(albedo_prime, eta)
     return 0.5 * p.albedo_prime * (np.exp(-p.mu * p.z_r) + np.exp(-p.mu * p.z_v))
+
+
+def dipole_tail_reflectance(r_opt, *, albedo_prime, eta):
+    """Reflectance of the planar dipole beyond distance ``r_opt``: ``int_r^inf R_d 2 pi r' dr'``.
+
+    Defined as ``(alpha'/2) [z_r exp(-mu d_r)/d_r + z_v exp(-mu d_v)/d_v]`` with ``d = sqrt(r^2 + z^2)``,
+    from ``d/dr [exp(-mu d)/d] = -r g(d)`` (physics.md b). Equals :func:`dipole_total_reflectance` at r = 0.
+    """
+    p = diffusion_params(albedo_prime, eta)
+    r2 = np.asarray(r_opt, dtype=np.float64) ** 2
+    d_r = np.sqrt(r2 + p.z_r**2)
+    d_v = np.sqrt(r2 + p.z_v**2)
+    with np.errstate(under="ignore"):
+        return 0.5 * p.albedo_prime * (p.z_r * np.exp(-p.mu * d_r) / d_r + p.z_v * np.exp(-p.mu * d_v) / d_v)
+
+
+def dipole_cutoff_radius(tol, *, albedo_prime, eta, r_max_opt=1e12):
+    """Smallest ``r_opt`` whose tail :func:`dipole_tail_reflectance` is below ``tol`` times the total.
+
+    Bisection in log space (the tail is monotonic in r). With sigma_a = 0 (mu = 0) the tail falls only like
+    1/r, so the result can be huge: callers clip it to the mesh size. Returns ``r_max_opt`` if not reached.
+    """
+    tot = float(dipole_total_reflectance(albedo_prime=albedo_prime, eta=eta))
+    target = float(tol) * tot
+    f = lambda r: float(dipole_tail_reflectance(r, albedo_prime=albedo_prime, eta=eta)) - target  # noqa: E731
+    if f(r_max_opt) > 0:
+        return float(r_max_opt)
+    lo, hi = 0.0, 1.0
+    while f(hi) > 0:
+        lo, hi = hi, hi * 2.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if f(mid) > 0 else (lo, mid)
+        if hi - lo <= 1e-12 * hi:
+            break
+    return hi
