@@ -1,0 +1,78 @@
+"""Tone mapping of linear radiance to display values: Drago et al. 2003 logarithmic operator, exposure, sRGB.
+
+F. Drago, K. Myszkowski, T. Annen, N. Chiba, "Adaptive Logarithmic Mapping For Displaying High Contrast
+Scenes", Computer Graphics Forum 22(3), 2003, eq. 4:
+
+    L_d = (L_dmax * 0.01 / log10(L_wmax + 1)) * log(L_w + 1) / log(2 + 8 (L_w / L_wmax)^(log(b)/log(0.5)))
+
+with world luminance scaled by the exposure (``L_w = luminance / L_wa``, L_wa the log-average luminance as
+Drago does) and the bias ``b`` (0.85 by default, the paper's recommendation). Colour is carried by scaling RGB
+by ``L_d / L_w``. All functions are pure: arrays in, arrays out.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Rec. 709 / sRGB luminance weights
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+
+
+def luminance(rgb):
+    """(..., 3) linear RGB -> (...) luminance (Rec. 709 weights)."""
+    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE_WEIGHTS
+
+
+def srgb_encode(linear):
+    """Linear [0, 1] -> sRGB-encoded [0, 1] (IEC 61966-2-1 piecewise curve); values clipped to [0, 1]."""
+    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def drago_tonemap(rgb, *, bias=0.85, exposure=1.0, L_dmax=100.0, mask=None):
+    """Drago 2003 adaptive logarithmic mapping of (..., 3) linear RGB to display-linear [0, 1] RGB.
+
+    ``mask`` selects the pixels/vertices that define the scene statistics (world adaptation luminance and
+    maximum); background is excluded that way. Monotonic in luminance and maps 0 to 0.
+    """
+    rgb = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64), nan=0.0, posinf=0.0), 0.0, None)
+    L = luminance(rgb)
+    sel = L[mask] if mask is not None else L.reshape(-1)
+    sel = sel[sel > 0]
+    if sel.size == 0:
+        return np.zeros_like(rgb)
+    L_wa = np.exp(np.mean(np.log(sel)))  # log-average (Drago sec. 3, world adaptation luminance)
+    Lw = exposure * L / L_wa
+    Lw_max = exposure * sel.max() / L_wa
+    expo = np.log(bias) / np.log(0.5)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Ld = (L_dmax * 0.01 / np.log10(Lw_max + 1.0)) * np.log(Lw + 1.0) / np.log(
+            2.0 + 8.0 * np.power(Lw / Lw_max, expo))
+        scale = np.where(L > 0, Ld / np.where(L > 0, L, 1.0), 0.0)
+    return np.clip(rgb * scale[..., None], 0.0, 1.0)
+
+
+def exposure_tonemap(rgb, *, exposure=None, mask=None, percentile=99.0):
+    """Plain exposure: scale so that the ``percentile`` of luminance maps to 1 (or by ``exposure``), clip."""
+    rgb = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64), nan=0.0, posinf=0.0), 0.0, None)
+    if exposure is None:
+        L = luminance(rgb)
+        sel = L[mask] if mask is not None else L.reshape(-1)
+        sel = sel[sel > 0]
+        exposure = 1.0 / np.percentile(sel, percentile) if sel.size else 1.0
+    return np.clip(rgb * exposure, 0.0, 1.0)
+
+
+def to_uint8(display_linear):
+    """Display-linear [0, 1] -> sRGB-encoded uint8."""
+    return np.round(srgb_encode(display_linear) * 255.0).astype(np.uint8)
+
+
+def tonemap(rgb, *, operator="drago", bias=0.85, exposure=None, mask=None):
+    """Tone map and sRGB-encode to uint8: ``operator`` is "drago" or "exposure"."""
+    if operator == "drago":
+        out = drago_tonemap(rgb, bias=bias, exposure=1.0 if exposure is None else exposure, mask=mask)
+    elif operator == "exposure":
+        out = exposure_tonemap(rgb, exposure=exposure, mask=mask)
+    else:
+        raise ValueError(f"unknown tone-mapping operator {operator!r}")
+    return to_uint8(out)
