@@ -104,8 +104,61 @@ def run_profile(args) -> int:
     return 0
 
 
+# --- bake ------------------------------------------------------------------------------------------------
+LIGHT_HELP = ("light SPEC (repeatable), positions in the mesh's units: beam:ox,oy,oz:dx,dy,dz[:power W] | "
+              "directional:dx,dy,dz[:irradiance W/mm^2] | point:x,y,z[:intensity W/sr]")
+
+
+def add_mesh_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("mesh", help="input mesh: OBJ, PLY, OFF, STL or GLB (never modified)")
+    p.add_argument("--units", default="mm", help="length unit of the mesh file: mm, cm, m or in (default mm)")
+
+
+def add_bake_args(p: argparse.ArgumentParser) -> None:
+    add_mesh_args(p)
+    add_material_args(p)
+    p.add_argument("--light", action="append", required=True, metavar="SPEC", help=LIGHT_HELP)
+    p.add_argument("--model", default="curved", choices=["dipole", "curved", "exact-sphere"],
+                   help="transport kernel (default curved)")
+    p.add_argument("--cutoff-tol", type=float, default=1e-4,
+                   help="neighbourhood radius: reflectance beyond it below this fraction (default 1e-4)")
+    p.add_argument("--curvature-radius", type=float, default=None, metavar="MM",
+                   help="neighbourhood for the curvature fit [mm] (default 2 mean edge lengths)")
+    p.add_argument("--out", required=True, metavar="OUT.ply",
+                   help="PLY with radiance_r/g/b (W/mm^2) and tone-mapped red/green/blue vertex colours")
+    p.add_argument("--npz", metavar="OUT.npz", help="also save radiance, k1, k2, d1, d2, beam distance")
+
+
+def mesh_and_material(args):
+    from . import io, transport  # noqa: PLC0415
+
+    material = material_from_args(args)
+    mesh = io.load_mesh(args.mesh, units=args.units)
+    if not args.quiet:
+        print(transport.describe_scale(mesh, material))
+    return mesh, material
+
+
+def run_bake(args) -> int:
+    from . import io, lights, transport  # noqa: PLC0415
+
+    io.check_output_path(args.out, [args.mesh])
+    if args.npz:
+        io.check_output_path(args.npz, [args.mesh, args.out])
+    mesh, material = mesh_and_material(args)
+    light_list = [lights.parse_light_spec(s, mm_per_unit=mesh.mm_per_unit) for s in args.light]
+    result = transport.bake(mesh, material, light_list, model=args.model, cutoff_tol=args.cutoff_tol,
+                            curvature_radius_mm=args.curvature_radius, progress=not args.quiet)
+    transport.write_bake(result, mesh, args.out, npz=args.npz)
+    if not args.quiet:
+        print(transport.describe_result(result))
+        print(f"wrote {args.out}" + (f" and {args.npz}" if args.npz else ""))
+    return 0
+
+
 # --- main --------------------------------------------------------------------------------------------
 COMMANDS = {
+    "bake": (add_bake_args, run_bake, "per-vertex radiance of a translucent mesh, written as a coloured PLY"),
     "profile": (add_profile_args, run_profile,
                 "reflectance vs geodesic distance on a plane, sphere, cylinder, saddle or curvature pair"),
 }

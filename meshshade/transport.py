@@ -1,0 +1,340 @@
+"""Transport: per-vertex radiant exitance M(x_o) = sum_i Phi_i R(x_o; x_i) over entry samples (the bake).
+
+The kernel is expanded at the entry point x_i (physics.md f): rho is the geodesic distance from x_i to x_o,
+phi the direction of x_o in x_i's tangent plane from x_i's first principal direction, and k1, k2 are x_i's
+principal curvatures. Models:
+
+* ``dipole``: Jensen's usage, R_d(|x_o - x_i|) (chord distance);
+* ``curved``: the first-order k1/k2 kernel with its positivity policy (kernels/curvature.py);
+* ``exact-sphere``: the exact sphere series with the local radius 2/(k1 + k2) (for validation on spheres;
+  where the surface is not convex it falls back to the dipole and counts it).
+
+Each entry sample reaches the vertices within a cutoff radius chosen per channel from the dipole's closed-form
+tail (the reflectance beyond it is below ``cutoff_tol`` of the total). Sources are processed in chunks so that
+memory stays bounded; the gather per chunk is vectorised (``np.bincount``), never a Python loop over vertices.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import MeshshadeError
+from .kernels.dipole import dipole_cutoff_radius, dipole_profile
+from .materials import Material
+
+log = logging.getLogger("meshshade")
+
+MODELS = ("dipole", "curved", "exact-sphere")
+#: pairs evaluated per chunk (memory ~ 100 bytes per pair)
+PAIRS_PER_CHUNK = 4_000_000
+
+
+@dataclass(frozen=True)
+class SourceFrames:
+    """Entry-sample geometry the kernel needs, (k,) or (k, 3) float64: curvatures in 1/mm, unit frames."""
+
+    k1: np.ndarray
+    k2: np.ndarray
+    d1: np.ndarray
+    d2: np.ndarray
+    normals: np.ndarray
+
+
+def source_frames(samples, curv, faces) -> SourceFrames:
+    """Principal curvatures and frames at entry samples: vertex values for vertex samples, barycentric
+    interpolation (directions sign-aligned, re-orthogonalised to the sample's normal) inside a triangle."""
+    k = len(samples)
+    k1, k2 = np.empty(k), np.empty(k)
+    d1 = np.empty((k, 3))
+    at_v = samples.vertex >= 0
+    iv = samples.vertex[at_v]
+    k1[at_v], k2[at_v], d1[at_v] = curv.k1[iv], curv.k2[iv], curv.d1[iv]
+    tri = ~at_v
+    if np.any(tri):
+        F = faces[samples.face[tri]]
+        b = samples.bary[tri]
+        k1[tri] = np.einsum("ij,ij->i", b, curv.k1[F])
+        k2[tri] = np.einsum("ij,ij->i", b, curv.k2[F])
+        D = curv.d1[F]  # (t, 3, 3): principal directions are defined up to sign: align to corner 0
+        sign = np.sign(np.einsum("ijk,ik->ij", D, D[:, 0]))
+        sign[sign == 0] = 1.0
+        d1[tri] = np.einsum("ij,ijk->ik", b * sign, D)
+    n = samples.normals / np.linalg.norm(samples.normals, axis=1, keepdims=True)
+    d1 = d1 - np.einsum("ij,ij->i", d1, n)[:, None] * n
+    norm = np.linalg.norm(d1, axis=1)
+    bad = norm < 1e-12
+    if np.any(bad):  # umbilic or failed frame: any tangent direction will do (k1 = k2 there)
+        alt = np.where(np.abs(n[bad, 0:1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+        d1[bad] = np.cross(n[bad], alt)
+        norm[bad] = np.linalg.norm(d1[bad], axis=1)
+    d1 /= norm[:, None]
+    d2 = np.cross(n, d1)
+    return SourceFrames(k1, k2, d1, d2, n)
+
+
+def cutoff_radii(material: Material, tol: float) -> np.ndarray:
+    """(3,) mm: per channel, the radius beyond which the dipole's reflectance is below ``tol`` of its total."""
+    out = np.empty(3)
+    for c in range(3):
+        ch = material.channel(c)
+        out[c] = dipole_cutoff_radius(tol, albedo_prime=ch["albedo_prime"], eta=ch["eta"]) / ch["sigma_t_prime"]
+    return out
+
+
+class PairKernel:
+    """Evaluates R [mm^-2] of one model and material for arrays of (source, exit) pairs.
+
+    Channels with equal parameters are computed once. For ``exact-sphere`` the series is tabulated once per
+    distinct local radius (radii rounded to ``sphere_radius_rtol``) on a fine angle grid and interpolated.
+    """
+
+    def __init__(self, model: str, material: Material, frames: SourceFrames, *, rtol: float = 1e-10,
+                 sphere_radius_rtol: float = 1e-3):
+        if model not in MODELS:
+            raise MeshshadeError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+        self.model, self.material, self.frames = model, material, frames
+        self.channels: list[tuple[int, list[int]]] = []  # (representative channel, channels it stands for)
+        seen: dict = {}
+        for c in range(3):
+            key = (material.albedo_prime[c], material.sigma_t_prime[c])
+            if key in seen:
+                self.channels[seen[key]][1].append(c)
+            else:
+                seen[key] = len(self.channels)
+                self.channels.append((c, [c]))
+        self.stats: dict = {}
+        if model == "exact-sphere":
+            H = 0.5 * (frames.k1 + frames.k2)
+            convex = H > 0
+            self.sphere_radius = np.where(convex, 1.0 / np.where(convex, H, 1.0), np.inf)
+            q = np.where(convex, np.round(np.log(np.where(convex, self.sphere_radius, 1.0)) / np.log1p(
+                sphere_radius_rtol)), -1).astype(np.int64)
+            self._radius_bin = q
+            self._sphere_tables: dict = {}
+            self.stats["exact_sphere_fallback_dipole"] = int((~convex).sum())
+            self.stats["exact_sphere_radius_bins"] = int(np.unique(q[convex]).size)
+        self.rtol = rtol
+        self.sphere_radius_rtol = sphere_radius_rtol
+
+    def evaluate(self, c: int, src, s, chord, phi) -> np.ndarray:
+        """R [mm^-2] of channel ``c`` for pairs with source indices ``src`` (into the frames), geodesic distance
+        ``s`` [mm], chord [mm] and azimuth ``phi`` [rad]."""
+        ch = self.material.channel(c)
+        st, par = ch["sigma_t_prime"], {"albedo_prime": ch["albedo_prime"], "eta": ch["eta"]}
+        if self.model == "dipole":
+            return dipole_profile(chord * st, **par) * st * st
+        if self.model == "curved":
+            from .kernels.curvature import curvature_profile  # noqa: PLC0415
+            f = self.frames
+            return curvature_profile(s * st, phi, k1_opt=f.k1[src] / st, k2_opt=f.k2[src] / st, **par) * st * st
+        return self._exact_sphere(c, st, par, src, s, chord)
+
+    def _exact_sphere(self, c, st, par, src, s, chord):
+        from .kernels.sphere import sphere_series_profile  # noqa: PLC0415
+
+        out = np.empty(s.shape)
+        bins = self._radius_bin[src]
+        flat = bins < 0
+        out[flat] = dipole_profile(chord[flat] * st, **par) * st * st
+        for b in np.unique(bins[~flat]):
+            sel = bins == b
+            key = (c, int(b))
+            if key not in self._sphere_tables:
+                R0 = float(np.exp(b * np.log1p(self.sphere_radius_rtol)))
+                theta = np.linspace(0.0, np.pi, 4097)
+                vals = sphere_series_profile(theta, R0_opt=R0 * st, rtol=self.rtol, **par) * st * st
+                self._sphere_tables[key] = (R0, theta, vals)
+            R0, theta, vals = self._sphere_tables[key]
+            th = np.clip(s[sel] / R0, 0.0, np.pi)
+            if th.size <= theta.size:  # few pairs (a beam): evaluate the series exactly
+                out[sel] = sphere_series_profile(th, R0_opt=R0 * st, rtol=self.rtol, **par) * st * st
+            else:  # log-linear interpolation; relative error < 1e-5 for R0 >= 1 transport length
+                out[sel] = np.exp(np.interp(th, theta, np.log(np.maximum(vals, 1e-300))))
+        return out
+
+
+@dataclass(frozen=True)
+class BakeResult:
+    """Per-vertex result of :func:`bake`.
+
+    radiance : (n, 3) float64 W/mm^2 — linear radiant exitance per channel (r, g, b)
+    k1, k2 : (n,) 1/mm; d1, d2 : (n, 3) — principal curvatures and directions of the mesh
+    samples : EntrySamples — where light entered and how much
+    beam_distance : (n,) mm or None — geodesic distance of each vertex from the first beam's entry point
+                    (inf beyond the neighbourhood)
+    cutoff_mm : (3,) — neighbourhood radius per channel
+    timings : dict stage -> seconds; stats : dict of counts (pairs, skipped work, fallbacks)
+    """
+
+    radiance: np.ndarray
+    k1: np.ndarray
+    k2: np.ndarray
+    d1: np.ndarray
+    d2: np.ndarray
+    samples: object
+    beam_distance: np.ndarray | None
+    cutoff_mm: np.ndarray
+    model: str
+    material: Material
+    timings: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def total_exitance_power(self):
+        """Set by :func:`bake`: (3,) W, sum of M * vertex area."""
+        return self.stats.get("exitant_power")
+
+
+def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter) -> tuple[np.ndarray, dict]:
+    """Accumulate M[v, c] = sum_i power_i R_c(pair) over the pair chunks yielded by ``pairs_iter``.
+
+    ``pairs_iter`` yields ``(src, vertex, s, chord, phi)`` arrays (src indexes ``power`` and the kernel's
+    frames). Channel c uses only pairs with s <= cutoff_mm[c] (beyond, its reflectance is negligible).
+    """
+    M = np.zeros((n_vertices, 3))
+    n_pairs = np.zeros(3, dtype=np.int64)
+    for src, vtx, s, chord, phi in pairs_iter:
+        for c, same in kernel.channels:
+            keep = s <= cutoff_mm[c]
+            if not np.any(keep):
+                continue
+            R = kernel.evaluate(c, src[keep], s[keep], chord[keep], phi[keep])
+            acc = np.bincount(vtx[keep], weights=power[src[keep]] * R, minlength=n_vertices)
+            n_pairs[c] += int(keep.sum())
+            for cc in same:
+                M[:, cc] += acc
+    return M, {"pairs_evaluated": int(n_pairs.sum()), "channels_computed": len(kernel.channels)}
+
+
+def describe_scale(mesh, material: Material) -> str:
+    """One line: mesh size in mm and in transport mean free paths (per channel), so unit mistakes show."""
+    size = mesh.bbox_size_mm
+    mfp = size.max() * material.sigma_t_prime
+    return (f"mesh: {mesh.n_vertices} vertices, {mesh.n_faces} faces, {size[0]:.4g} x {size[1]:.4g} x "
+            f"{size[2]:.4g} mm (largest extent = {mfp[0]:.4g}/{mfp[1]:.4g}/{mfp[2]:.4g} transport mean free "
+            f"paths r/g/b; mean edge {mesh.mean_edge_length:.4g} mm); material {material.describe()}")
+
+
+def _phi(frames: SourceFrames, src, positions, vtx, points) -> np.ndarray:
+    """Azimuth of exit points in the entry samples' tangent frames (projection of x_o - x_i)."""
+    d = points[vtx] - positions[src]
+    return np.arctan2(np.einsum("ij,ij->i", d, frames.d2[src]), np.einsum("ij,ij->i", d, frames.d1[src]))
+
+
+def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol: float = 1e-4,
+         curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool = False,
+         rtol: float = 1e-10) -> BakeResult:
+    """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
+
+    Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
+    (directional, W/mm^2) or intensity (point, W/sr). Stages are timed in ``result.timings``.
+    """
+    from .geometry.curvature import principal_curvatures  # noqa: PLC0415
+    from .geometry.neighbourhood import GeodesicNeighbourhoods  # noqa: PLC0415
+    from .lights import BeamLight, entry_samples  # noqa: PLC0415
+    from .raycast import make_scene  # noqa: PLC0415
+
+    if model not in MODELS:
+        raise MeshshadeError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+    if not (0 < cutoff_tol < 1):
+        raise MeshshadeError(f"cutoff tolerance must lie in (0, 1), got {cutoff_tol}")
+    lights = list(lights) if isinstance(lights, (list, tuple)) else [lights]
+    timings, t0 = {}, time.perf_counter()
+
+    def lap(name):
+        nonlocal t0
+        t = time.perf_counter()
+        timings[name] = timings.get(name, 0.0) + t - t0
+        t0 = t
+
+    V, F = mesh.vertices, mesh.faces
+    curv = principal_curvatures(V, F, radius_mm=curvature_radius_mm)
+    lap("curvature")
+    scene = make_scene(V, mesh.nondegenerate_faces, backend=backend)
+    samples = entry_samples(V, F, mesh.vertex_normals, mesh.vertex_areas, lights, scene=scene, eta=material.eta)
+    lap("rays")
+    frames = source_frames(samples, curv, F)
+    cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
+    kernel = PairKernel(model, material, frames, rtol=rtol)
+    solver = GeodesicNeighbourhoods(V, mesh.nondegenerate_faces, mesh.vertex_normals)
+    lap("neighbourhoods")
+    stats = {"entry_samples": len(samples), "cutoff_mm": cut.tolist(), **samples.stats}
+    beam_distance = None
+    M = np.zeros((mesh.n_vertices, 3))
+    k = len(samples)
+    if k:
+        # chunk sizes from the expected neighbours per source (area of the cutoff disc over area per vertex)
+        per_vertex_area = mesh.total_area / max(mesh.n_vertices, 1)
+        expected = max(1.0, np.pi * cut.max() ** 2 / per_vertex_area)
+        chunk = int(max(1, min(k, PAIRS_PER_CHUNK // expected)))
+        starts = range(0, k, chunk)
+        bar = None
+        if progress and k > chunk:
+            from tqdm import tqdm  # noqa: PLC0415
+            bar = tqdm(total=k, desc="gather", unit="src", leave=False)
+        n_pairs = 0
+
+        def pairs():
+            nonlocal n_pairs, t0
+            for a in starts:
+                b = min(k, a + chunk)
+                nb = solver.query(samples.positions[a:b], samples.face[a:b], samples.bary[a:b],
+                                  samples.vertex[a:b], samples.normals[a:b], cut.max())
+                src = np.repeat(np.arange(a, b), np.diff(nb.indptr))
+                n_pairs += src.size
+                phi = _phi(frames, src, samples.positions, nb.vertex, V)
+                lap("neighbourhoods")
+                yield src, nb.vertex, nb.distance, nb.chord, phi
+                lap("gather")
+                if bar is not None:
+                    bar.update(b - a)
+
+        M, gstats = gather(kernel, mesh.n_vertices, samples.power, cut, pairs())
+        if bar is not None:
+            bar.close()
+        stats.update(gstats, pairs_found=n_pairs)
+        first_beam = next((i for i, L in enumerate(lights) if isinstance(L, BeamLight)), None)
+        if first_beam is not None:
+            j = int(np.flatnonzero(samples.light_index == first_beam)[0])
+            nb = solver.query(samples.positions[j:j + 1], samples.face[j:j + 1], samples.bary[j:j + 1],
+                              samples.vertex[j:j + 1], samples.normals[j:j + 1], cut.max())
+            beam_distance = np.full(mesh.n_vertices, np.inf)
+            beam_distance[nb.vertex] = nb.distance
+            lap("neighbourhoods")
+    stats.update(kernel.stats)
+    stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
+    stats["entering_power"] = float(samples.power.sum())
+    return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, beam_distance, cut, model, material,
+                      timings, stats)
+
+
+def describe_result(result: BakeResult) -> str:
+    s = result.stats
+    t = ", ".join(f"{k} {v:.3g} s" for k, v in result.timings.items())
+    ex = s["exitant_power"]
+    return (f"{result.model}: {s['entry_samples']} entry samples, {s.get('pairs_found', 0)} pairs within "
+            f"{max(s['cutoff_mm']):.3g} mm; entering {s['entering_power']:.4g} W, exitant "
+            f"{ex[0]:.4g}/{ex[1]:.4g}/{ex[2]:.4g} W (r/g/b); {t}")
+
+
+def write_bake(result: BakeResult, mesh, out, *, npz=None) -> None:
+    """Write the PLY (radiance_r/g/b float W/mm^2 + uchar red/green/blue, tone-mapped) and optionally an NPZ."""
+    from . import io  # noqa: PLC0415
+    from .tonemap import tonemap  # noqa: PLC0415
+
+    M = result.radiance
+    props = {"radiance_r": M[:, 0], "radiance_g": M[:, 1], "radiance_b": M[:, 2]}
+    colours = tonemap(M, operator="drago")
+    comments = [f"meshshade model {result.model}", f"meshshade material {result.material.describe()}",
+                "meshshade radiance_r/g/b: linear radiant exitance in W/mm^2 per unit light power/irradiance"]
+    io.write_mesh_ply(out, mesh, props, colours, comments=comments)
+    if npz:
+        arrays = dict(radiance=M, k1=result.k1, k2=result.k2, d1=result.d1, d2=result.d2,
+                      vertex_areas=mesh.vertex_areas, cutoff_mm=result.cutoff_mm,
+                      entry_positions=result.samples.positions, entry_power=result.samples.power)
+        if result.beam_distance is not None:
+            arrays["beam_distance"] = result.beam_distance
+        io.write_npz(npz, **arrays)
