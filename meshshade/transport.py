@@ -218,12 +218,6 @@ def describe_scale(mesh, material: Material) -> str:
             f"paths r/g/b; mean edge {mesh.mean_edge_length:.4g} mm); material {material.describe()}")
 
 
-def _phi(frames: SourceFrames, src, positions, vtx, points) -> np.ndarray:
-    """Azimuth of exit points in the entry samples' tangent frames (projection of x_o - x_i)."""
-    d = points[vtx] - positions[src]
-    return np.arctan2(np.einsum("ij,ij->i", d, frames.d2[src]), np.einsum("ij,ij->i", d, frames.d1[src]))
-
-
 def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol: float = 1e-4,
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool = False,
          rtol: float = 1e-10) -> BakeResult:
@@ -253,13 +247,13 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     V, F = mesh.vertices, mesh.faces
     curv = principal_curvatures(V, F, radius_mm=curvature_radius_mm)
     lap("curvature")
-    scene = make_scene(V, mesh.nondegenerate_faces, backend=backend)
+    scene = make_scene(V, F, backend=backend)  # face ids must index mesh.faces
     samples = entry_samples(V, F, mesh.vertex_normals, mesh.vertex_areas, lights, scene=scene, eta=material.eta)
     lap("rays")
     frames = source_frames(samples, curv, F)
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
     kernel = PairKernel(model, material, frames, rtol=rtol)
-    solver = GeodesicNeighbourhoods(V, mesh.nondegenerate_faces, mesh.vertex_normals)
+    solver = GeodesicNeighbourhoods(V, F, mesh.vertex_normals)  # skips degenerate faces itself
     lap("neighbourhoods")
     stats = {"entry_samples": len(samples), "cutoff_mm": cut.tolist(), **samples.stats}
     beam_distance = None
@@ -282,12 +276,12 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
             for a in starts:
                 b = min(k, a + chunk)
                 nb = solver.query(samples.positions[a:b], samples.face[a:b], samples.bary[a:b],
-                                  samples.vertex[a:b], samples.normals[a:b], cut.max())
-                src = np.repeat(np.arange(a, b), np.diff(nb.indptr))
+                                  samples.vertex[a:b], frames.normals[a:b], cut.max(), d1=frames.d1[a:b],
+                                  d2=frames.d2[a:b], k1=frames.k1[a:b], k2=frames.k2[a:b])
+                src = a + nb.source_index()
                 n_pairs += src.size
-                phi = _phi(frames, src, samples.positions, nb.vertex, V)
                 lap("neighbourhoods")
-                yield src, nb.vertex, nb.distance, nb.chord, phi
+                yield src, nb.vertex.astype(np.int64), nb.distance, nb.chord, nb.phi
                 lap("gather")
                 if bar is not None:
                     bar.update(b - a)
