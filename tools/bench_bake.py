@@ -1,0 +1,76 @@
+"""Benchmark the bake: time per stage and kernel pairs per second (issue: mesh pipeline).
+
+Scenes: icospheres of ~10k/40k/160k vertices (R = 60 mm), spot scaled to 100 mm and the Lee Perry-Smith head
+scan scaled to 200 mm (from ../shared/meshes when present), skin1, one directional light. Each scene is baked
+with the dipole (the baseline) and the curved model in the same run, so the ratio curved/dipole holds on a
+noisy machine. Prints JSON (one object per scene and model) to stdout.
+
+    python tools/bench_bake.py [--quick] [--models dipole,curved]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from meshshade.geometry.mesh import Mesh
+from meshshade.geometry.procedural import icosphere
+from meshshade.io import read_mesh_arrays
+from meshshade.lights import DirectionalLight
+from meshshade.materials import Material
+from meshshade.transport import bake
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+
+
+def scenes(quick: bool):
+    for level in ((4, 5) if quick else (5, 6, 7)):
+        V, F = icosphere(60.0, level)
+        yield f"icosphere_L{level}", Mesh(V, F)
+    for name, size in (("spot.obj", 100.0), ("lee_perry_smith_head.obj", 200.0)):
+        path = SHARED / name
+        if not path.exists():
+            print(f"skipping {name}: {path} not found", file=sys.stderr)
+            continue
+        V, F = read_mesh_arrays(path)
+        V = (V - V.mean(axis=0)) * (size / np.ptp(V, axis=0).max())
+        yield f"{Path(name).stem}_{size:g}mm", Mesh(V, F)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small meshes only")
+    ap.add_argument("--models", default="dipole,curved")
+    args = ap.parse_args(argv)
+    material = Material.preset("skin1")
+    light = DirectionalLight((0.3, -0.4, -1.0), 1.0)
+    bake(Mesh(*icosphere(10.0, 2)), material, [light], model="curved")  # compile numba kernels first
+    rows = []
+    for name, mesh in scenes(args.quick):
+        base = None
+        for model in args.models.split(","):
+            t = time.perf_counter()
+            res = bake(mesh, material, [light], model=model)
+            wall = time.perf_counter() - t
+            pairs = res.stats.get("pairs_found", 0)
+            row = {"scene": name, "vertices": mesh.n_vertices, "model": model, "wall_s": round(wall, 4),
+                   "stages_s": {k: round(v, 4) for k, v in res.timings.items()},
+                   "entry_samples": res.stats["entry_samples"], "pairs": pairs,
+                   "pairs_per_s_gather": round(res.stats.get("pairs_evaluated", 0) /
+                                               max(res.timings.get("gather", 1e-9), 1e-9)),
+                   "shadow_rays_cast": res.stats.get("shadow_rays_cast"),
+                   "shadow_rays_skipped": res.stats.get("shadow_rays_skipped")}
+            if base is None:
+                base = wall
+            row["wall_ratio_to_first_model"] = round(wall / base, 3)
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    return rows
+
+
+if __name__ == "__main__":
+    main()
