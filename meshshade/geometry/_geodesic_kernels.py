@@ -37,43 +37,31 @@ _IMPROVE = 1.0 - 1e-13
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _push(hk, hid, size, key, item):
-    i = size
-    while i > 0:
-        p = (i - 1) >> 1
-        if hk[p] <= key:
-            break
-        hk[i] = hk[p]
-        hid[i] = hid[p]
-        i = p
-    hk[i] = key
-    hid[i] = item
-    return size + 1
+def _bq_push(bhead, ek, ei, en, nev, key, item, inv_delta, cur, nb):
+    """Queue ``item`` with priority ``key`` in bucket floor(key / delta) (clamped to the live range)."""
+    b = int(key * inv_delta)
+    if b < cur:
+        b = cur
+    elif b >= cur + nb:
+        b = cur + nb - 1
+    slot = b % nb
+    ek[nev] = key
+    ei[nev] = item
+    en[nev] = bhead[slot]
+    bhead[slot] = nev
+    return nev + 1
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _pop(hk, hid, size):
-    k0 = hk[0]
-    i0 = hid[0]
-    size -= 1
-    key = hk[size]
-    item = hid[size]
-    i = 0
+def _bq_pop(bhead, ek, ei, en, cur, nb):
+    """Remove an event of the lowest non-empty bucket (LIFO inside a bucket); the queue must not be empty."""
     while True:
-        c = 2 * i + 1
-        if c >= size:
-            break
-        if c + 1 < size and hk[c + 1] < hk[c]:
-            c += 1
-        if hk[c] >= key:
-            break
-        hk[i] = hk[c]
-        hid[i] = hid[c]
-        i = c
-    if size > 0:
-        hk[i] = key
-        hid[i] = item
-    return k0, i0, size
+        slot = cur % nb
+        e = bhead[slot]
+        if e >= 0:
+            bhead[slot] = en[e]
+            return ek[e], ei[e], cur
+        cur += 1
 
 
 @njit(cache=True, nogil=True)
@@ -123,7 +111,7 @@ def _append_results(out_v, out_d, nout, touched, nt, dist, cutoff):
 
 @njit(cache=True, nogil=True)
 def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, he_head, he_opp, he_twin,
-                  he_tox, he_tsx, he_len, he_ox, he_oy, v_ptr, v_he, emitter, rel_tol):
+                  he_tox, he_tsx, he_len, he_ox, he_oy, v_ptr, v_he, emitter, rel_tol, inv_delta, nb):
     """Window propagation for a block of sources.  Returns (counts (k,), vertex (nnz,) int32, distance (nnz,))."""
     k = src_vertex.shape[0]
     m3 = he_tail.shape[0]
@@ -141,9 +129,11 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
     p_lo = np.empty(pcap)
     p_hi = np.empty(pcap)
     p_sg = np.empty(pcap)
-    hcap = 4096
-    hk = np.empty(hcap)
-    hid = np.empty(hcap, np.int64)
+    bhead = np.full(nb, -1, np.int64)
+    ecap = 4096
+    ek = np.empty(ecap)
+    ei = np.empty(ecap, np.int64)
+    en = np.empty(ecap, np.int64)
     MAXC = 64
     c_t = np.empty(MAXC, np.int64)
     c_sx = np.empty(MAXC)
@@ -160,7 +150,10 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
         stamp = i + 1
         cut = cutoff[i]
         nt = 0
-        size = 0
+        nev = 0
+        qn = 0
+        cur = 0
+        bhead[:] = -1
         npool = 0
         nc = 0
         sv = src_vertex[i]
@@ -170,7 +163,8 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
             vdone[sv] = 0
             touched[nt] = sv
             nt += 1
-            size = _push(hk, hid, size, 0.0, -sv - 1)
+            nev = _bq_push(bhead, ek, ei, en, nev, 0.0, -sv - 1, inv_delta, cur, nb)
+            qn += 1
         else:
             f = src_face[i]
             for kk in range(3):
@@ -195,14 +189,16 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                     nc += 1
             for kk in range(3):
                 u = he_tail[3 * f + kk]
-                if emitter[u] or dist[u] == 0.0:
-                    size = _push(hk, hid, size, dist[u], -u - 1)
+                if (emitter[u] or dist[u] == 0.0) and dist[u] <= cut:
+                    nev = _bq_push(bhead, ek, ei, en, nev, dist[u], -u - 1, inv_delta, cur, nb)
+                    qn += 1
         while True:
             # ---- insert pending children (windows) after pruning -------------------------------------
-            if size + 4 * nc + 8 >= hcap:
-                hcap = 2 * (size + 4 * nc + 8)
-                hk = _grow_f(hk, hcap)
-                hid = _grow_f(hid, hcap)
+            if nev + 4 * nc + 8 >= ecap:
+                ecap = 2 * (nev + 4 * nc + 8)
+                ek = _grow_f(ek, ecap)
+                ei = _grow_f(ei, ecap)
+                en = _grow_f(en, ecap)
             if npool + nc >= pcap:
                 pcap = 2 * (npool + nc)
                 p_h = _grow_f(p_h, pcap)
@@ -279,24 +275,27 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                         nt += 1
                     if dd < dist[u] * _IMPROVE:
                         dist[u] = dd
-                        if emitter[u]:
+                        if emitter[u] and dd <= cut:
                             vdone[u] = 0
-                            size = _push(hk, hid, size, dd, -u - 1)
+                            nev = _bq_push(bhead, ek, ei, en, nev, dd, -u - 1, inv_delta, cur, nb)
+                            qn += 1
                 p_h[npool] = t
                 p_sx[npool] = sx
                 p_sy[npool] = sy
                 p_lo[npool] = lo
                 p_hi[npool] = hi
                 p_sg[npool] = sg
-                size = _push(hk, hid, size, key, npool)
+                nev = _bq_push(bhead, ek, ei, en, nev, key, npool, inv_delta, cur, nb)
+                qn += 1
                 npool += 1
             nc = 0
             # ---- next event ------------------------------------------------------------------------
-            if size == 0:
+            if qn == 0:
                 break
-            key, item, size = _pop(hk, hid, size)
+            key, item, cur = _bq_pop(bhead, ek, ei, en, cur, nb)
+            qn -= 1
             if key > cut:
-                break
+                continue
             if item < 0:  # vertex event: emit a pseudo-source into every face around the vertex
                 v = -item - 1
                 if vdone[v] == stamp or key > dist[v]:
@@ -322,13 +321,15 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                             nt += 1
                         if dd < dist[u] * _IMPROVE:
                             dist[u] = dd
-                            if emitter[u]:
+                            if emitter[u] and dd <= cut:
                                 vdone[u] = 0
-                                if size + 8 >= hcap:
-                                    hcap = 2 * (size + 8)
-                                    hk = _grow_f(hk, hcap)
-                                    hid = _grow_f(hid, hcap)
-                                size = _push(hk, hid, size, dd, -u - 1)
+                                if nev + 8 >= ecap:
+                                    ecap = 2 * (nev + 8)
+                                    ek = _grow_f(ek, ecap)
+                                    ei = _grow_f(ei, ecap)
+                                    en = _grow_f(en, ecap)
+                                nev = _bq_push(bhead, ek, ei, en, nev, dd, -u - 1, inv_delta, cur, nb)
+                                qn += 1
                     t = he_twin[h]
                     if t >= 0 and nc < MAXC:
                         c_t[nc] = t
@@ -426,16 +427,18 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
 
 @njit(cache=True, nogil=True)
 def _vertex_heap_block(src_vertex, src_face, src_bary, cutoff, n_vertices, e_ptr, e_nbr, e_len,
-                       he_tail, he_head, he_len, he_ox, he_oy, v_ptr, v_he, use_triangles):
+                       he_tail, he_head, he_len, he_ox, he_oy, v_ptr, v_he, use_triangles, inv_delta, nb):
     """Dijkstra (use_triangles=False) or fast marching with point-source triangle updates (True)."""
     k = src_vertex.shape[0]
     dist = np.empty(n_vertices)
     vstamp = np.zeros(n_vertices, np.int32)
     settled = np.zeros(n_vertices, np.int32)
     touched = np.empty(n_vertices, np.int64)
-    hcap = 4096
-    hk = np.empty(hcap)
-    hid = np.empty(hcap, np.int64)
+    bhead = np.full(nb, -1, np.int64)
+    ecap = 4096
+    ek = np.empty(ecap)
+    ei = np.empty(ecap, np.int64)
+    en = np.empty(ecap, np.int64)
     counts = np.zeros(k, np.int64)
     out_v = np.empty(max(1024, 64 * k), np.int32)
     out_d = np.empty(out_v.shape[0])
@@ -444,14 +447,18 @@ def _vertex_heap_block(src_vertex, src_face, src_bary, cutoff, n_vertices, e_ptr
         stamp = i + 1
         cut = cutoff[i]
         nt = 0
-        size = 0
+        nev = 0
+        qn = 0
+        cur = 0
+        bhead[:] = -1
         sv = src_vertex[i]
         if sv >= 0:
             vstamp[sv] = stamp
             dist[sv] = 0.0
             touched[nt] = sv
             nt += 1
-            size = _push(hk, hid, size, 0.0, sv)
+            nev = _bq_push(bhead, ek, ei, en, nev, 0.0, sv, inv_delta, cur, nb)
+            qn += 1
         else:
             f = src_face[i]
             for kk in range(3):
@@ -464,18 +471,20 @@ def _vertex_heap_block(src_vertex, src_face, src_bary, cutoff, n_vertices, e_ptr
                 dist[u] = np.sqrt(px * px + py * py)
                 touched[nt] = u
                 nt += 1
-                size = _push(hk, hid, size, dist[u], u)
-        while size > 0:
-            key, v, size = _pop(hk, hid, size)
-            if key > dist[v]:
+                if dist[u] <= cut:
+                    nev = _bq_push(bhead, ek, ei, en, nev, dist[u], u, inv_delta, cur, nb)
+                    qn += 1
+        while qn > 0:
+            key, v, cur = _bq_pop(bhead, ek, ei, en, cur, nb)
+            qn -= 1
+            if key > dist[v] or key > cut:
                 continue
-            if key > cut:
-                break
             settled[v] = stamp
-            if size + 64 >= hcap:
-                hcap = 2 * (size + 64)
-                hk = _grow_f(hk, hcap)
-                hid = _grow_f(hid, hcap)
+            if nev + 64 >= ecap:
+                ecap = 2 * (nev + 64)
+                ek = _grow_f(ek, ecap)
+                ei = _grow_f(ei, ecap)
+                en = _grow_f(en, ecap)
             for j in range(e_ptr[v], e_ptr[v + 1]):
                 u = e_nbr[j]
                 dd = key + e_len[j]
@@ -486,11 +495,14 @@ def _vertex_heap_block(src_vertex, src_face, src_bary, cutoff, n_vertices, e_ptr
                     nt += 1
                 if dd < dist[u] * _IMPROVE:
                     dist[u] = dd
-                    if size + 1 >= hcap:
-                        hcap = 2 * hcap
-                        hk = _grow_f(hk, hcap)
-                        hid = _grow_f(hid, hcap)
-                    size = _push(hk, hid, size, dd, u)
+                    if dd <= cut:
+                        if nev + 1 >= ecap:
+                            ecap = 2 * ecap
+                            ek = _grow_f(ek, ecap)
+                            ei = _grow_f(ei, ecap)
+                            en = _grow_f(en, ecap)
+                        nev = _bq_push(bhead, ek, ei, en, nev, dd, u, inv_delta, cur, nb)
+                        qn += 1
             if not use_triangles:
                 continue
             for j in range(v_ptr[v], v_ptr[v + 1]):
@@ -544,11 +556,14 @@ def _vertex_heap_block(src_vertex, src_face, src_bary, cutoff, n_vertices, e_ptr
                     dd = np.sqrt(dx * dx + dy * dy)
                     if dd < dist[b] * _IMPROVE:
                         dist[b] = dd
-                        if size + 1 >= hcap:
-                            hcap = 2 * hcap
-                            hk = _grow_f(hk, hcap)
-                            hid = _grow_f(hid, hcap)
-                        size = _push(hk, hid, size, dd, b)
+                        if dd <= cut:
+                            if nev + 1 >= ecap:
+                                ecap = 2 * ecap
+                                ek = _grow_f(ek, ecap)
+                                ei = _grow_f(ei, ecap)
+                                en = _grow_f(en, ecap)
+                            nev = _bq_push(bhead, ek, ei, en, nev, dd, b, inv_delta, cur, nb)
+                            qn += 1
         before = nout
         out_v, out_d, nout = _append_results(out_v, out_d, nout, touched, nt, dist, cut)
         counts[i] = nout - before

@@ -184,7 +184,8 @@ def _build_topology(V: np.ndarray, F: np.ndarray) -> dict:
                e_ptr=e_ptr, e_nbr=dst.astype(np.int64), e_len=e_len, good_face=good_face,
                n_boundary_edges=int(np.count_nonzero(sizes == 1)),
                n_nonmanifold_edges=int(np.count_nonzero(sizes > 2)),
-               mean_edge=float(e_len.mean()) if e_len.size else 0.0)
+               mean_edge=float(e_len.mean()) if e_len.size else 0.0,
+               max_edge=float(e_len.max()) if e_len.size else 0.0)
     return {k: (_readonly(v) if isinstance(v, np.ndarray) else v) for k, v in out.items()}
 
 
@@ -365,13 +366,17 @@ class GeodesicNeighbourhoods:
 
     def _run_internal(self, sv, sf, bary, cut):
         t = self._topo
+        # bucket queue: width 1/8 mean edge, enough buckets to span the largest jump of a key (3 longest edges)
+        delta = t["mean_edge"] / 8.0 if t["mean_edge"] > 0 else 1.0
+        nb = int(min(1 << 16, max(64, np.ceil(3.0 * t["max_edge"] / delta) + 2)))
+        q = (1.0 / delta, nb)
         if self.method == "window":
             return _k._window_block(sv, sf, bary, cut, self.n_vertices, t["he_tail"], t["he_head"], t["he_opp"],
                                     t["he_twin"], t["he_tox"], t["he_tsx"], t["he_len"], t["he_ox"], t["he_oy"],
-                                    t["v_ptr"], t["v_he"], t["emitter"], float(self.rel_tol))
+                                    t["v_ptr"], t["v_he"], t["emitter"], float(self.rel_tol), *q)
         return _k._vertex_heap_block(sv, sf, bary, cut, self.n_vertices, t["e_ptr"], t["e_nbr"], t["e_len"],
                                      t["he_tail"], t["he_head"], t["he_len"], t["he_ox"], t["he_oy"],
-                                     t["v_ptr"], t["v_he"], self.method == "fmm")
+                                     t["v_ptr"], t["v_he"], self.method == "fmm", *q)
 
     def query(self, source_points, source_faces, source_bary, source_vertex, source_normals, cutoff_mm, *,
               d1=None, d2=None, k1=None, k2=None, chord: bool = True, tangent: bool = False,
