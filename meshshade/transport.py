@@ -127,10 +127,24 @@ class PairKernel:
         if self.model == "dipole":
             return dipole_profile(chord * st, **par) * st * st
         if self.model == "curved":
-            from .kernels.curvature import curvature_profile  # noqa: PLC0415
+            table = self._curvature_table(c, st, par, float(s.max()) if s.size else 0.0)
             f = self.frames
-            return curvature_profile(s * st, phi, k1_opt=f.k1[src] / st, k2_opt=f.k2[src] / st, **par) * st * st
+            R, valid = table.profile(s * st, phi, k1_opt=f.k1[src] / st, k2_opt=f.k2[src] / st,
+                                     return_validity=True)
+            self.stats["curved_pairs_out_of_first_order_range"] = (
+                self.stats.get("curved_pairs_out_of_first_order_range", 0) + int((~valid).sum()))
+            return R * st * st
         return self._exact_sphere(c, st, par, src, s, chord)
+
+    def _curvature_table(self, c, st, par, s_max):
+        """One Chebyshev table of the curvature coefficients per channel, grown when a longer distance shows up."""
+        from .kernels.curvature import CurvatureTable  # noqa: PLC0415
+
+        tables = self.__dict__.setdefault("_tables", {})
+        t = tables.get(c)
+        if t is None or t.rho_max_opt < s_max * st:
+            t = tables[c] = CurvatureTable(par["albedo_prime"], par["eta"], max(s_max * st * 1.25, 10.0))
+        return t
 
     def _exact_sphere(self, c, st, par, src, s, chord):
         from .kernels.sphere import sphere_series_profile  # noqa: PLC0415
