@@ -18,6 +18,7 @@ point      (--k1, --k2)        R_d(s)                                 (none)    
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,9 +136,16 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
 
 def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_deg=(0.0,), rtol=1e-10):
     """All (model, radius, azimuth, channel) curves as rows of dicts, for the CSV, table and plot."""
-    s = _check_distances(distances_mm)
+    s_all = _check_distances(distances_mm)
     rows = []
     for shape in shapes:
+        s = s_all
+        if shape.kind == "sphere" and np.any(s_all > np.pi * shape.radius_mm):
+            s = s_all[s_all <= np.pi * shape.radius_mm]  # no point on a sphere is further than half its girth
+            warnings.warn(f"sphere of radius {shape.radius_mm:g} mm: distances beyond {np.pi * shape.radius_mm:.4g} mm "
+                          "(half the circumference) are left out of its curves", stacklevel=2)
+            if s.size == 0:
+                raise MeshshadeError(f"no requested distance lies on the sphere of radius {shape.radius_mm:g} mm")
         for az in azimuths_deg:
             for model in models:
                 R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol)

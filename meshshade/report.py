@@ -34,6 +34,7 @@ def _grey(rows) -> bool:
     return all(np.array_equal(v[0], w) for v in by.values() for w in v[1:])
 
 
+
 def format_profile_table(rows, *, material, extra_columns=()) -> str:
     """A readable fixed-width table: one column per curve, one line per distance (channels merged if grey)."""
     grey = _grey(rows)
@@ -51,9 +52,13 @@ def format_profile_table(rows, *, material, extra_columns=()) -> str:
     width = max(14, *(len(h) + 2 for h in heads))
     lines = [f"# {material.describe()}", "# reflectance per unit power entering the medium [1/mm^2]",
              f"{'distance_mm':>12}" + "".join(f"{h:>{width}}" for h in heads)]
-    s = curves[0]["distance_mm"]
-    for i in range(s.size):
-        lines.append(f"{s[i]:>12.6g}" + "".join(f"{c['reflectance_per_mm2'][i]:>{width}.6e}" for c in curves))
+    s_all = np.unique(np.concatenate([c["distance_mm"] for c in curves]))
+    for x in s_all:
+        cells = []
+        for c in curves:
+            hit = np.flatnonzero(c["distance_mm"] == x)
+            cells.append(f"{c['reflectance_per_mm2'][hit[0]]:>{width}.6e}" if hit.size else f"{'-':>{width}}")
+        lines.append(f"{x:>12.6g}" + "".join(cells))
     return "\n".join(lines)
 
 

@@ -65,12 +65,13 @@ def test_profile_table_and_plot(tmp_path, capsys):
     (["profile", "--material", "skin1", "--distances", "1,x"], "--distances"),
     (["profile", "--material", "skin1", "--distances", "-1"], "distances"),
     (["profile", "--material", "skin1", "--sigma-s-prime", "1,2"], "1 or 3"),
-    (["profile", "--material", "skin1", "--shape", "sphere", "--radius", "1", "--distances", "10"], "sphere"),
+    (["profile", "--material", "skin1", "--shape", "sphere", "--radius", "1", "--distances", "10"], "no requested"),
 ])
 def test_profile_bad_input_one_line_exit_2(argv, needle, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("meshshade: error:") and "\n" not in err and needle in err
+    errors = [ln for ln in err.splitlines() if not ln.startswith("meshshade: warning:")]
+    assert len(errors) == 1 and errors[0].startswith("meshshade: error:") and needle in errors[0]
     assert "Traceback" not in err
 
 
@@ -98,3 +99,14 @@ def test_profile_sphere_exact_equals_series_kernel(tmp_path):
     st = 1.01
     ref = sphere_series_profile(s / 10.0, R0_opt=10 * st, albedo_prime=1 / 1.01, eta=1.3) * st**2
     assert np.allclose([float(r["reflectance_per_mm2"]) for r in rows], ref, rtol=1e-14, atol=0)
+
+
+def test_profile_sphere_drops_distances_beyond_half_girth(tmp_path, capsys):
+    out = tmp_path / "p.csv"
+    assert main(["profile", "--sigma-s-prime", "1", "--sigma-a", "0.01", "--shape", "sphere", "--radius", "2,50",
+                 "--max-distance", "20", "--samples", "5", "--models", "exact", "--csv", str(out)]) == 0
+    assert "half the circumference" in capsys.readouterr().err
+    rows = read_csv(out)
+    small = [float(r["distance_mm"]) for r in rows if r["radius_mm"] == "2" and r["channel"] == "r"]
+    big = [float(r["distance_mm"]) for r in rows if r["radius_mm"] == "50" and r["channel"] == "r"]
+    assert max(small) <= np.pi * 2 and len(big) == 5
