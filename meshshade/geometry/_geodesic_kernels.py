@@ -14,11 +14,11 @@ its key, so processing slightly out of order changes the work, not the result (l
     where a path through one of its edge's end vertices is shorter (exact), a window whose whole interval is
     beaten through the opposite vertex is dropped (exact, the set where a point beats a pseudo-source along a
     line is an interval), and "one angle one split" trims the rays of a window that would cross a shorter ray
-    to the same vertex (exact).  ``rel_tol > 0`` relaxes the first two tests by that relative margin; the loss
-    per pruning is at most ``rel_tol`` times the distance, but prunings compound along the front.
-    Pseudo-sources are emitted at saddle (cone angle >= 2 pi), boundary and non-manifold vertices.  Every
-    distance is the length of an actual path on the mesh, so results never fall below the exact polyhedral
-    distance (up to rounding).
+    to the same vertex (exact).  Pseudo-sources are emitted at boundary and non-manifold vertices (all
+    around) and at saddles (cone angle theta > 2 pi) only into the sector [alpha + pi, alpha + theta - pi]
+    opposite the arrival direction alpha, where a path through the vertex can be shortest (MMP's rule; it
+    halves the window count on scanned meshes).  Every distance is the length of an actual path on the mesh,
+    so results never fall below the exact polyhedral distance (up to rounding).
 ``_vertex_queue_block(..., use_triangles=True)``
     First-order fast marching (Kimmel & Sethian 1998) with the point-source ("circle intersection") triangle
     update of Novotni & Klein 2002 and re-opening of settled vertices; exact on flat meshes, O(h) on curved ones.
@@ -135,8 +135,66 @@ def _append_results(out_v, out_d, nout, touched, nt, dist, cutoff):
 
 
 @njit(cache=True, nogil=True)
+def _build_fans(n_vertices, he_twin, he_tsx, he_corner, v_ptr, v_he):
+    """Angular position of every corner in its vertex's fan (for the pseudo-source shadow rule).
+
+    Walking counter-clockwise around vertex v, the half-edge opposite v in the next face is
+    ``next(twin(next(h)))``.  Returns ``fan_start`` (3m,): the angle, around the opposite vertex of half-edge h,
+    of the direction towards tail(h) (the corner of h's face spans [fan_start, fan_start + corner]), and
+    ``fan_ok`` (n,): the walk closed over all of v's faces (interior manifold vertex, consistent winding).
+    """
+    fan_start = np.zeros(he_twin.shape[0])
+    fan_ok = np.zeros(n_vertices, np.bool_)
+    for v in range(n_vertices):
+        a, b = v_ptr[v], v_ptr[v + 1]
+        deg = b - a
+        if deg < 3:
+            continue
+        h = v_he[a]
+        acc = 0.0
+        ok = True
+        for _ in range(deg):
+            fan_start[h] = acc
+            acc += he_corner[h]
+            nx = 3 * (h // 3) + (h % 3 + 1) % 3
+            t = he_twin[nx]
+            if t < 0 or he_tsx[nx] > 0.0:  # open edge or inconsistent winding: no fan
+                ok = False
+                break
+            h = 3 * (t // 3) + (t % 3 + 1) % 3
+        fan_ok[v] = ok and h == v_he[a]
+    return fan_start, fan_ok
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _arrival_angle(role, h, px, py, he_len, he_ox, he_oy, fan_start, he_corner):
+    """Fan angle, around the vertex, of the direction back along the path that reached it.
+
+    The path's last straight piece comes from point (px, py) of frame(h); the vertex is the opposite corner
+    (role 0), the tail (role 1) or the head (role 2) of h.
+    """
+    L = he_len[h]
+    ox = he_ox[h]
+    oy = he_oy[h]
+    base = 3 * (h // 3)
+    if role == 0:
+        ax = -ox
+        ay = -oy
+        dx = px - ox
+        dy = py - oy
+        return fan_start[h] + np.arctan2(ax * dy - ay * dx, ax * dx + ay * dy)
+    if role == 1:   # from direction tail -> head, counter-clockwise positive
+        hA = base + (h - base + 1) % 3
+        return fan_start[hA] + np.arctan2(py, px)
+    hB = base + (h - base + 2) % 3  # from direction head -> tail
+    dx = px - L
+    return fan_start[hB] + he_corner[hB] + np.arctan2(-py, -dx)
+
+
+@njit(cache=True, nogil=True)
 def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, he_head, he_opp, he_twin,
-                  he_tox, he_tsx, he_len, he_ox, he_oy, v_ptr, v_he, emitter, rel_tol, inv_delta, nb):
+                  he_tox, he_tsx, he_len, he_ox, he_oy, v_ptr, v_he, emitter, inv_delta, nb,
+                  fan_start, fan_ok, he_corner, v_theta):
     """Window propagation for a block of sources.  Returns (counts (k,), vertex (nnz,) int32, distance (nnz,))."""
     k = src_vertex.shape[0]
     m3 = he_tail.shape[0]
@@ -144,6 +202,10 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
     vstamp = np.zeros(n_vertices, np.int32)
     vdone = np.zeros(n_vertices, np.int32)
     touched = np.empty(n_vertices, np.int64)
+    arr_role = np.zeros(n_vertices, np.int8)   # how the best path reached the vertex (see _arrival_angle)
+    arr_h = np.zeros(n_vertices, np.int64)
+    arr_x = np.zeros(n_vertices)
+    arr_y = np.zeros(n_vertices)
     abest = np.empty(m3)
     abx = np.empty(m3)
     astamp = np.zeros(m3, np.int32)
@@ -170,7 +232,6 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
     out_v = np.empty(max(1024, 64 * k), np.int32)
     out_d = np.empty(out_v.shape[0])
     nout = 0
-    keep = 1.0 - rel_tol
     for i in range(k):
         stamp = i + 1
         cut = cutoff[i]
@@ -186,6 +247,7 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
             vstamp[sv] = stamp
             dist[sv] = 0.0
             vdone[sv] = 0
+            arr_role[sv] = -1
             touched[nt] = sv
             nt += 1
             nev = _bq_push(bhead, ek, ei, en, nev, 0.0, -sv - 1, inv_delta, cur, nb)
@@ -201,6 +263,10 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                 vstamp[u] = stamp
                 dist[u] = np.sqrt(px * px + py * py)
                 vdone[u] = 0
+                arr_role[u] = 1
+                arr_h[u] = h
+                arr_x[u] = px
+                arr_y[u] = py
                 touched[nt] = u
                 nt += 1
                 t = he_twin[h]
@@ -243,16 +309,16 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                 A = he_tail[t]
                 B = he_head[t]
                 O = he_opp[t]
-                # trim where the path through A (x < xA) or B is shorter (relaxed by rel_tol)
+                # trim where the path through A (x < xA) or B is shorter
                 if vstamp[A] == stamp:
-                    dA = dist[A] * keep - sg
+                    dA = dist[A] - sg
                     den = 2.0 * (sx + dA)
                     if den > 0.0:
                         xA = (sx * sx + sy * sy - dA * dA) / den
                         if xA + dA >= 0.0 and xA > lo:
                             lo = xA
                 if vstamp[B] == stamp:
-                    dB = dist[B] * keep - sg
+                    dB = dist[B] - sg
                     sxm = Lt - sx
                     den = 2.0 * (sxm + dB)
                     if den > 0.0:
@@ -267,12 +333,14 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                 vx = he_ox[t]
                 vy = he_oy[t]
                 if vstamp[O] == stamp:
-                    dO = dist[O] * keep
+                    dO = dist[O]
                     if (dO + np.sqrt((vx - lo) ** 2 + vy * vy) < sg + np.sqrt((lo - sx) ** 2 + sy * sy) and
                             dO + np.sqrt((vx - hi) ** 2 + vy * vy) < sg + np.sqrt((hi - sx) ** 2 + sy * sy)):
                         continue
                 # distances to the window's end vertices (when lit) and to the opposite vertex
                 for e in range(3):
+                    ax_ = sx
+                    ay_ = sy
                     if e == 0:
                         if lo > 1e-12 * Lt:
                             continue
@@ -288,8 +356,12 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                         xc = sx + (vx - sx) * (-sy) / (vy - sy)
                         if xc < lo:    # bent path through the interval's end point (a valid upper bound)
                             dd = sg + np.sqrt((lo - sx) ** 2 + sy * sy) + np.sqrt((vx - lo) ** 2 + vy * vy)
+                            ax_ = lo
+                            ay_ = 0.0
                         elif xc > hi:
                             dd = sg + np.sqrt((hi - sx) ** 2 + sy * sy) + np.sqrt((vx - hi) ** 2 + vy * vy)
+                            ax_ = hi
+                            ay_ = 0.0
                         else:
                             dd = sg + np.sqrt((vx - sx) ** 2 + (vy - sy) ** 2)
                     if vstamp[u] != stamp:
@@ -300,6 +372,10 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                         nt += 1
                     if dd < dist[u] * _IMPROVE:
                         dist[u] = dd
+                        arr_role[u] = (e + 1) % 3   # e: 0 = tail (role 1), 1 = head (role 2), 2 = opposite (0)
+                        arr_h[u] = t
+                        arr_x[u] = ax_
+                        arr_y[u] = ay_
                         if emitter[u] and dd <= cut:
                             vdone[u] = 0
                             nev = _bq_push(bhead, ek, ei, en, nev, dd, -u - 1, inv_delta, cur, nb)
@@ -326,6 +402,14 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                 if vdone[v] == stamp or key > dist[v]:
                     continue
                 vdone[v] = stamp
+                # MMP: a shortest path through a saddle turns by >= pi on both sides, so the pseudo-source
+                # only lights the sector [alpha + pi, alpha + theta - pi] opposite the arrival direction alpha
+                sector = fan_ok[v] and arr_role[v] >= 0
+                if sector:
+                    theta = v_theta[v]
+                    width = theta - 2.0 * np.pi
+                    alpha = _arrival_angle(arr_role[v], arr_h[v], arr_x[v], arr_y[v], he_len, he_ox, he_oy,
+                                           fan_start, he_corner)
                 for j in range(v_ptr[v], v_ptr[v + 1]):
                     h = v_he[j]
                     vx = he_ox[h]
@@ -346,6 +430,10 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                             nt += 1
                         if dd < dist[u] * _IMPROVE:
                             dist[u] = dd
+                            arr_role[u] = e + 1
+                            arr_h[u] = h
+                            arr_x[u] = vx
+                            arr_y[u] = vy
                             if emitter[u] and dd <= cut:
                                 vdone[u] = 0
                                 if nev + 8 >= ecap:
@@ -356,14 +444,57 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                                 nev = _bq_push(bhead, ek, ei, en, nev, dd, -u - 1, inv_delta, cur, nb)
                                 qn += 1
                     t = he_twin[h]
-                    if t >= 0 and nc < MAXC:
-                        c_t[nc] = t
-                        c_sx[nc] = he_tox[h] + he_tsx[h] * vx
-                        c_sy[nc] = -vy
-                        c_lo[nc] = 0.0
-                        c_hi[nc] = Lh
-                        c_sg[nc] = key
-                        nc += 1
+                    if t < 0 or nc >= MAXC:
+                        continue
+                    x0 = 0.0
+                    x1 = Lh
+                    if sector:
+                        # the sector relative to this corner, which spans [0, corner] from direction v -> tail
+                        cor = he_corner[h]
+                        a0 = (alpha + np.pi - fan_start[h]) % theta
+                        b0 = -1.0
+                        b1 = -2.0
+                        for wrap in range(2):
+                            lo_a = max(a0 - wrap * theta, 0.0) - 1e-9
+                            hi_a = min(a0 - wrap * theta + width, cor) + 1e-9
+                            if hi_a >= lo_a:
+                                if b1 < b0:
+                                    b0 = lo_a
+                                    b1 = hi_a
+                                else:
+                                    b0 = min(b0, lo_a)
+                                    b1 = max(b1, hi_a)
+                        if b1 < b0:
+                            continue
+                        # rays from v at those angles (counter-clockwise from v -> tail) meet the edge y = 0
+                        ux = -vx
+                        uy = -vy
+                        nu = np.sqrt(ux * ux + uy * uy)
+                        ux /= nu
+                        uy /= nu
+                        for e in range(2):
+                            ang = max(b0, 0.0) if e == 0 else min(b1, cor)
+                            ca = np.cos(ang)
+                            sa = np.sin(ang)
+                            rx = ux * ca - uy * sa
+                            ry = ux * sa + uy * ca
+                            xe = vx + rx * (-vy) / ry if ry < -1e-15 else (0.0 if e == 0 else Lh)
+                            if e == 0:
+                                x0 = min(max(xe, 0.0), Lh)
+                            else:
+                                x1 = min(max(xe, 0.0), Lh)
+                        if x1 < x0:
+                            x0, x1 = x1, x0
+                    # interval [x0, x1] of frame(h) -> frame(t)
+                    q0 = he_tox[h] + he_tsx[h] * x0
+                    q1 = he_tox[h] + he_tsx[h] * x1
+                    c_t[nc] = t
+                    c_sx[nc] = he_tox[h] + he_tsx[h] * vx
+                    c_sy[nc] = -vy
+                    c_lo[nc] = min(q0, q1)
+                    c_hi[nc] = max(q0, q1)
+                    c_sg[nc] = key
+                    nc += 1
                 continue
             w = item
             h = p_h[w]

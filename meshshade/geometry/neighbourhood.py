@@ -16,10 +16,9 @@ Method (``method="window"``, the default): exact polyhedral geodesics
     Against the *smooth* surface the mesh stands for, the polyhedral distance of an inscribed mesh undershoots
     by O(h^2): on a 10 mm sphere -0.26 / -0.07 / -0.018 / -0.0045 % (max) at edges of 1.5 / 0.75 / 0.38 / 0.19 mm
     (fitted order 1.96); on a 5 mm cylinder with 0.47 mm edges -0.018 %.
-    ``rel_tol > 0`` relaxes the pruning (fewer windows) but its error compounds along the front (3.6 % at
-    1e-3 on a 40k icosphere), so keep it <= 3e-4 (max error 6e-4 on the shared meshes and icospheres).
-    Cost: about 14 windows per vertex on a sphere, 20-60 on scanned meshes, ~0.15-0.3 us each, i.e. about
-    2 us per (source, neighbour) pair on one core (``tools/bench_neighbourhood.py``).
+    Saddle vertices emit pseudo-source windows only into the sector where a path through them can be shortest
+    (MMP's rule).  Cost: 10-25 windows per vertex (14 on a sphere, 25 on the sliver-rich head), ~0.15 us each,
+    i.e. about 2-4 us per (source, neighbour) pair on one core (``tools/bench_neighbourhood.py``).
 Faster, less accurate (``method="fmm"``, ``"dijkstra"``)
     ``"fmm"``: first-order fast marching (Kimmel & Sethian 1998) with the point-source triangle update of
     Novotni & Klein (2002) and re-opening, on the same bucket queue; exact on flat and developable meshes,
@@ -170,9 +169,9 @@ def _build_topology(V: np.ndarray, F: np.ndarray) -> dict:
     ox_b, oy_b = ox - L, oy
     angle = np.arctan2(np.abs(ox * oy_b - oy * ox_b), ox * ox_b + oy * oy_b)
     angle_sum = np.bincount(opp[good], weights=angle[good], minlength=n)
-    emitter = angle_sum > 2.0 * np.pi * (1.0 + 1e-9)  # saddles (flat vertices need no pseudo-source)
-    emitter[tail[open_he]] = True
-    emitter[head[open_he]] = True
+    open_vertex = np.zeros(n, bool)  # on an open or non-manifold edge: always a pseudo-source
+    open_vertex[tail[open_he]] = True
+    open_vertex[head[open_he]] = True
     # one-ring: half-edges opposite each vertex
     v_he = idx[np.argsort(opp[idx], kind="stable")]
     v_ptr = np.r_[0, np.cumsum(np.bincount(opp[idx], minlength=n))].astype(np.int64)
@@ -186,7 +185,8 @@ def _build_topology(V: np.ndarray, F: np.ndarray) -> dict:
     e_ptr = np.r_[0, np.cumsum(np.bincount(src, minlength=n))].astype(np.int64)
     e_len = np.linalg.norm(V[dst] - V[src], axis=1)
     out = dict(he_tail=tail, he_head=head, he_opp=opp, he_twin=twin, he_tox=tox, he_tsx=tsx, he_len=L,
-               he_ox=ox, he_oy=oy, v_ptr=v_ptr, v_he=v_he.astype(np.int64), emitter=emitter,
+               he_ox=ox, he_oy=oy, v_ptr=v_ptr, v_he=v_he.astype(np.int64), angle_excess=angle_sum - 2.0 * np.pi, open_vertex=open_vertex,
+               he_corner=np.where(good, angle, 0.0), v_theta=angle_sum,
                e_ptr=e_ptr, e_nbr=dst.astype(np.int64), e_len=e_len, good_face=good_face,
                n_boundary_edges=int(np.count_nonzero(sizes == 1)),
                n_nonmanifold_edges=int(np.count_nonzero(sizes > 2)),
@@ -239,9 +239,7 @@ class GeodesicNeighbourhoods:
         Unit normals; the default tangent plane of vertex sources when :meth:`query` gets no normals.
         Computed (area-weighted) when None.
     method : {"window", "fmm", "dijkstra"}
-        See the module docstring; "window" is exact up to ``rel_tol``.
-    rel_tol : float >= 0
-        Relative pruning tolerance of the window method (0 = exact).
+        See the module docstring; "window" is exact.
     n_threads : int or None
         Worker threads for :meth:`query` (the kernels release the GIL); default: usable CPUs.
     """
@@ -250,7 +248,6 @@ class GeodesicNeighbourhoods:
     faces: np.ndarray
     vertex_normals: np.ndarray | None = None
     method: str = "window"
-    rel_tol: float = 0.0
     n_threads: int | None = None
 
     def __post_init__(self):
@@ -267,8 +264,6 @@ class GeodesicNeighbourhoods:
             raise ValueError("face indices out of range")
         if self.method not in METHODS:
             raise ValueError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
-        if not (np.isfinite(self.rel_tol) and 0.0 <= self.rel_tol <= 1.0):
-            raise ValueError(f"rel_tol must lie in [0, 1], got {self.rel_tol}")
         if self.n_threads is not None and int(self.n_threads) < 1:
             raise ValueError(f"n_threads must be >= 1, got {self.n_threads}")
         # internal Z-order of vertices and faces: neighbours share cache lines (2x faster graph searches)
@@ -280,6 +275,11 @@ class GeodesicNeighbourhoods:
         finv[fperm] = np.arange(fperm.size)
         topo = _build_topology(V[vperm], vinv[F[fperm]] if F.size else F)
         topo.update(vperm=_readonly(vperm), vinv=_readonly(vinv), finv=_readonly(finv))
+        # pseudo-sources: open/non-manifold vertices and saddles (cone angle above 2 pi)
+        topo["emitter"] = _readonly(topo["open_vertex"] | (topo["angle_excess"] > 2.0 * np.pi * 1e-9))
+        fan_start, fan_ok = _k._build_fans(V.shape[0], topo["he_twin"], topo["he_tsx"], topo["he_corner"],
+                                           topo["v_ptr"], topo["v_he"])
+        topo.update(fan_start=_readonly(fan_start), fan_ok=_readonly(fan_ok))
         if self.vertex_normals is None:
             fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
             N = np.zeros_like(V)
@@ -310,7 +310,7 @@ class GeodesicNeighbourhoods:
     def __repr__(self) -> str:
         t = self._topo
         return (f"GeodesicNeighbourhoods({self.n_vertices} vertices, {self.faces.shape[0]} faces, "
-                f"mean edge {t['mean_edge']:.4g} mm, method={self.method!r}, rel_tol={self.rel_tol:g}, "
+                f"mean edge {t['mean_edge']:.4g} mm, method={self.method!r}, "
                 f"{t['n_boundary_edges']} boundary / {t['n_nonmanifold_edges']} non-manifold edges, "
                 f"{int(t['emitter'].sum())} saddle/boundary vertices, "
                 f"{int((~t['good_face']).sum())} degenerate faces ignored)")
@@ -379,7 +379,8 @@ class GeodesicNeighbourhoods:
         if self.method == "window":
             return _k._window_block(sv, sf, bary, cut, self.n_vertices, t["he_tail"], t["he_head"], t["he_opp"],
                                     t["he_twin"], t["he_tox"], t["he_tsx"], t["he_len"], t["he_ox"], t["he_oy"],
-                                    t["v_ptr"], t["v_he"], t["emitter"], float(self.rel_tol), *q)
+                                    t["v_ptr"], t["v_he"], t["emitter"], *q,
+                                    t["fan_start"], t["fan_ok"], t["he_corner"], t["v_theta"])
         return _k._vertex_queue_block(sv, sf, bary, cut, self.n_vertices, t["e_ptr"], t["e_nbr"], t["e_len"],
                                      t["he_tail"], t["he_head"], t["he_len"], t["he_ox"], t["he_oy"],
                                      t["v_ptr"], t["v_he"], self.method == "fmm", *q)
@@ -506,19 +507,19 @@ def tangent_azimuth(tangent, d1, d2, rho=None, k1=None, k2=None) -> np.ndarray:
 
 def geodesic_neighbourhoods(vertices, faces, source_points, source_faces, source_bary, source_vertex,
                             source_normals, cutoff_mm, *, vertex_normals=None, method: str = "window",
-                            rel_tol: float = 0.0, **query_kwargs) -> Neighbourhoods:
+                            **query_kwargs) -> Neighbourhoods:
     """One-off :meth:`GeodesicNeighbourhoods.query` (builds the solver, queries once)."""
-    solver = GeodesicNeighbourhoods(vertices, faces, vertex_normals, method=method, rel_tol=rel_tol)
+    solver = GeodesicNeighbourhoods(vertices, faces, vertex_normals, method=method)
     return solver.query(source_points, source_faces, source_bary, source_vertex, source_normals, cutoff_mm,
                         **query_kwargs)
 
 
 def geodesic_distances_from(vertices, faces, *, vertex: int | None = None, face: int | None = None, bary=None,
-                            cutoff_mm: float = np.inf, method: str = "window", rel_tol: float = 0.0):
+                            cutoff_mm: float = np.inf, method: str = "window"):
     """(n,) float64 mm: geodesic distance of every vertex from one source point (inf beyond ``cutoff_mm``).
 
     The source is ``vertex`` or a point of ``face`` with barycentric weights ``bary``; e.g. a beam's entry point
     (its hit face and barycentrics).
     """
-    solver = GeodesicNeighbourhoods(vertices, faces, method=method, rel_tol=rel_tol, n_threads=1)
+    solver = GeodesicNeighbourhoods(vertices, faces, method=method, n_threads=1)
     return solver.distances_from(vertex=vertex, face=face, bary=bary, cutoff_mm=cutoff_mm)
