@@ -202,11 +202,45 @@ class BakeResult:
         return self.stats.get("exitant_power")
 
 
-def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter) -> tuple[np.ndarray, dict]:
+#: source patches are averaged over (ring average) for pairs closer than this many patch radii
+PATCH_AVERAGE_RADII = 4.0
+
+
+def patch_average_factor(s_mm, a_mm, *, albedo_prime, eta, sigma_t_prime):
+    """Ratio of the dipole averaged over a source patch to its point value, for pairs at distance ``s_mm``.
+
+    A vertex sample stands for a patch of radius ``a = sqrt(area/pi)`` lit uniformly; the exitance it causes at
+    distance s is the kernel averaged over that patch. Point sampling over-counts badly when the kernel's width
+    (~z_r) is below the edge length (the self term alone can exceed the power entering). The average is taken
+    over the ring |r - s| <= a with the dipole's closed-form tail T(r) = int_r^inf R_d 2 pi r dr:
+
+        R_bar(s) = [T(max(s - a, 0)) - T(s + a)] / (pi ((s + a)^2 - max(s - a, 0)^2))
+
+    (the exact disc average at s = 0, -> R_d(s) for s >> a). Other models are multiplied by the same ratio
+    (curvature changes little across one patch). Returns (k,) float64 > 0.
+    """
+    from .kernels.dipole import dipole_tail_reflectance  # noqa: PLC0415
+
+    s = np.asarray(s_mm, dtype=np.float64) * sigma_t_prime
+    a = np.asarray(a_mm, dtype=np.float64) * sigma_t_prime
+    lo = np.maximum(s - a, 0.0)
+    hi = s + a
+    kw = {"albedo_prime": albedo_prime, "eta": eta}
+    ring = np.pi * (hi * hi - lo * lo)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        avg = (dipole_tail_reflectance(lo, **kw) - dipole_tail_reflectance(hi, **kw)) / ring
+        f = avg / dipole_profile(s, **kw)
+    return np.where((a > 0) & np.isfinite(f) & (f > 0), f, 1.0)
+
+
+def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, source_radius=None
+           ) -> tuple[np.ndarray, dict]:
     """Accumulate M[v, c] = sum_i power_i R_c(pair) over the pair chunks yielded by ``pairs_iter``.
 
     ``pairs_iter`` yields ``(src, vertex, s, chord, phi)`` arrays (src indexes ``power`` and the kernel's
     frames). Channel c uses only pairs with s <= cutoff_mm[c] (beyond, its reflectance is negligible).
+    ``source_radius`` (k,) mm: patch radius of each source (0 for a pencil beam), see
+    :func:`patch_average_factor`.
     """
     M = np.zeros((n_vertices, 3))
     n_pairs = np.zeros(3, dtype=np.int64)
@@ -216,6 +250,13 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter) ->
             if not np.any(keep):
                 continue
             R = kernel.evaluate(c, src[keep], s[keep], chord[keep], phi[keep])
+            if source_radius is not None:
+                a = source_radius[src[keep]]
+                near = np.flatnonzero(s[keep] < PATCH_AVERAGE_RADII * a)
+                if near.size:
+                    ch = kernel.material.channel(c)
+                    R[near] *= patch_average_factor(s[keep][near], a[near], albedo_prime=ch["albedo_prime"],
+                                                    eta=ch["eta"], sigma_t_prime=ch["sigma_t_prime"])
             acc = np.bincount(vtx[keep], weights=power[src[keep]] * R, minlength=n_vertices)
             n_pairs[c] += int(keep.sum())
             for cc in same:
@@ -300,7 +341,10 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
                 if bar is not None:
                     bar.update(b - a)
 
-        M, gstats = gather(kernel, mesh.n_vertices, samples.power, cut, pairs())
+        # vertex samples of directional/point lights stand for their vertex's area; beam samples are points
+        radius = np.where(samples.vertex >= 0, np.sqrt(mesh.vertex_areas[np.maximum(samples.vertex, 0)] / np.pi),
+                          0.0)
+        M, gstats = gather(kernel, mesh.n_vertices, samples.power, cut, pairs(), source_radius=radius)
         if bar is not None:
             bar.close()
         stats.update(gstats, pairs_found=n_pairs)
