@@ -21,8 +21,8 @@ Method (``method="window"``, the default): exact polyhedral geodesics
     i.e. about 2-4 us per (source, neighbour) pair on one core (``tools/bench_neighbourhood.py``).
 Faster, less accurate (``method="fmm"``, ``"dijkstra"``)
     ``"fmm"``: first-order fast marching (Kimmel & Sethian 1998) with the point-source triangle update of
-    Novotni & Klein (2002) and re-opening, on the same bucket queue; exact on flat and developable meshes,
-    about 4x cheaper than "window"; max error 0.1-0.7 % on icospheres, the torus and spot, 1-2 % on bunny and
+    Novotni & Klein (2002) and re-opening, on the same bucket queue; exact on flat meshes without obtuse
+    triangles (0.5 % max on a random Delaunay plate), about 4x cheaper than "window"; max error 0.1-0.7 % on icospheres, the torus and spot, 1-2 % on bunny and
     hand, 5 % on the head (obtuse triangles).  ``"dijkstra"`` (edge paths) overestimates by 16-60 % (max;
     8-15 % mean) and is kept as the baseline.
 
@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _geodesic_kernels as _k
+from . import _graph_kernels as _g
 
 __all__ = ["GeodesicNeighbourhoods", "Neighbourhoods", "geodesic_neighbourhoods", "geodesic_distances_from",
            "tangent_azimuth", "METHODS"]
@@ -381,7 +382,7 @@ class GeodesicNeighbourhoods:
                                     t["he_twin"], t["he_tox"], t["he_tsx"], t["he_len"], t["he_ox"], t["he_oy"],
                                     t["v_ptr"], t["v_he"], t["emitter"], *q,
                                     t["fan_start"], t["fan_ok"], t["he_corner"], t["v_theta"])
-        return _k._vertex_queue_block(sv, sf, bary, cut, self.n_vertices, t["e_ptr"], t["e_nbr"], t["e_len"],
+        return _g._vertex_queue_block(sv, sf, bary, cut, self.n_vertices, t["e_ptr"], t["e_nbr"], t["e_len"],
                                      t["he_tail"], t["he_head"], t["he_len"], t["he_ox"], t["he_oy"],
                                      t["v_ptr"], t["v_he"], self.method == "fmm", *q)
 
