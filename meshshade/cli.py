@@ -161,6 +161,10 @@ COMMANDS = {
     "bake": (add_bake_args, run_bake, "per-vertex radiance of a translucent mesh, written as a coloured PLY"),
     "profile": (add_profile_args, run_profile,
                 "reflectance vs geodesic distance on a plane, sphere, cylinder, saddle or curvature pair"),
+    "check": (lambda p: __import__("meshshade.cli_check", fromlist=["_"]).add_check_args(p),
+              lambda a: __import__("meshshade.cli_check", fromlist=["_"]).run_check(a),
+              "what the pipeline will make of a mesh: size in mm and transport lengths, defects, curvature, "
+              "resolution, where first-order theory holds"),
 }
 
 

@@ -47,7 +47,7 @@ from .geometry.mesh import Mesh, MeshDefectWarning
 from .units import mm_per_unit
 
 __all__ = ["SUPPORTED_MESH_FORMATS", "load_mesh", "read_mesh_arrays", "atomic_write", "check_output_path",
-           "write_ply", "write_mesh_ply", "write_npz", "write_text", "write_figure", "PLY_RESERVED_NAMES"]
+           "write_ply", "write_mesh_ply", "write_npz", "write_text", "write_json", "write_figure", "PLY_RESERVED_NAMES"]
 
 #: file extension -> format name
 SUPPORTED_MESH_FORMATS = {".obj": "obj", ".ply": "ply", ".off": "off", ".stl": "stl", ".glb": "glb",
@@ -111,7 +111,7 @@ def _read_obj(path: Path):
             faces = np.array(rows, dtype=np.int64).reshape(-1, 3)
             if faces.min() >= 1:
                 return verts, faces - 1
-    except ValueError:
+    except (ValueError, OverflowError):  # OverflowError: an index beyond int64 (reported line by line)
         pass
     return _read_obj_lines(path)
 
@@ -147,6 +147,8 @@ def _read_obj_lines(path: Path):
                         from None
                 if len(idx) < 3:
                     raise MeshValidationError(f"{path}:{lineno}: face with {len(idx)} corners (need at least 3)")
+                if max(map(abs, idx)) >= 2**62:
+                    raise MeshValidationError(f"{path}:{lineno}: face index out of range in {line.strip()[:60]!r}")
                 if 0 in idx:
                     raise MeshValidationError(f"{path}:{lineno}: face index 0 (OBJ indices start at 1)")
                 idx = [i - 1 if i > 0 else n + i for i in idx]
@@ -465,4 +467,14 @@ def write_npz(path, **arrays) -> Path:
     with atomic_write(path) as tmp:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
+    return path
+
+
+def write_json(path, obj) -> Path:
+    """Write ``obj`` as indented JSON (UTF-8) atomically."""
+    import json  # noqa: PLC0415
+
+    path = Path(path)
+    with atomic_write(path) as tmp:
+        tmp.write_text(json.dumps(obj, indent=2) + "\n", encoding="utf-8")
     return path

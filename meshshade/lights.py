@@ -40,6 +40,9 @@ def _vec3(value, what: str) -> tuple[float, float, float]:
 
 def _direction(value, what: str = "direction") -> tuple[float, float, float]:
     d = np.array(_vec3(value, what))
+    big = float(np.max(np.abs(d)))
+    if big > 0.0:
+        d = d / big  # scale first: the norm of (1e308, 1e308, 1e308) overflows
     norm = float(np.linalg.norm(d))
     if not norm > 0.0:
         raise LightError(f"{what} must be non-zero, got {tuple(float(x) for x in d)}")

@@ -290,6 +290,8 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         raise MeshshadeError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     if not (0 < cutoff_tol < 1):
         raise MeshshadeError(f"cutoff tolerance must lie in (0, 1), got {cutoff_tol}")
+    if curvature_radius_mm is not None and not (np.isfinite(curvature_radius_mm) and curvature_radius_mm > 0):
+        raise MeshshadeError(f"curvature radius must be a positive number of mm, got {curvature_radius_mm}")
     lights = list(lights) if isinstance(lights, (list, tuple)) else [lights]
     timings, t0 = {}, time.perf_counter()
 
