@@ -157,7 +157,10 @@ def run_bake(args) -> int:
 
 
 # --- main --------------------------------------------------------------------------------------------
+from .cli_mc import add_mc_args, run_mc  # noqa: E402  (lazy inside; no import cycle)
+
 COMMANDS = {
+    "mc": (add_mc_args, run_mc, "Monte Carlo reference: random walk inside the mesh, exitance with standard errors"),
     "bake": (add_bake_args, run_bake, "per-vertex radiance of a translucent mesh, written as a coloured PLY"),
     "profile": (add_profile_args, run_profile,
                 "reflectance vs geodesic distance on a plane, sphere, cylinder, saddle or curvature pair"),

@@ -1,0 +1,566 @@
+"""Monte Carlo reference: a volumetric random walk inside the closed mesh that the diffusion models shade.
+
+Physics (MCML conventions, Wang, Jacques & Zheng 1995, *Comput. Methods Programs Biomed.* 47:131):
+
+* photons enter from the lights (beam, directional, point); at entry the unpolarised Fresnel reflectance
+  F(cos) (index 1 outside, ``eta`` inside) is split off *deterministically* as specular power and the rest is
+  refracted (Snell) into the medium;
+* free paths s = -ln(u)/sigma_t with sigma_t = sigma_s + sigma_a, sigma_s = sigma_s'/(1 - g);
+* at an interaction the weight is multiplied by the single-scattering albedo sigma_s/sigma_t (the removed part
+  is tallied as absorbed) and the direction is sampled from the Henyey-Greenstein phase function (isotropic at
+  g = 0);
+* a boundary is found with a batched Embree ``first_hit`` from the photon's position along its direction: if
+  the hit is nearer than the sampled free path, the photon reaches the surface and is reflected with
+  probability F(cos_i) (from index eta into 1; total internal reflection gives F = 1) or leaves, and its weight
+  is tallied on the exit face (with the barycentrics of the exit point, so also on the face's vertices);
+* Russian roulette below ``ROULETTE_THRESHOLD`` times the photon's initial weight: survive with probability
+  1/``ROULETTE_BOOST`` with the weight multiplied by ``ROULETTE_BOOST``. The roulette's net weight change is
+  booked in ``absorbed`` (its expectation is zero, so ``absorbed`` stays unbiased) so that specular + diffuse +
+  transmitted + absorbed (+ lost) = 1 holds *exactly* per channel, not only on average.
+
+Channels: one walk per distinct (sigma_s', sigma_a) pair; channels with equal coefficients (grey materials)
+share one walk and are copied. (Per-channel weights on one path are only valid when sigma_t is equal across
+channels; separate walks are simpler and always correct.)
+
+Wavefront: all live photons advance together by one free path per iteration with numpy; dead photons are
+replaced by new ones from the lights as long as photons remain (a regenerating pool of ``pool`` photons, so
+the long tail of the walk does not starve the Embree batches).
+
+Uncertainty: photon ``i`` belongs to batch ``i % n_batches``; every reported quantity is also tallied per batch
+and its standard error is the batch-means estimate std(batch values, ddof=1)/sqrt(n_batches).
+
+Pure computation, no file I/O (``write_mc`` delegates writing to :mod:`meshshade.io`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import LightError, MeshshadeError
+from .kernels.fresnel import fresnel_reflectance
+from .lights import BeamLight, DirectionalLight, PointLight, winding_number
+from .materials import Material
+
+ROULETTE_THRESHOLD = 1e-4
+ROULETTE_BOOST = 10.0
+DEFAULT_BATCHES = 16
+TOTAL_KEYS = ("specular_reflectance", "diffuse_reflectance", "transmittance", "absorbed")
+
+
+# ------------------------------------------------------------------------------------------------ sampling
+def _orthonormal_basis(d):
+    """(t, b) unit vectors orthogonal to unit ``d`` (n, 3) (Duff et al. 2017, branchless)."""
+    sign = np.where(d[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + d[:, 2])
+    b = d[:, 0] * d[:, 1] * a
+    t = np.stack([1.0 + sign * d[:, 0] ** 2 * a, sign * b, -sign * d[:, 0]], axis=1)
+    s = np.stack([b, sign + d[:, 1] ** 2 * a, -d[:, 1]], axis=1)
+    return t, s
+
+
+def sample_hg_cos(g: float, u) -> np.ndarray:
+    """cos(theta) of the Henyey-Greenstein phase function with anisotropy ``g`` by inversion (u uniform in [0, 1))."""
+    u = np.asarray(u, dtype=np.float64)
+    if abs(g) < 1e-6:
+        return 1.0 - 2.0 * u
+    tmp = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
+    return np.clip((1.0 + g * g - tmp * tmp) / (2.0 * g), -1.0, 1.0)
+
+
+def scatter_directions(d, g: float, rng) -> np.ndarray:
+    """New unit directions (n, 3) after HG scattering of unit directions ``d`` (n, 3)."""
+    n = d.shape[0]
+    cos_t = sample_hg_cos(g, rng.random(n))
+    sin_t = np.sqrt(np.clip(1.0 - cos_t * cos_t, 0.0, None))
+    phi = 2.0 * np.pi * rng.random(n)
+    t, b = _orthonormal_basis(d)
+    out = (sin_t * np.cos(phi))[:, None] * t + (sin_t * np.sin(phi))[:, None] * b + cos_t[:, None] * d
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def refract_in(d, n, eta: float) -> np.ndarray:
+    """Refract unit directions ``d`` arriving from outside (index 1) through outward unit normals ``n`` into eta."""
+    cos_i = np.clip(-np.einsum("ij,ij->i", d, n), 0.0, 1.0)
+    sin2_t = (1.0 - cos_i ** 2) / eta ** 2
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, None))
+    out = d / eta + (cos_i / eta - cos_t)[:, None] * n
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+# ------------------------------------------------------------------------------------------------ emitters
+class _Emitter:
+    """Draws photons from the lights: entry point (face, bary), inward direction, weight (W), specular part.
+
+    Every photon carries ``P_total / N`` W times a correction for point lights; shadowed directional/point
+    photons carry no incident power (weight 0).
+    """
+
+    def __init__(self, V, F, normals, areas, lights, scene, eta):
+        self.V, self.F, self.N, self.A, self.scene, self.eta = V, F, normals, areas, scene, eta
+        self.lights = list(lights)
+        if not self.lights:
+            raise LightError("Monte Carlo needs at least one light")
+        self.parts = []
+        power = []
+        for i, light in enumerate(self.lights):
+            if isinstance(light, BeamLight):
+                o, d = np.array(light.origin), np.array(light.direction)
+                if abs(winding_number(V, F, o)) > 0.5:
+                    raise LightError(f"beam light {i} starts inside the mesh (origin {light.origin} mm)")
+                hits = scene.first_hit(o, d, exact=True)
+                f = int(hits.face[0])
+                if f < 0 or float(normals[f] @ d) >= 0.0:
+                    raise LightError(f"beam light {i} from {light.origin} mm along {light.direction} misses "
+                                     "the mesh (or reaches the back of a face)")
+                self.parts.append(("beam", f, hits.bary[0], d))
+                power.append(light.power)
+            elif isinstance(light, (DirectionalLight, PointLight)):
+                c = V[F].mean(axis=1)
+                if isinstance(light, DirectionalLight):
+                    cos = normals @ (-np.array(light.direction))
+                    w = light.irradiance * np.clip(cos, 0.0, None) * areas
+                else:
+                    pos = np.array(light.position)
+                    if abs(winding_number(V, F, pos)) > 0.5:
+                        raise LightError(f"point light {i} at {light.position} mm is inside the mesh")
+                    delta = pos - c
+                    r2 = np.einsum("ij,ij->i", delta, delta)
+                    cos = np.einsum("ij,ij->i", normals, delta) / np.sqrt(r2)
+                    w = light.intensity * np.clip(cos, 0.0, None) * areas / r2
+                total = float(w.sum())
+                if not total > 0.0:
+                    raise LightError(f"light {i} ({light!r}) faces no part of the mesh")
+                self.parts.append(("area", np.cumsum(w) / total, w, light))
+                power.append(total)
+            else:
+                raise LightError(f"light {i} is not a BeamLight, DirectionalLight or PointLight: {light!r}")
+        self.light_power = np.array(power, dtype=np.float64)   # W (for area lights: centroid estimate)
+        self.total_power = float(self.light_power.sum())
+        self.light_cdf = np.cumsum(self.light_power) / self.total_power
+        # faces whose normal faces each light (diffuse reflectance vs transmittance)
+        self.facing = np.zeros((len(self.lights), F.shape[0]), dtype=bool)
+        c = V[F].mean(axis=1)
+        for i, light in enumerate(self.lights):
+            if isinstance(light, PointLight):
+                self.facing[i] = np.einsum("ij,ij->i", normals, np.array(light.position) - c) > 0.0
+            else:
+                self.facing[i] = normals @ (-np.array(light.direction)) > 0.0
+
+    def emit(self, k: int, n_total: int, rng):
+        """k photons: (light, face, bary (k,3), points, dirs_in, weight_in, specular, incident)."""
+        light = np.minimum(np.searchsorted(self.light_cdf, rng.random(k), side="right"), len(self.lights) - 1)
+        face = np.zeros(k, dtype=np.int64)
+        bary = np.zeros((k, 3))
+        d_out = np.zeros((k, 3))           # incident direction (outside, travelling towards the surface)
+        weight = np.full(k, self.total_power / n_total)
+        for i, part in enumerate(self.parts):
+            sel = np.flatnonzero(light == i)
+            if sel.size == 0:
+                continue
+            if part[0] == "beam":
+                face[sel], bary[sel], d_out[sel] = part[1], part[2], part[3]
+                continue
+            _, cdf, w_face, lt = part
+            f = np.minimum(np.searchsorted(cdf, rng.random(sel.size), side="right"), cdf.size - 1)
+            r1, r2 = np.sqrt(rng.random(sel.size)), rng.random(sel.size)
+            b = np.stack([1.0 - r1, r1 * (1.0 - r2), r1 * r2], axis=1)
+            face[sel], bary[sel] = f, b
+            p = np.einsum("ij,ijk->ik", b, self.V[self.F[f]])
+            if isinstance(lt, DirectionalLight):
+                d = np.broadcast_to(np.array(lt.direction), (sel.size, 3))
+                to_light, t_max = -d, np.inf
+            else:
+                delta = p - np.array(lt.position)
+                dist = np.linalg.norm(delta, axis=1)
+                d = delta / dist[:, None]
+                to_light, t_max = -d, dist
+                # importance weight: true irradiance at the point over the face-centroid value used for sampling
+                cos = np.clip(-np.einsum("ij,ij->i", self.N[f], d), 0.0, None)
+                weight[sel] *= lt.intensity * cos / dist ** 2 * self.A[f] / w_face[f]
+            d_out[sel] = d
+            origin = self.scene.offset_origins(p, self.N[f], sign=1.0)
+            shadow = self.scene.occluded(origin, to_light, t_max)
+            weight[sel[shadow]] = 0.0
+        points = np.einsum("ij,ijk->ik", bary, self.V[self.F[face]])
+        n = self.N[face]
+        cos_i = np.clip(-np.einsum("ij,ij->i", d_out, n), 0.0, 1.0)
+        Fr = fresnel_reflectance(cos_i, 1.0, self.eta)
+        dirs = refract_in(d_out, n, self.eta)
+        points = self.scene.offset_origins(points, n, sign=-1.0)
+        return light, face, points, dirs, weight * (1.0 - Fr), weight * Fr, weight.copy()
+
+
+# ------------------------------------------------------------------------------------------------ results
+@dataclass
+class MCResult:
+    """Tallies of a Monte Carlo run (all powers in W, per channel r, g, b; stderr by batch means).
+
+    face_power : (m, 3) W leaving each face; vertex_power : (n, 3) W, exit power split by barycentrics;
+    radiance : (n, 3) W/mm^2, vertex_power / vertex area (exitance), with radiance_stderr;
+    totals : dict key -> (3,) fractions of the incident power (TOTAL_KEYS) and ``<key>_stderr``;
+    lost : (3,) fraction lost to numerical leaks (rays that miss the mesh from inside), normally 0;
+    beam_exits : per channel, dict of arrays ``face``, ``bary``, ``weight`` (W), ``batch`` for photons of the
+        first beam light (for radial profiles); beam_entry : (face, bary) of that beam, or None.
+    """
+
+    material: Material
+    face_power: np.ndarray
+    face_power_stderr: np.ndarray
+    vertex_power: np.ndarray
+    radiance: np.ndarray
+    radiance_stderr: np.ndarray
+    totals: dict
+    lost: np.ndarray
+    incident_power: np.ndarray
+    entering_power: np.ndarray
+    photons: int
+    events: int
+    boundary_events: int
+    seconds: float
+    n_batches: int
+    beam_exits: list = field(default_factory=list)
+    beam_entry: tuple | None = None
+    beam_distance: np.ndarray | None = None
+
+    @property
+    def events_per_second(self) -> float:
+        return self.events / max(self.seconds, 1e-12)
+
+
+def _batch_stats(per_batch):
+    """(B, ...) batch totals -> (mean of the sum-estimate, stderr of the sum) with equal-size batches."""
+    B = per_batch.shape[0]
+    total = per_batch.sum(axis=0)
+    stderr = np.std(per_batch * B, axis=0, ddof=1) / np.sqrt(B) if B > 1 else np.zeros_like(total)
+    return total, stderr
+
+
+class _Walk:
+    """One grey walk (one channel group) with a regenerating wavefront."""
+
+    def __init__(self, V, F, normals, emitter, scene, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam):
+        self.V, self.F, self.N, self.em, self.scene = V, F, normals, emitter, scene
+        self.sigma_t = sigma_s + sigma_a
+        self.albedo = sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
+        self.g, self.eta, self.B, self.keep_beam = g, eta, n_batches, keep_beam
+        m, L = F.shape[0], len(emitter.lights)
+        self.face = np.zeros((n_batches, m))
+        self.face_vert = np.zeros((n_batches, V.shape[0]))
+        self.tot = np.zeros((n_batches, 7))  # specular, diffuse, transmitted, absorbed, lost, incident, entering
+        self.events = 0
+        self.boundary = 0
+        self.beam_light = next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), None)
+        self.exits = {"face": [], "bary": [], "weight": [], "batch": []}
+        self.L = L
+
+    def run(self, n_photons, rng, *, pool, time_budget=None, progress=None):
+        t0 = time.perf_counter()
+        emitted = 0
+        keys = ("pos", "dir", "w", "w0", "batch", "light")
+        live = {k: np.zeros((0, 3) if k in ("pos", "dir") else 0) for k in keys}
+        live["batch"] = live["batch"].astype(np.int64)
+        live["light"] = live["light"].astype(np.int64)
+        stop_emitting = False
+        while True:
+            if time_budget is not None and time.perf_counter() - t0 > time_budget:
+                stop_emitting = True
+            k = min(pool - live["w"].size, n_photons - emitted) if not stop_emitting else 0
+            if k > 0:
+                live = self._add(live, k, emitted, n_photons, rng)
+                emitted += k
+                if progress is not None:
+                    progress.update(k)
+            if live["w"].size == 0:
+                break
+            live = self._step(live, rng)
+        return emitted
+
+    def _add(self, live, k, emitted, n_total, rng):
+        light, face, pos, dirs, w_in, spec, inc = self.em.emit(k, n_total, rng)
+        batch = (emitted + np.arange(k)) % self.B
+        np.add.at(self.tot, (batch, 0), spec)
+        np.add.at(self.tot, (batch, 5), inc)
+        np.add.at(self.tot, (batch, 6), w_in)
+        ok = w_in > 0.0
+        new = {"pos": pos[ok], "dir": dirs[ok], "w": w_in[ok], "w0": w_in[ok], "batch": batch[ok],
+               "light": light[ok]}
+        return {key: np.concatenate([live[key], new[key]]) for key in live}
+
+    def _step(self, live, rng):
+        pos, d, w, batch = live["pos"], live["dir"], live["w"], live["batch"]
+        n = w.size
+        hits = self.scene.first_hit(pos, d)
+        s = -np.log1p(-rng.random(n)) / self.sigma_t if self.sigma_t > 0 else np.full(n, np.inf)
+        t_hit = np.where(hits.face >= 0, np.maximum(hits.t, 0.0), np.inf)
+        # a ray from inside must hit the back of a face; a miss or a front hit means the photon leaked out
+        fn = self.N[np.maximum(hits.face, 0)]
+        cos_i = np.einsum("ij,ij->i", d, fn)
+        leaked = (hits.face < 0) | (cos_i <= 0.0)
+        at_boundary = (t_hit <= s) & ~leaked
+        scatter = (s < t_hit) & ~leaked & ~at_boundary
+        keep = scatter.copy()
+        # --- leaks
+        if np.any(leaked):
+            np.add.at(self.tot, (batch[leaked], 4), w[leaked])
+        # --- interactions: absorb, scatter
+        idx = np.flatnonzero(scatter)
+        if idx.size:
+            pos[idx] += s[idx, None] * d[idx]
+            np.add.at(self.tot, (batch[idx], 3), w[idx] * (1.0 - self.albedo))
+            w[idx] *= self.albedo
+            d[idx] = scatter_directions(d[idx], self.g, rng)
+            self.events += idx.size
+        # --- boundary: Fresnel reflect or exit
+        idx = np.flatnonzero(at_boundary)
+        if idx.size:
+            self.boundary += idx.size
+            ci = np.clip(cos_i[idx], 0.0, 1.0)
+            R = fresnel_reflectance(ci, self.eta, 1.0)
+            refl = rng.random(idx.size) < R
+            r_idx, e_idx = idx[refl], idx[~refl]
+            if r_idx.size:
+                nr = fn[r_idx]
+                d[r_idx] = d[r_idx] - 2.0 * cos_i[r_idx, None] * nr
+                pos[r_idx] = self.scene.offset_origins(hits.points[r_idx], nr, sign=-1.0)
+                keep[r_idx] = True
+            if e_idx.size:
+                f = hits.face[e_idx]
+                u, v = hits.uv[e_idx, 0], hits.uv[e_idx, 1]
+                bary = np.stack([1.0 - u - v, u, v], axis=1)
+                we, be = w[e_idx], batch[e_idx]
+                np.add.at(self.face, (be, f), we)
+                for j in range(3):
+                    np.add.at(self.face_vert, (be, self.F[f, j]), we * bary[:, j])
+                facing = self.em.facing[live["light"][e_idx], f]
+                np.add.at(self.tot, (be[facing], 1), we[facing])
+                np.add.at(self.tot, (be[~facing], 2), we[~facing])
+                if self.keep_beam and self.beam_light is not None:
+                    mine = live["light"][e_idx] == self.beam_light
+                    for key, val in (("face", f), ("bary", bary), ("weight", we), ("batch", be)):
+                        self.exits[key].append(val[mine])
+        # --- Russian roulette (net change booked as absorbed: exact balance, unbiased)
+        low = keep & (w < ROULETTE_THRESHOLD * live["w0"])
+        idx = np.flatnonzero(low)
+        if idx.size:
+            survive = rng.random(idx.size) * ROULETTE_BOOST < 1.0
+            delta = np.where(survive, -(ROULETTE_BOOST - 1.0) * w[idx], w[idx])
+            np.add.at(self.tot, (batch[idx], 3), delta)
+            w[idx] = np.where(survive, w[idx] * ROULETTE_BOOST, 0.0)
+            keep[idx[~survive]] = False
+        return {key: val[keep] for key, val in live.items()}
+
+
+def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000, seed: int = 0,
+             time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int = 1 << 16,
+             keep_beam_exits: bool = True, beam_distances: bool = True, progress: bool = False) -> MCResult:
+    """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
+
+    Parameters
+    ----------
+    mesh : Mesh (closed, outward faces; vertices in mm)
+    material : Material (uses sigma_s', sigma_a, eta and g)
+    lights : light or sequence of BeamLight / DirectionalLight / PointLight
+    photons : photons per channel group (with ``time_budget``: an upper bound, None = unbounded)
+    seed : int, makes the run reproducible (per channel group a child of ``numpy.random.SeedSequence(seed)``)
+    time_budget : float seconds or None; emission stops once it is spent (live photons are finished)
+    n_batches : batches for the standard errors (>= 2)
+    beam_distances : compute per-vertex geodesic distances from the first beam's entry point
+
+    Returns
+    -------
+    MCResult
+    """
+    from .raycast import make_scene  # noqa: PLC0415
+
+    if isinstance(lights, (BeamLight, DirectionalLight, PointLight)):
+        lights = [lights]
+    if photons is None and time_budget is None:
+        raise MeshshadeError("give a photon count or a time budget")
+    if photons is not None and photons < n_batches:
+        raise MeshshadeError(f"need at least {n_batches} photons (one per batch), got {photons}")
+    if n_batches < 2:
+        raise MeshshadeError("n_batches must be at least 2 for a standard error")
+    n_photons = int(photons) if photons is not None else 1 << 62
+    V, F = mesh.vertices, mesh.faces
+    normals, areas = mesh.face_normals, mesh.face_areas
+    scene = make_scene(V, F)
+    emitter = _Emitter(V, F, normals, areas, lights, scene, material.eta)
+    g = material.g
+    sigma_s = material.sigma_s_prime / (1.0 - g)
+    groups: dict = {}
+    for c in range(3):
+        groups.setdefault((float(sigma_s[c]), float(material.sigma_a[c])), []).append(c)
+    children = np.random.SeedSequence(seed).spawn(len(groups))
+    t0 = time.perf_counter()
+    face_p = np.zeros((F.shape[0], 3)); face_se = np.zeros_like(face_p)
+    vert_p = np.zeros((V.shape[0], 3)); vert_se = np.zeros_like(vert_p)
+    tot = np.zeros((7, 3)); tot_se = np.zeros((7, 3))
+    frac = np.zeros((5, 3)); frac_se = np.zeros((5, 3))
+    events = boundary = 0
+    emitted_max = 0
+    exits = [None] * 3
+    bar = None
+    if progress:
+        from tqdm import tqdm  # noqa: PLC0415
+        bar = tqdm(total=None if photons is None else n_photons * len(groups), desc="mc", unit="photon",
+                   leave=False)
+    try:
+        for ((ss, sa), chans), child in zip(groups.items(), children):
+            walk = _Walk(V, F, normals, emitter, scene, sigma_s=ss, sigma_a=sa, g=g, eta=material.eta,
+                         n_batches=n_batches, keep_beam=keep_beam_exits)
+            budget = None if time_budget is None else time_budget / len(groups)
+            emitted = walk.run(n_photons, np.random.default_rng(child), pool=pool, time_budget=budget,
+                               progress=bar)
+            emitted_max = max(emitted_max, emitted)
+            scale = n_photons / emitted if emitted else 1.0
+            # photon weights were P/n_photons: rescale when the time budget stopped emission early
+            fp, fse = _batch_stats(walk.face * scale)
+            vp, _ = _batch_stats(walk.face_vert * scale)
+            vse = _batch_stats(walk.face_vert * scale)[1]
+            tt, tse = _batch_stats(walk.tot * scale)
+            inc = walk.tot[:, 5]
+            ratios = walk.tot[:, :5] / np.where(inc > 0, inc, np.nan)[:, None]          # (B, 5) per batch
+            fr = tt[:5] / tt[5] if tt[5] > 0 else np.zeros(5)
+            fse_tot = np.nanstd(ratios, axis=0, ddof=1) / np.sqrt(n_batches)
+            for c in chans:
+                face_p[:, c], face_se[:, c], vert_p[:, c], vert_se[:, c] = fp, fse, vp, vse
+                tot[:, c], tot_se[:, c], frac[:, c], frac_se[:, c] = tt, tse, fr, fse_tot
+                if keep_beam_exits and walk.exits["face"]:
+                    exits[c] = {k: np.concatenate(v) for k, v in walk.exits.items()}
+                    exits[c]["weight"] = exits[c]["weight"] * scale
+            events += walk.events
+            boundary += walk.boundary
+    finally:
+        if bar is not None:
+            bar.close()
+    seconds = time.perf_counter() - t0
+    va = mesh.vertex_areas
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radiance = np.where(va[:, None] > 0, vert_p / va[:, None], 0.0)
+        radiance_se = np.where(va[:, None] > 0, vert_se / va[:, None], 0.0)
+    totals = {}
+    for i, key in enumerate(TOTAL_KEYS):
+        totals[key] = frac[i]
+        totals[key + "_stderr"] = frac_se[i]
+    beam_entry = None
+    beam_distance = None
+    b = emitter.parts[next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), -1)] \
+        if any(isinstance(lt, BeamLight) for lt in emitter.lights) else None
+    if b is not None:
+        beam_entry = (int(b[1]), np.asarray(b[2]))
+        if beam_distances:
+            from .geometry.neighbourhood import GeodesicNeighbourhoods  # noqa: PLC0415
+            beam_distance = GeodesicNeighbourhoods(V, F).distances_from(face=beam_entry[0], bary=beam_entry[1])
+    return MCResult(material=material, face_power=face_p, face_power_stderr=face_se, vertex_power=vert_p,
+                    radiance=radiance, radiance_stderr=radiance_se, totals=totals, lost=frac[4],
+                    incident_power=tot[5], entering_power=tot[6], photons=emitted_max, events=events,
+                    boundary_events=boundary, seconds=seconds, n_batches=n_batches,
+                    beam_exits=exits if keep_beam_exits else [], beam_entry=beam_entry,
+                    beam_distance=beam_distance)
+
+
+# ------------------------------------------------------------------------------------------------ profiles
+def radial_exitance(exit_distance, weight, batch, distances_mm, *, halfwidth_mm, annulus_area, n_batches,
+                    entering_power):
+    """Exitance per unit entering power [mm^-2] in annuli [s - h, s + h] (clipped at 0) around each distance.
+
+    exit_distance, weight, batch : (k,) exit geodesic distance (mm), power (W), batch index
+    annulus_area : callable (a, b) -> area (mm^2) of the surface between geodesic distances a and b
+    Returns (value (n,), stderr (n,)).
+    """
+    s = np.asarray(distances_mm, dtype=np.float64)
+    h = np.broadcast_to(np.asarray(halfwidth_mm, dtype=np.float64), s.shape)
+    lo, hi = np.maximum(s - h, 0.0), s + h
+    per = np.zeros((n_batches, s.size))
+    for j in range(s.size):
+        sel = (exit_distance >= lo[j]) & (exit_distance < hi[j])
+        per[:, j] = np.bincount(batch[sel], weights=weight[sel], minlength=n_batches) / annulus_area(lo[j], hi[j])
+    per /= entering_power
+    return _batch_stats(per)
+
+
+def mc_profile(material: Material, distances_mm, *, shape, photons: int = 200_000, seed: int = 0,
+               subdivisions: int | None = None, return_stderr: bool = False):
+    """Monte Carlo reflectance profile [mm^-2] per unit entering power, (3, n), for a unit beam at a sphere's pole.
+
+    The sphere is an icosphere of ``shape.radius_mm`` (subdivision chosen so edges are <= ~R/30, at most 6);
+    the beam enters at normal incidence at the north pole; exit points are tallied against their great-circle
+    distance from the pole in annuli of half-width max(0.1 s, 0.05/sigma_t'_min) (exact spherical annulus area).
+    """
+    from .geometry.mesh import Mesh  # noqa: PLC0415
+    from .geometry.procedural import icosphere  # noqa: PLC0415
+
+    if shape is None or shape.kind != "sphere":
+        raise MeshshadeError("the Monte Carlo profile is implemented for --shape sphere only "
+                             "(use `meshshade mc` on a mesh for other geometry)")
+    R = float(shape.radius_mm)
+    s = np.asarray(distances_mm, dtype=np.float64)
+    level = subdivisions if subdivisions is not None else 5 if R <= 20 else 6
+    V, F = icosphere(R, level)
+    # rotate so that no vertex sits on the pole: the beam then enters inside a face
+    ang = 0.0123
+    rot = np.array([[1, 0, 0], [0, np.cos(ang), -np.sin(ang)], [0, np.sin(ang), np.cos(ang)]])
+    mesh = Mesh.from_arrays(V @ rot.T, F)
+    beam = BeamLight((0.0, 0.0, 2.0 * R + 1.0), (0.0, 0.0, -1.0), 1.0)
+    res = simulate(mesh, material, [beam], photons=photons, seed=seed, beam_distances=False)
+    h = np.maximum(0.1 * s, 0.05 / float(np.min(material.sigma_t_prime)))
+    area = lambda a, b: 2.0 * np.pi * R * R * (np.cos(a / R) - np.cos(min(b / R, np.pi)))  # noqa: E731
+    out = np.zeros((3, s.size))
+    err = np.zeros((3, s.size))
+    for c in range(3):
+        ex = res.beam_exits[c]
+        if ex is None:
+            continue
+        p = np.einsum("ij,ijk->ik", ex["bary"], mesh.vertices[mesh.faces[ex["face"]]])
+        dist = R * np.arctan2(np.linalg.norm(p[:, :2], axis=1), p[:, 2])
+        out[c], err[c] = radial_exitance(dist, ex["weight"], ex["batch"], s, halfwidth_mm=h, annulus_area=area,
+                                         n_batches=res.n_batches, entering_power=float(res.entering_power[c]))
+    return (out, err) if return_stderr else out
+
+
+# ------------------------------------------------------------------------------------------------ output
+def summary_dict(result: MCResult) -> dict:
+    """The JSON summary: totals (three values, or one for a grey material) with stderrs, photons, events, seconds."""
+    grey = result.material.is_grey
+    out = {}
+    for key, val in result.totals.items():
+        out[key] = float(val[0]) if grey else [float(x) for x in val]
+    out.update(lost=float(result.lost[0]) if grey else [float(x) for x in result.lost],
+               photons=int(result.photons), events=int(result.events),
+               boundary_events=int(result.boundary_events), seconds=float(result.seconds),
+               events_per_second=float(result.events_per_second), n_batches=int(result.n_batches),
+               material=result.material.to_dict())
+    return out
+
+
+def describe_mc(result: MCResult) -> str:
+    t = result.totals
+    f = lambda k: f"{t[k][0]:.5f}±{t[k + '_stderr'][0]:.5f}"  # noqa: E731
+    return (f"mc: {result.photons} photons, {result.events} scattering events in {result.seconds:.2f} s "
+            f"({result.events_per_second:.3g}/s); R_spec {f('specular_reflectance')}, "
+            f"R_diffuse {f('diffuse_reflectance')}, T {f('transmittance')}, A {f('absorbed')} (channel r)")
+
+
+def write_mc(result: MCResult, mesh, out, *, npz=None, summary=None) -> None:
+    """Write the PLY (radiance_r/g/b W/mm^2, stderr_r/g/b, uchar colours), optional NPZ and JSON summary."""
+    from . import io  # noqa: PLC0415
+    from .tonemap import tonemap  # noqa: PLC0415
+
+    M, S = result.radiance, result.radiance_stderr
+    props = {f"radiance_{c}": M[:, i] for i, c in enumerate("rgb")}
+    props.update({f"stderr_{c}": S[:, i] for i, c in enumerate("rgb")})
+    comments = ["meshshade model mc", f"meshshade material {result.material.describe()}",
+                f"meshshade photons {result.photons} seed-reproducible",
+                "meshshade radiance_r/g/b: linear radiant exitance in W/mm^2; stderr_r/g/b its standard error"]
+    io.write_mesh_ply(out, mesh, props, tonemap(M, operator="drago"), comments=comments)
+    if npz:
+        arrays = dict(radiance=M, radiance_stderr=S, face_power=result.face_power,
+                      face_power_stderr=result.face_power_stderr, vertex_power=result.vertex_power,
+                      vertex_areas=mesh.vertex_areas)
+        if result.beam_distance is not None:
+            arrays["beam_distance"] = result.beam_distance
+        io.write_npz(npz, **arrays)
+    if summary:
+        io.write_json(summary, summary_dict(result))
