@@ -240,8 +240,9 @@ def _batch_stats(per_batch):
 class _Walk:
     """One grey walk (one channel group) with a regenerating wavefront."""
 
-    def __init__(self, V, F, normals, emitter, scene, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam):
-        self.V, self.F, self.N, self.em, self.scene = V, F, normals, emitter, scene
+    def __init__(self, V, F, normals, emitter, scene, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam,
+                 grid=None):
+        self.V, self.F, self.N, self.em, self.scene, self.grid = V, F, normals, emitter, scene, grid
         self.sigma_t = sigma_s + sigma_a
         self.albedo = sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
         self.g, self.eta, self.B, self.keep_beam = g, eta, n_batches, keep_beam
@@ -258,7 +259,7 @@ class _Walk:
     def run(self, n_photons, rng, *, pool, time_budget=None, progress=None):
         t0 = time.perf_counter()
         emitted = 0
-        keys = ("pos", "dir", "w", "w0", "batch", "light")
+        keys = ("pos", "dir", "w", "w0", "batch", "light", "pend")
         live = {k: np.zeros((0, 3) if k in ("pos", "dir") else 0) for k in keys}
         live["batch"] = live["batch"].astype(np.int64)
         live["light"] = live["light"].astype(np.int64)
@@ -285,7 +286,7 @@ class _Walk:
         np.add.at(self.tot, (batch, 6), w_in)
         ok = w_in > 0.0
         new = {"pos": pos[ok], "dir": dirs[ok], "w": w_in[ok], "w0": w_in[ok], "batch": batch[ok],
-               "light": light[ok]}
+               "light": light[ok], "pend": np.full(int(ok.sum()), -1.0)}
         return {key: np.concatenate([live[key], new[key]]) for key in live}
 
     def _step(self, live, rng):
@@ -293,6 +294,8 @@ class _Walk:
         n = w.size
         hits = self.scene.first_hit(pos, d)
         s = -np.log1p(-rng.random(n)) / self.sigma_t if self.sigma_t > 0 else np.full(n, np.inf)
+        s = np.where(live["pend"] >= 0.0, live["pend"], s)   # a free path drawn by the interior kernel
+        live["pend"][:] = -1.0
         t_hit = np.where(hits.face >= 0, np.maximum(hits.t, 0.0), np.inf)
         # a ray from inside must hit the back of a face; a miss or a front hit means the photon leaked out
         fn = self.N[np.maximum(hits.face, 0)]
@@ -349,12 +352,26 @@ class _Walk:
             np.add.at(self.tot, (batch[idx], 3), delta)
             w[idx] = np.where(survive, w[idx] * ROULETTE_BOOST, 0.0)
             keep[idx[~survive]] = False
-        return {key: val[keep] for key, val in live.items()}
+        live = {key: val[keep] for key, val in live.items()}
+        if self.grid is not None and live["w"].size and self.sigma_t > 0:
+            from .montecarlo_interior import interior_walk  # noqa: PLC0415
+
+            g = self.grid
+            absorbed, alive, ev = interior_walk(live["pos"], live["dir"], live["w"], live["w0"], live["pend"],
+                                                g.safe, g.origin, g.h, self.sigma_t, self.albedo, self.g,
+                                                ROULETTE_THRESHOLD, ROULETTE_BOOST, 100_000,
+                                                int(rng.integers(0, 2**31 - 1)))
+            self.events += int(ev)
+            self.tot[:, 3] += np.bincount(live["batch"], weights=absorbed, minlength=self.B)
+            if not np.all(alive):
+                live = {key: val[alive] for key, val in live.items()}
+        return live
 
 
 def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000, seed: int = 0,
              time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int = 1 << 16,
-             keep_beam_exits: bool = True, beam_distances: bool = True, progress: bool = False) -> MCResult:
+             keep_beam_exits: bool = True, beam_distances: bool = True, fast_interior: bool = True,
+             progress: bool = False) -> MCResult:
     """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
 
     Parameters
@@ -367,6 +384,8 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     time_budget : float seconds or None; emission stops once it is spent (live photons are finished)
     n_batches : batches for the standard errors (>= 2)
     beam_distances : compute per-vertex geodesic distances from the first beam's entry point
+    fast_interior : numba free flights inside a conservative safe-distance grid (no ray cast needed there);
+        False gives the plain Embree-every-step wavefront (same distribution, different random stream)
 
     Returns
     -------
@@ -386,6 +405,10 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     V, F = mesh.vertices, mesh.faces
     normals, areas = mesh.face_normals, mesh.face_areas
     scene = make_scene(V, F)
+    grid = None
+    if fast_interior:
+        from .montecarlo_interior import SafeDistanceGrid  # noqa: PLC0415
+        grid = SafeDistanceGrid(V, F)
     emitter = _Emitter(V, F, normals, areas, lights, scene, material.eta)
     g = material.g
     sigma_s = material.sigma_s_prime / (1.0 - g)
@@ -409,7 +432,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     try:
         for ((ss, sa), chans), child in zip(groups.items(), children):
             walk = _Walk(V, F, normals, emitter, scene, sigma_s=ss, sigma_a=sa, g=g, eta=material.eta,
-                         n_batches=n_batches, keep_beam=keep_beam_exits)
+                         n_batches=n_batches, keep_beam=keep_beam_exits, grid=grid)
             budget = None if time_budget is None else time_budget / len(groups)
             emitted = walk.run(n_photons, np.random.default_rng(child), pool=pool, time_budget=budget,
                                progress=bar)
