@@ -152,3 +152,23 @@ def test_profile_mc_sphere_small(tmp_path):
     assert main(["profile", "--sigma-s-prime", "1", "--sigma-a", "0.01", "--shape", "sphere", "--radius", "10",
                  "--distances", "1,2", "--models", "mc", "--csv", str(csv)]) == 0
     assert "mc" in csv.read_text()
+
+
+# independent adding-doubling cross-check (iadpython, test-only dependency): total R and T of slabs between
+# index-1 half-spaces, collimated normal incidence; (mu_s [1/mm], mu_a [1/mm], g, n, d [mm], box side [mm])
+IAD_SLABS = [(10.0, 0.1, 0.9, 1.4, 1.0, 80.0), (5.0, 0.5, 0.5, 1.33, 0.5, 30.0)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mu_s, mu_a, g, n, d, side", IAD_SLABS)
+def test_simulate_slab_matches_adding_doubling(mu_s, mu_a, g, n, d, side):
+    iad = pytest.importorskip("iadpython")
+    ref = iad.Sample(a=mu_s / (mu_s + mu_a), b=(mu_s + mu_a) * d, g=g, n=n, n_above=1.0, n_below=1.0, quad_pts=16)
+    R_ref, T_ref = (float(x) for x in ref.rt()[:2])
+    mesh = Mesh.from_arrays(*box((side, side, d)))
+    r = simulate(mesh, Material(mu_s * (1 - g), mu_a, eta=n, g=g), [_beam(1.0 + d)], photons=200_000, seed=21,
+                 beam_distances=False)
+    t = r.totals
+    R = t["specular_reflectance"][0] + t["diffuse_reflectance"][0]
+    assert abs(R - R_ref) < 4 * t["diffuse_reflectance_stderr"][0] + 2e-3, (R, R_ref)
+    assert abs(t["transmittance"][0] - T_ref) < 4 * t["transmittance_stderr"][0] + 2e-3, (t["transmittance"][0], T_ref)
