@@ -124,6 +124,9 @@ def add_bake_args(p: argparse.ArgumentParser) -> None:
                    help="neighbourhood radius: reflectance beyond it below this fraction (default 1e-4)")
     p.add_argument("--curvature-radius", type=float, default=None, metavar="MM",
                    help="neighbourhood for the curvature fit [mm] (default 2 mean edge lengths)")
+    p.add_argument("--geodesic", default="exact", choices=["exact", "arc"],
+                   help="geodesic distances: exact polyhedral (default) or arc (curvature-corrected chords: "
+                        "~5x faster, 1e-4 on smooth meshes, 1-11 %% low on bumpy scans)")
     p.add_argument("--out", required=True, metavar="OUT.ply",
                    help="PLY with radiance_r/g/b (W/mm^2) and tone-mapped red/green/blue vertex colours")
     p.add_argument("--npz", metavar="OUT.npz", help="also save radiance, k1, k2, d1, d2, beam distance")
@@ -148,7 +151,8 @@ def run_bake(args) -> int:
     mesh, material = mesh_and_material(args)
     light_list = [lights.parse_light_spec(s, mm_per_unit=mesh.mm_per_unit) for s in args.light]
     result = transport.bake(mesh, material, light_list, model=args.model, cutoff_tol=args.cutoff_tol,
-                            curvature_radius_mm=args.curvature_radius, progress=not args.quiet)
+                            curvature_radius_mm=args.curvature_radius, progress=not args.quiet,
+                            geodesic=args.geodesic)
     transport.write_bake(result, mesh, args.out, npz=args.npz)
     if not args.quiet:
         print(transport.describe_result(result))
