@@ -259,10 +259,11 @@ class _Walk:
     def run(self, n_photons, rng, *, pool, time_budget=None, progress=None):
         t0 = time.perf_counter()
         emitted = 0
-        keys = ("pos", "dir", "w", "w0", "batch", "light", "pend")
+        keys = ("pos", "dir", "w", "w0", "batch", "light", "pend", "rng")
         live = {k: np.zeros((0, 3) if k in ("pos", "dir") else 0) for k in keys}
         live["batch"] = live["batch"].astype(np.int64)
         live["light"] = live["light"].astype(np.int64)
+        live["rng"] = live["rng"].astype(np.uint64)
         stop_emitting = False
         while True:
             if time_budget is not None and time.perf_counter() - t0 > time_budget:
@@ -286,7 +287,8 @@ class _Walk:
         np.add.at(self.tot, (batch, 6), w_in)
         ok = w_in > 0.0
         new = {"pos": pos[ok], "dir": dirs[ok], "w": w_in[ok], "w0": w_in[ok], "batch": batch[ok],
-               "light": light[ok], "pend": np.full(int(ok.sum()), -1.0)}
+               "light": light[ok], "pend": np.full(int(ok.sum()), -1.0),
+               "rng": rng.integers(0, 2**63, size=int(ok.sum()), dtype=np.uint64)}
         return {key: np.concatenate([live[key], new[key]]) for key in live}
 
     def _step(self, live, rng):
@@ -359,8 +361,7 @@ class _Walk:
             g = self.grid
             absorbed, alive, ev = interior_walk(live["pos"], live["dir"], live["w"], live["w0"], live["pend"],
                                                 g.safe, g.origin, g.h, self.sigma_t, self.albedo, self.g,
-                                                ROULETTE_THRESHOLD, ROULETTE_BOOST, 100_000,
-                                                int(rng.integers(0, 2**31 - 1)))
+                                                ROULETTE_THRESHOLD, ROULETTE_BOOST, 100_000, live["rng"])
             self.events += int(ev)
             self.tot[:, 3] += np.bincount(live["batch"], weights=absorbed, minlength=self.B)
             if not np.all(alive):
