@@ -172,3 +172,22 @@ def test_simulate_slab_matches_adding_doubling(mu_s, mu_a, g, n, d, side):
     R = t["specular_reflectance"][0] + t["diffuse_reflectance"][0]
     assert abs(R - R_ref) < 4 * t["diffuse_reflectance_stderr"][0] + 2e-3, (R, R_ref)
     assert abs(t["transmittance"][0] - T_ref) < 4 * t["transmittance_stderr"][0] + 2e-3, (t["transmittance"][0], T_ref)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("R0", [10.0, 50.0])
+def test_mc_profile_sphere_vs_exact_diffusion(R0):
+    """Skin-like medium: diffusion (exact sphere series) agrees with MC to < 8 % beyond 5 transport lengths and
+    underestimates it by > 30 % within a quarter transport length of the beam (tools/mc_sphere_table.py)."""
+    from meshshade.montecarlo import mc_profile
+    from meshshade.profiles import Shape, reflectance_profile
+
+    mat = Material(1.0, 0.01, eta=1.3)
+    shape = Shape.make("sphere", R0)
+    s = np.array([0.25, 5.0, 10.0])
+    mc, se = mc_profile(mat, s, shape=shape, photons=300_000, seed=3, return_stderr=True)
+    exact = reflectance_profile(mat, s, model="exact", shape=shape)[0]
+    rel = exact / mc[0] - 1.0
+    assert np.all(se[0] < 0.03 * mc[0])
+    assert rel[0] < -0.3
+    assert np.all(np.abs(rel[1:]) < 0.08), rel
