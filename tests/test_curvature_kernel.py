@@ -413,16 +413,20 @@ def test_curvature_table_profile_equals_direct_coefficients():
     rho = rng.random(500) * 120  # part beyond the table
     phi = rng.random(500) * 7
     k1, k2 = rng.normal(size=500) * 0.05, rng.normal(size=500) * 0.05
-    R = table.profile(rho, phi, k1_opt=k1, k2_opt=k2)
+    R = table.profile(rho, phi, k1_opt=k1, k2_opt=k2, policy="exp")
     a, b = curvature_ratios(rho, **SKIN)
     c2 = np.cos(2 * phi)
     delta = 0.5 * (k1 + k2) * (a + b) + 0.5 * (k1 - k2) * c2 * (a - b)
     want = dipole_profile(rho, **SKIN) * np.exp(delta)
     np.testing.assert_allclose(R, want, rtol=1e-10)
     # the kernel's own cos(2 phi) is within 2e-16 of numpy's
-    np.testing.assert_allclose(table.profile(rho, cos2phi=c2, k1_opt=k1, k2_opt=k2), R, rtol=1e-13)
+    np.testing.assert_allclose(table.profile(rho, cos2phi=c2, k1_opt=k1, k2_opt=k2, policy="exp"), R, rtol=1e-13)
     # curvature_profile tabulates up to max(rho) = 120 (the table above: 100, direct beyond)
-    np.testing.assert_allclose(curvature_profile(rho, cos2phi=c2, k1_opt=k1, k2_opt=k2, **SKIN), R, rtol=1e-10)
+    np.testing.assert_allclose(curvature_profile(rho, cos2phi=c2, k1_opt=k1, k2_opt=k2, policy="exp", **SKIN), R,
+                               rtol=1e-10)
+    # the default "soft" policy saturates delta: exp(tanh(delta)) (DELTA_SAT = 1)
+    soft = dipole_profile(rho, **SKIN) * np.exp(np.tanh(delta))
+    np.testing.assert_allclose(table.profile(rho, phi, k1_opt=k1, k2_opt=k2), soft, rtol=1e-10)
     assert "CurvatureTable(" in repr(table) and "intervals=" in repr(table)
 
 

@@ -116,8 +116,12 @@ __all__ = [
 ]
 
 #: positivity policies of :func:`curvature_profile` (module docstring)
-POLICIES = ("exp", "clamp")
-_POLICY_ID = {"exp": 0, "clamp": 1}
+POLICIES = ("soft", "exp", "clamp")
+_POLICY_ID = {"exp": 0, "clamp": 1, "soft": 2}
+#: "soft" policy: delta saturates smoothly as DELTA_SAT tanh(delta / DELTA_SAT) before exponentiation, so that
+#: far outside first-order range (nu >> tol, e.g. 20 mm from a 10 mm feature) the correction stays within
+#: e^{+-DELTA_SAT} of the dipole instead of growing like e^{k C(rho)}; identical to "exp" to third order in delta
+DELTA_SAT = 1.0
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
 _GL_X = 0.5 * (_GL_X + 1.0)  # nodes on [0, 1]
@@ -409,11 +413,13 @@ def _profile_loop(rho, ang, k1, k2, ang_is_cos2, policy, coef, n_int, alb, mu, z
             delta = 0.5 * (c1 + c2) * (ra + rb) + 0.5 * (c1 - c2) * cs[j] * (ra - rb)
             if not (abs(delta) < math.inf):
                 return True
+            if policy == 2:
+                delta = DELTA_SAT * math.tanh(delta / DELTA_SAT)
             dl[j] = delta
             if want_valid:
                 valid[k] = max(abs(c1), abs(c2)) * (abs(ra) + abs(rb) + z_r) <= tol
         # pass 2: the dipole with e^delta (or times max(1 + delta, 0))
-        if policy == 0:
+        if policy != 1:
             _dipole_exp_block(rho[start:start + m], dl[:m], out[start:start + m], pre, mu, z_r, z_v)
         else:
             _dipole_clamp_block(rho[start:start + m], dl[:m], out[start:start + m], pre, mu, z_r, z_v)
@@ -422,7 +428,9 @@ def _profile_loop(rho, ang, k1, k2, ang_is_cos2, policy, coef, n_int, alb, mu, z
             k = start + j
             if out[k] > rd0:
                 d0 = max((k1[k] + k2[k]) * a0, 0.0)
-                cap = rd0 * (math.exp(min(d0, _DELTA_MAX)) if policy == 0 else 1.0 + d0)
+                if policy == 2:
+                    d0 = DELTA_SAT * math.tanh(d0 / DELTA_SAT)
+                cap = rd0 * (math.exp(min(d0, _DELTA_MAX)) if policy != 1 else 1.0 + d0)
                 if out[k] > cap:
                     out[k] = cap
     return False
@@ -618,6 +626,8 @@ def curvature_factor(delta, policy="exp"):
     if policy not in _POLICY_ID:
         raise ValueError(f"policy must be one of {POLICIES}, got {policy!r}")
     delta = np.asarray(delta, dtype=np.float64)
+    if policy == "soft":
+        return np.exp(DELTA_SAT * np.tanh(delta / DELTA_SAT))
     if policy == "exp":
         return np.exp(np.minimum(delta, _DELTA_MAX))
     return np.maximum(1.0 + delta, 0.0)
@@ -696,7 +706,7 @@ class CurvatureTable:
         a, b = self.ratios(rho_opt)
         return np.abs(np.asarray(k_opt, dtype=np.float64)) * (np.abs(a) + np.abs(b) + self.z_r) <= tol
 
-    def profile(self, rho_opt, phi=None, *, k1_opt, k2_opt, cos2phi=None, policy="exp", return_validity=False,
+    def profile(self, rho_opt, phi=None, *, k1_opt, k2_opt, cos2phi=None, policy="soft", return_validity=False,
                 tol=_VALIDITY_TOL):
         """Curved kernel R (optical units) as :func:`curvature_profile`, from this table (same arguments)."""
         if policy not in _POLICY_ID:
@@ -738,7 +748,7 @@ def _ratios_table_many(rho, coef, n_int, mu, z_r, z_b, out_a, out_b):
         out_b[k] = rb
 
 
-def curvature_profile(rho_opt, phi=None, *, k1_opt, k2_opt, albedo_prime, eta, cos2phi=None, policy="exp",
+def curvature_profile(rho_opt, phi=None, *, k1_opt, k2_opt, albedo_prime, eta, cos2phi=None, policy="soft",
                       return_validity=False, tol=_VALIDITY_TOL):
     """Curved-surface diffuse reflectance R in optical units (first order in k, physics.md e.3 (ii)).
 
