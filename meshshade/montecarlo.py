@@ -544,6 +544,29 @@ def mc_profile(material: Material, distances_mm, *, shape, photons: int = 200_00
     return (out, err) if return_stderr else out
 
 
+def beam_radial_power(result: MCResult, mesh, edges_mm):
+    """Exit power of the first beam's photons against geodesic distance from its entry point, per channel.
+
+    The distance of an exit point is the barycentric interpolation of ``result.beam_distance`` (exact polyhedral
+    geodesic distances of the vertices from the entry point). edges_mm : (k + 1,) increasing bin edges [mm].
+    Returns (power (3, k) W, stderr (3, k) W).
+    """
+    edges = np.asarray(edges_mm, dtype=np.float64)
+    out, err = np.zeros((3, edges.size - 1)), np.zeros((3, edges.size - 1))
+    if result.beam_distance is None:
+        raise MeshshadeError("no beam light (or beam_distances=False): no geodesic distance tally")
+    for c, ex in enumerate(result.beam_exits):
+        if ex is None:
+            continue
+        dist = np.einsum("ij,ij->i", ex["bary"], result.beam_distance[mesh.faces[ex["face"]]])
+        k = np.searchsorted(edges, dist, side="right") - 1
+        ok = (k >= 0) & (k < edges.size - 1)
+        per = np.zeros((result.n_batches, edges.size - 1))
+        np.add.at(per, (ex["batch"][ok], k[ok]), ex["weight"][ok])
+        out[c], err[c] = _batch_stats(per)
+    return out, err
+
+
 # ------------------------------------------------------------------------------------------------ output
 def summary_dict(result: MCResult) -> dict:
     """The JSON summary: totals (three values, or one for a grey material) with stderrs, photons, events, seconds."""
@@ -585,6 +608,10 @@ def write_mc(result: MCResult, mesh, out, *, npz=None, summary=None) -> None:
                       vertex_areas=mesh.vertex_areas)
         if result.beam_distance is not None:
             arrays["beam_distance"] = result.beam_distance
+            finite = result.beam_distance[np.isfinite(result.beam_distance)]
+            edges = np.linspace(0.0, 1.000001 * float(finite.max()) if finite.size else 1.0, 101)
+            power, stderr = beam_radial_power(result, mesh, edges)
+            arrays.update(beam_radial_edges_mm=edges, beam_radial_power=power.T, beam_radial_power_stderr=stderr.T)
         io.write_npz(npz, **arrays)
     if summary:
         io.write_json(summary, summary_dict(result))

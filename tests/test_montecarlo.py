@@ -124,7 +124,11 @@ def test_cli_mc_end_to_end(tmp_path):
     names = ply.metadata["_ply_raw"]["vertex"]["data"].dtype.names
     for name in ("radiance_r", "radiance_g", "radiance_b", "stderr_r", "stderr_g", "stderr_b", "red"):
         assert name in names
-    assert np.load(npz)["beam_distance"].shape == (V.shape[0],)
+    data = np.load(npz)
+    assert data["beam_distance"].shape == (V.shape[0],)
+    # the radial tally holds every exit of the beam's photons (all exits: a single beam lights this sphere)
+    exits = (summary["diffuse_reflectance"] + summary["transmittance"]) * 1.0
+    np.testing.assert_allclose(data["beam_radial_power"].sum(axis=0), exits, rtol=1e-9)
     assert load_mesh(out).n_vertices == V.shape[0]
 
 
