@@ -441,8 +441,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
             scale = n_photons / emitted if emitted else 1.0
             # photon weights were P/n_photons: rescale when the time budget stopped emission early
             fp, fse = _batch_stats(walk.face * scale)
-            vp, _ = _batch_stats(walk.face_vert * scale)
-            vse = _batch_stats(walk.face_vert * scale)[1]
+            vp, vse = _batch_stats(walk.face_vert * scale)
             tt, tse = _batch_stats(walk.tot * scale)
             inc = walk.tot[:, 5]
             ratios = walk.tot[:, :5] / np.where(inc > 0, inc, np.nan)[:, None]          # (B, 5) per batch
