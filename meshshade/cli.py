@@ -105,7 +105,7 @@ def run_profile(args) -> int:
 
 
 # --- bake ------------------------------------------------------------------------------------------------
-LIGHT_HELP = ("light SPEC (repeatable), positions in the mesh's units: beam:ox,oy,oz:dx,dy,dz[:power W] | "
+LIGHT_HELP = ("light SPEC (repeatable), positions in the mesh's units: beam:ox,oy,oz:dx,dy,dz[:power W[:radius]] | "
               "directional:dx,dy,dz[:irradiance W/mm^2] | point:x,y,z[:intensity W/sr]")
 
 

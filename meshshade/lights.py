@@ -61,18 +61,43 @@ def _nonnegative(value, what: str) -> float:
     return x
 
 
+#: rays that sample a beam of finite width (a sunflower pattern over its disc)
+BEAM_SAMPLES = 64
+
+
 @dataclass(frozen=True)
 class BeamLight:
-    """A pencil beam (infinitely thin) of ``power`` W from ``origin`` (mm) along ``direction`` (normalised)."""
+    """A beam of ``power`` W from ``origin`` (mm) along ``direction`` (normalised).
+
+    ``radius`` = 0 (default) is a pencil beam: one entry point. ``radius`` > 0 [mm] is a collimated beam of uniform
+    power over a disc: ``BEAM_SAMPLES`` parallel rays on a sunflower (Vogel) pattern, each carrying an equal share
+    of the power; rays that miss the mesh carry their share away.
+    """
 
     origin: tuple[float, float, float]
     direction: tuple[float, float, float]
     power: float = 1.0
+    radius: float = 0.0
 
     def __post_init__(self):
         object.__setattr__(self, "origin", _vec3(self.origin, "beam origin"))
         object.__setattr__(self, "direction", _direction(self.direction, "beam direction"))
         object.__setattr__(self, "power", _nonnegative(self.power, "beam power"))
+        object.__setattr__(self, "radius", _nonnegative(self.radius, "beam radius"))
+
+    def ray_origins(self) -> np.ndarray:
+        """(k, 3) mm: one origin for a pencil beam, ``BEAM_SAMPLES`` over the disc otherwise."""
+        o = np.array(self.origin)
+        if self.radius == 0.0:
+            return o[None, :]
+        d = np.array(self.direction)
+        u = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(d, u)
+        j = np.arange(BEAM_SAMPLES)
+        r = self.radius * np.sqrt((j + 0.5) / BEAM_SAMPLES)  # equal-area rings
+        a = j * np.pi * (3.0 - np.sqrt(5.0))  # golden angle
+        return o + r[:, None] * (np.cos(a)[:, None] * u + np.sin(a)[:, None] * v)
 
 
 @dataclass(frozen=True)
@@ -102,7 +127,7 @@ class PointLight:
 Light = Union[BeamLight, DirectionalLight, PointLight]
 
 _SPEC_SYNTAX = {
-    "beam": "beam:ox,oy,oz:dx,dy,dz[:power]",
+    "beam": "beam:ox,oy,oz:dx,dy,dz[:power[:radius]]",
     "directional": "directional:dx,dy,dz[:irradiance]",
     "point": "point:x,y,z[:intensity]",
 }
@@ -134,7 +159,8 @@ def parse_light_spec(spec: str, mm_per_unit: float = 1.0) -> Light:
 
     Syntax (positions in the mesh's units, converted to mm with ``mm_per_unit``; directions unitless)::
 
-        beam:ox,oy,oz:dx,dy,dz[:power]          power in W (default 1)
+        beam:ox,oy,oz:dx,dy,dz[:power[:radius]] power in W (default 1); radius of a finite-width beam in the
+                                                mesh's units (default 0: a pencil beam)
         directional:dx,dy,dz[:irradiance]       irradiance in W/mm^2 (default 1)
         point:x,y,z[:intensity]                 intensity in W/sr (default 1)
 
@@ -156,14 +182,15 @@ def parse_light_spec(spec: str, mm_per_unit: float = 1.0) -> Light:
     if kind not in _SPEC_SYNTAX:
         raise LightError(f"unknown light type {fields[0]!r} in {spec!r} (expected beam, directional or point)")
     n_vec = 2 if kind == "beam" else 1
-    if len(fields) - 1 not in (n_vec, n_vec + 1):
+    if len(fields) - 1 not in ((n_vec, n_vec + 1, n_vec + 2) if kind == "beam" else (n_vec, n_vec + 1)):
         raise LightError(f"light spec {spec!r} must look like {_SPEC_SYNTAX[kind]}")
     try:
         if kind == "beam":
             origin = _spec_vec3(fields[1], "beam origin") * scale
             direction = _spec_vec3(fields[2], "beam direction")
-            power = _spec_scalar(fields[3], "beam power") if len(fields) == 4 else 1.0
-            return BeamLight(origin, direction, power)
+            power = _spec_scalar(fields[3], "beam power") if len(fields) >= 4 else 1.0
+            radius = _spec_scalar(fields[4], "beam radius") * scale if len(fields) == 5 else 0.0
+            return BeamLight(origin, direction, power, radius)
         if kind == "directional":
             direction = _spec_vec3(fields[1], "directional light direction")
             irradiance = _spec_scalar(fields[2], "directional irradiance") if len(fields) == 3 else 1.0
@@ -542,29 +569,35 @@ def _front_hit(hits, V, F, d) -> bool:
 
 
 def _beam_sample(light: BeamLight, i: int, V, F, get_scene, eta) -> dict:
-    o = np.array(light.origin)
+    origins = light.ray_origins()
+    k = origins.shape[0]
     d = np.array(light.direction)
-    if abs(winding_number(V, F, o)) > 0.5:
+    if abs(winding_number(V, F, np.array(light.origin))) > 0.5:
         raise LightError(f"beam light {i} starts inside the mesh (origin {light.origin} mm)")
     scene = get_scene()
-    hits = scene.first_hit(o, d)
-    if not _front_hit(hits, V, F, d):
-        # a miss or a back-facing hit can be a float32 crack at a vertex (Embree): decide it in float64
-        hits = scene.first_hit(o, d, exact=True)
-    f = int(hits.face[0])
-    if f < 0:
+    D = np.broadcast_to(d, (k, 3))
+    hits = scene.first_hit(origins, D)
+    face = hits.face.copy()
+    points, bary = hits.points.copy(), hits.bary.copy()
+    for j in range(k):  # a miss or a back-facing hit can be a float32 crack at a vertex (Embree): float64 retry
+        if not (face[j] >= 0 and float(_unit_face_normal(V, F, int(face[j])) @ d) < 0.0):
+            h = scene.first_hit(origins[j], d, exact=True)
+            face[j], points[j], bary[j] = h.face[0], h.points[0], h.bary[0]
+    hit = face >= 0
+    if not np.any(hit):
         raise LightError(f"beam light {i} from {light.origin} mm along {light.direction} misses the mesh")
-    n = _unit_face_normal(V, F, f)
-    cos = float(-n @ d)
-    if cos <= 0.0:
-        raise LightError(f"beam light {i} reaches the back of face {f}: the faces are wound inward, "
+    n = np.array([_unit_face_normal(V, F, int(f)) for f in face[hit]])
+    cos = -(n @ d)
+    if np.any(cos <= 0.0):
+        raise LightError(f"beam light {i} reaches the back of a face: the faces are wound inward, "
                          f"or the origin {light.origin} mm is inside the mesh")
-    power = light.power * float(fresnel_transmittance_entry(cos, eta))
+    share = light.power / k
+    m = int(hit.sum())
     return {
-        "positions": hits.points, "face": hits.face, "bary": hits.bary, "vertex": np.array([-1]),
-        "normals": n[None, :], "power": np.array([power]), "cos": np.array([cos]),
-        "light_index": np.array([i]), "incident": light.power,
-        "specular": light.power * float(fresnel_reflectance(cos, 1.0, eta)),
+        "positions": points[hit], "face": face[hit], "bary": bary[hit], "vertex": np.full(m, -1),
+        "normals": n, "power": share * fresnel_transmittance_entry(cos, eta), "cos": cos,
+        "light_index": np.full(m, i), "incident": share * m,
+        "specular": float(np.sum(share * fresnel_reflectance(cos, 1.0, eta))),
     }
 
 

@@ -79,8 +79,8 @@ def test_parse_light_spec_defaults():
 @pytest.mark.parametrize("spec, fragment", [
     ("spot:0,0,0:0,0,1", "unknown light type 'spot'"),
     ("", "empty light spec"),
-    ("beam:0,0,0", "must look like beam:ox,oy,oz:dx,dy,dz[:power]"),
-    ("beam:0,0,0:0,0,1:1:2", "must look like beam"),
+    ("beam:0,0,0", "must look like beam:ox,oy,oz:dx,dy,dz[:power[:radius]]"),
+    ("beam:0,0,0:0,0,1:1:2:3", "must look like beam"),
     ("directional", "must look like directional"),
     ("point:1,2,3:4:5", "must look like point"),
     ("beam:0,0:0,0,1", "beam origin needs 3 comma-separated numbers"),
@@ -393,3 +393,27 @@ def test_winding_number_inside_outside():
     assert winding_number(V, F, [0.1, 0.2, 0.0]) == pytest.approx(1.0, abs=1e-9)
     assert winding_number(V, F, [3.0, 0.0, 0.0]) == pytest.approx(0.0, abs=1e-9)
     assert winding_number(V, F[:, ::-1], [0.0, 0.0, 0.0]) == pytest.approx(-1.0, abs=1e-9)
+
+
+def test_finite_width_beam_spreads_power_over_many_entry_points():
+    import trimesh
+
+    from meshshade.lights import BEAM_SAMPLES, BeamLight, entry_samples, parse_light_spec
+
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=10.0)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    N = np.asarray(sphere.vertex_normals)
+    A = np.full(len(V), sphere.area / len(V))
+    beam = parse_light_spec("beam:0,0,50:0,0,-1:2.0:3", mm_per_unit=1.0)
+    assert isinstance(beam, BeamLight) and beam.radius == 3.0 and beam.power == 2.0
+    s = entry_samples(V, F, N, A, [beam], eta=1.3)
+    assert len(s) == BEAM_SAMPLES
+    r = np.hypot(s.positions[:, 0], s.positions[:, 1])
+    assert r.max() <= 3.0 + 1e-9 and r.min() < 0.5
+    # every ray hits: the incident power is the beam's; entering = incident - specular
+    assert s.incident_power[0] == pytest.approx(2.0)
+    assert s.power.sum() + s.specular_power[0] == pytest.approx(2.0)
+    # a beam wider than the sphere loses the rays that miss
+    wide = entry_samples(V, F, N, A, [BeamLight((0, 0, 50), (0, 0, -1), 1.0, radius=20.0)], eta=1.3)
+    assert wide.incident_power[0] == pytest.approx(len(wide) / BEAM_SAMPLES)
+    assert len(wide) < BEAM_SAMPLES
