@@ -35,7 +35,7 @@ def run_check(args) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MeshDefectWarning)  # listed in the report instead
         mesh = io.load_mesh(args.mesh, units=args.units)
-    report = check_mesh(mesh, material, curvature_radius_mm=cr)
+        report = check_mesh(mesh, material, curvature_radius_mm=cr)  # curvature fallbacks: in the report too
     print(format_check(report))
     if args.json:
         io.write_text(args.json, report_to_json(report))
