@@ -172,6 +172,7 @@ COMMANDS = {
               lambda a: __import__("meshshade.cli_check", fromlist=["_"]).run_check(a),
               "what the pipeline will make of a mesh: size in mm and transport lengths, defects, curvature, "
               "resolution, where first-order theory holds"),
+    **__import__("meshshade.cli_images", fromlist=["_"]).IMAGE_COMMANDS,
 }
 
 

@@ -47,7 +47,8 @@ from .geometry.mesh import Mesh, MeshDefectWarning
 from .units import mm_per_unit
 
 __all__ = ["SUPPORTED_MESH_FORMATS", "load_mesh", "read_mesh_arrays", "atomic_write", "check_output_path",
-           "write_ply", "write_mesh_ply", "write_npz", "write_text", "write_json", "write_figure", "PLY_RESERVED_NAMES"]
+           "write_ply", "write_mesh_ply", "write_npz", "write_text", "write_json", "write_figure", "PLY_RESERVED_NAMES",
+           "write_exr", "write_png", "read_exr"]
 
 #: file extension -> format name
 SUPPORTED_MESH_FORMATS = {".obj": "obj", ".ply": "ply", ".off": "off", ".stl": "stl", ".glb": "glb",
@@ -478,3 +479,69 @@ def write_json(path, obj) -> Path:
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps(obj, indent=2) + "\n", encoding="utf-8")
     return path
+
+
+# ----------------------------------------------------------------------------------------------- images
+def _oiio():
+    try:
+        import OpenImageIO as oiio  # noqa: PLC0415
+    except ImportError as exc:  # pragma: no cover - a required dependency
+        raise OutputError(f"OpenImageIO is needed to write images: {_one_line(exc)}") from None
+    return oiio
+
+
+def _write_image(path, pixels, fmt, metadata=None) -> Path:
+    oiio = _oiio()
+    path = Path(path)
+    h, w, c = pixels.shape
+    spec = oiio.ImageSpec(w, h, c, fmt)
+    if c == 4:
+        spec.channelnames = ("R", "G", "B", "A")
+        spec.alpha_channel = 3
+    for key, value in (metadata or {}).items():
+        spec.attribute(f"meshshade:{key}", str(value))
+    with atomic_write(path) as tmp:
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), spec):
+            raise OutputError(f"could not write {path}: {oiio.geterror() or (out.geterror() if out else '')}")
+        ok = out.write_image(np.ascontiguousarray(pixels))
+        err = out.geterror()
+        out.close()
+        if not ok:
+            raise OutputError(f"could not write {path}: {err}")
+    return path
+
+
+def write_exr(path, rgba_float, metadata: dict | None = None) -> Path:
+    """Write an (H, W, 4) or (H, W, 3) linear float image as OpenEXR (half=no: 32-bit float) atomically.
+
+    ``metadata`` entries become string attributes ``meshshade:<key>`` (model, material, lights, camera, units).
+    """
+    arr = np.asarray(rgba_float, dtype=np.float32)
+    if arr.ndim != 3 or arr.shape[2] not in (3, 4):
+        raise ValueError(f"image must be (H, W, 3|4), got {arr.shape}")
+    return _write_image(path, arr, "float", metadata)
+
+
+def write_png(path, rgba_uint8) -> Path:
+    """Write an (H, W, 4|3) uint8 image (sRGB-encoded, straight alpha) as PNG atomically."""
+    arr = np.asarray(rgba_uint8)
+    if arr.dtype != np.uint8 or arr.ndim != 3 or arr.shape[2] not in (3, 4):
+        raise ValueError(f"PNG image must be (H, W, 3|4) uint8, got {arr.shape} {arr.dtype}")
+    return _write_image(path, arr, "uint8")
+
+
+def read_exr(path) -> tuple[np.ndarray, dict]:
+    """Read an image through OpenImageIO: ((H, W, C) float32 pixels, {key: value} of ``meshshade:*`` attributes)."""
+    oiio = _oiio()
+    path = Path(path)
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise MeshValidationError(f"{path}: cannot read image: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+        meta = {a.name.split(":", 1)[1]: a.value for a in spec.extra_attribs if a.name.startswith("meshshade:")}
+    finally:
+        inp.close()
+    return np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels), meta

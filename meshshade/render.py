@@ -1,0 +1,275 @@
+"""Images of a baked mesh: camera, primary rays (Embree), image formation. Returns arrays, writes nothing.
+
+Radiance toward the camera (the convention meshshade uses)
+---------------------------------------------------------
+The bake gives the radiant exitance M [W/mm^2] leaving the surface (Jensen's R_d already accounts for the
+boundary). It is spread over the outgoing hemisphere with the exit Fresnel factor of Jensen et al. 2001's
+S_d (``F_t(eta, omega_o) / pi``), normalised so that the hemisphere integral gives back M:
+
+    L(omega_o) = F_t(eta, cos_o) M / (pi C(eta)),     C(eta) = 2 int_0^1 F_t(eta, mu) mu dmu
+
+(``F_t = 1 - F_r`` for light leaving into air, evaluated with the outside angle; by reciprocity the same as the
+entry transmittance). int L cos dω = M exactly. C(1.3) = 0.908. L is in W/(mm^2 sr).
+
+Per-vertex vs per-pixel
+-----------------------
+* default: M is interpolated with the hit's barycentrics from the per-vertex bake (cheap: one ray per sample).
+  Near a pencil beam the peak is smeared over the entry triangle's fan.
+* ``per_pixel``: the kernel is gathered at each sample's own surface point from the bake's entry samples
+  (:class:`PixelGather`). Distances are the chord corrected to an arc with the source's normal curvature in
+  that direction, ``s = 2 asin(|k_n| c / 2) / |k_n|`` (exact on a sphere, second order elsewhere); pairs are
+  found by a k-d tree, so no mesh connectivity is used (parts closer than the cutoff through space can leak).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import MeshshadeError
+from .kernels.fresnel import fresnel_transmittance_entry
+
+
+# ------------------------------------------------------------------------------------------------ camera
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole (``perspective``, vertical ``fov_deg``) or ``orthographic`` (vertical extent ``ortho_height`` mm)."""
+
+    kind: str
+    eye: tuple
+    target: tuple
+    up: tuple = (0.0, 1.0, 0.0)
+    fov_deg: float = 30.0
+    ortho_height: float = 1.0
+
+    def __post_init__(self):
+        if self.kind not in ("perspective", "orthographic"):
+            raise MeshshadeError(f"camera kind must be perspective or orthographic, got {self.kind!r}")
+        f = np.asarray(self.target, float) - np.asarray(self.eye, float)
+        if not np.all(np.isfinite(f)) or np.linalg.norm(f) == 0:
+            raise MeshshadeError("camera eye and target must differ")
+        if np.linalg.norm(np.cross(f, np.asarray(self.up, float))) < 1e-9 * np.linalg.norm(f):
+            raise MeshshadeError("camera up vector is parallel to the view direction")
+        if self.kind == "perspective" and not (0 < self.fov_deg < 180):
+            raise MeshshadeError(f"fov must lie in (0, 180) degrees, got {self.fov_deg}")
+        if self.kind == "orthographic" and not self.ortho_height > 0:
+            raise MeshshadeError("orthographic height must be > 0")
+
+    def basis(self):
+        """(forward, right, up) unit vectors."""
+        f = np.asarray(self.target, float) - np.asarray(self.eye, float)
+        f /= np.linalg.norm(f)
+        r = np.cross(f, np.asarray(self.up, float))
+        r /= np.linalg.norm(r)
+        return f, r, np.cross(r, f)
+
+    def rays(self, x_ndc, y_ndc, aspect):
+        """Ray origins and unit directions for normalised image coordinates in [-1, 1] (y up)."""
+        f, r, u = self.basis()
+        eye = np.asarray(self.eye, float)
+        x = np.asarray(x_ndc, float)[..., None]
+        y = np.asarray(y_ndc, float)[..., None]
+        if self.kind == "perspective":
+            h = np.tan(np.radians(self.fov_deg) / 2)
+            d = f + x * h * aspect * r + y * h * u
+            d /= np.linalg.norm(d, axis=-1, keepdims=True)
+            return np.broadcast_to(eye, d.shape).copy(), d
+        half = self.ortho_height / 2
+        o = eye + x * half * aspect * r + y * half * u
+        return o, np.broadcast_to(f, o.shape).copy()
+
+    def describe(self) -> str:
+        e, t, u = (",".join(f"{v:.6g}" for v in a) for a in (self.eye, self.target, self.up))
+        extra = f"fov {self.fov_deg:g} deg" if self.kind == "perspective" else f"height {self.ortho_height:.6g} mm"
+        return f"{self.kind} eye {e} target {t} up {u} {extra}"
+
+
+def auto_camera(mesh, view_dir=(0.0, 0.0, -1.0), *, kind="perspective", fov_deg=30.0, margin=1.08) -> Camera:
+    """A camera looking along ``view_dir`` at the bounding-box centre that frames the whole mesh."""
+    d = np.asarray(view_dir, float)
+    d /= np.linalg.norm(d)
+    lo, hi = mesh.bbox
+    c = 0.5 * (lo + hi)
+    radius = 0.5 * mesh.scale * margin
+    up = (0.0, 1.0, 0.0) if abs(d[1]) < 0.9 else (0.0, 0.0, 1.0)
+    if kind == "orthographic":
+        return Camera("orthographic", tuple(c - 2 * radius * d), tuple(c), up, ortho_height=2 * radius)
+    dist = radius / np.sin(np.radians(fov_deg) / 2)
+    return Camera("perspective", tuple(c - dist * d), tuple(c), up, fov_deg=fov_deg)
+
+
+def parse_camera(spec: str, mesh, mm_per_unit: float = 1.0) -> Camera:
+    """``auto`` | ``auto:dx,dy,dz`` | ``persp:ex,ey,ez:tx,ty,tz:ux,uy,uz:fov`` | ``ortho:eye:target:up:height``
+    (positions and height in the mesh file's units)."""
+    parts = spec.split(":")
+    try:
+        vec = [tuple(float(v) for v in p.split(",")) for p in parts[1:4]]
+        if parts[0] == "auto":
+            return auto_camera(mesh, vec[0] if len(parts) > 1 else (0.0, 0.0, -1.0))
+        if parts[0] in ("persp", "ortho") and len(parts) == 5 and all(len(v) == 3 for v in vec):
+            eye, tgt = (tuple(np.multiply(v, mm_per_unit)) for v in vec[:2])
+            if parts[0] == "persp":
+                return Camera("perspective", eye, tgt, vec[2], fov_deg=float(parts[4]))
+            return Camera("orthographic", eye, tgt, vec[2], ortho_height=float(parts[4]) * mm_per_unit)
+    except ValueError:
+        pass
+    raise MeshshadeError(f"bad camera {spec!r}: auto[:dx,dy,dz] | persp:eye:target:up:fov_deg | "
+                         "ortho:eye:target:up:height (vectors x,y,z)")
+
+
+# ------------------------------------------------------------------------------------------------ exit radiance
+def exit_normalisation(eta: float, n: int = 256) -> float:
+    """C(eta) = 2 int_0^1 F_t(eta, mu) mu dmu (Gauss-Legendre), so that int L cos dω = M."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    mu = 0.5 * (x + 1)
+    return float(np.sum(w * 0.5 * 2 * fresnel_transmittance_entry(mu, eta) * mu))
+
+
+def exit_radiance(M, cos_o, eta):
+    """L = F_t(eta, cos_o) M / (pi C(eta)) [W/(mm^2 sr)] for exitance M (..., 3) and outgoing cosine (...)."""
+    ft = fresnel_transmittance_entry(np.clip(cos_o, 0.0, 1.0), eta)
+    return np.asarray(M, float) * (ft / (np.pi * exit_normalisation(eta)))[..., None]
+
+
+# ------------------------------------------------------------------------------------------------ per-pixel gather
+class PixelGather:
+    """Exitance at arbitrary surface points from a bake's entry samples (the kernel gathered per pixel)."""
+
+    def __init__(self, mesh, result, *, max_pairs=3_000_000):
+        from .transport import PairKernel, source_frames  # noqa: PLC0415
+
+        from types import SimpleNamespace  # noqa: PLC0415
+
+        curv = SimpleNamespace(k1=result.k1, k2=result.k2, d1=result.d1)
+        self.samples = result.samples
+        self.frames = source_frames(result.samples, curv, mesh.faces)
+        self.kernel = PairKernel(result.model, result.material, self.frames)
+        self.cut = np.asarray(result.cutoff_mm, float)
+        s = self.samples
+        self.radius = np.where(s.vertex >= 0, np.sqrt(mesh.vertex_areas[np.maximum(s.vertex, 0)] / np.pi), 0.0)
+        self.max_pairs = max_pairs
+
+    def __call__(self, points) -> np.ndarray:
+        """(n, 3) mm surface points -> (n, 3) W/mm^2 exitance."""
+        from scipy.spatial import cKDTree  # noqa: PLC0415
+
+        from .transport import gather  # noqa: PLC0415
+
+        points = np.asarray(points, float)
+        pos = self.samples.positions
+        if len(pos) == 0 or len(points) == 0:
+            return np.zeros((len(points), 3))
+        tree = cKDTree(pos)
+        density = max(1.0, len(pos) * (self.cut.max() / max(np.ptp(pos, axis=0).max(), 1e-9)) ** 2)
+        chunk = int(max(256, self.max_pairs // density))
+        f = self.frames
+
+        def pairs():
+            for a in range(0, len(points), chunk):
+                sub = points[a:a + chunk]
+                m = tree.sparse_distance_matrix(cKDTree(sub), self.cut.max(), output_type="ndarray")
+                src, pix, chord = m["i"].astype(np.int64), m["j"].astype(np.int64), m["v"]
+                # sparse_distance_matrix drops zero distances: add exact coincidences back
+                dd, ii = tree.query(sub, k=1)
+                z = np.flatnonzero(dd == 0)
+                src, pix = np.concatenate([src, ii[z]]), np.concatenate([pix, z])
+                chord = np.concatenate([chord, np.zeros(z.size)])
+                v = sub[pix] - pos[src]
+                x1, x2 = np.einsum("ij,ij->i", v, f.d1[src]), np.einsum("ij,ij->i", v, f.d2[src])
+                phi = np.arctan2(x2, x1)
+                c2, s2 = np.cos(phi) ** 2, np.sin(phi) ** 2
+                kn = np.abs(f.k1[src] * c2 + f.k2[src] * s2)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    arc = 2.0 * np.arcsin(np.clip(kn * chord / 2, 0.0, 1.0)) / kn
+                s = np.where(kn * chord > 1e-8, arc, chord)
+                yield src, a + pix, s, chord, phi
+
+        M, _ = gather(self.kernel, len(points), self.samples.power, self.cut, pairs(), source_radius=self.radius)
+        return M
+
+
+# ------------------------------------------------------------------------------------------------ rendering
+def _sample_offsets(spp: int, rng) -> np.ndarray:
+    """(spp, 2) jittered stratified sub-pixel offsets in [0, 1)."""
+    n = int(np.ceil(np.sqrt(spp)))
+    g = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="xy"), -1).reshape(-1, 2)[:spp]
+    return (g + rng.random((spp, 2))) / n if spp > 1 else np.full((1, 2), 0.5)
+
+
+def render_radiance(mesh, vertex_radiance, camera: Camera, width: int = 512, height: int = 512, spp: int = 4, *,
+                    eta: float = 1.3, exitance_at=None, scene=None, seed: int = 0):
+    """Render radiance toward ``camera``.
+
+    Parameters
+    ----------
+    mesh : Mesh (mm); vertex_radiance : (n, 3) W/mm^2 exitance M per vertex (the bake's ``radiance``)
+    exitance_at : optional callable (k, 3) points -> (k, 3) exitance (e.g. :class:`PixelGather`): per-pixel mode
+    spp : samples per pixel (jittered strata, seeded by ``seed``) for antialiasing
+
+    Returns
+    -------
+    rgb : (H, W, 3) float64, radiance W/(mm^2 sr), premultiplied by coverage (background 0)
+    alpha : (H, W) float64 coverage in [0, 1]
+    """
+    from .raycast import make_scene  # noqa: PLC0415
+
+    if width < 1 or height < 1 or spp < 1:
+        raise MeshshadeError("width, height and spp must be >= 1")
+    scene = scene or make_scene(mesh.vertices, mesh.faces)
+    rng = np.random.default_rng(seed)
+    off = _sample_offsets(spp, rng)
+    jj, ii = np.meshgrid(np.arange(width), np.arange(height), indexing="xy")
+    rgb = np.zeros((height, width, 3))
+    alpha = np.zeros((height, width))
+    aspect = width / height
+    M_v = np.asarray(vertex_radiance, float)
+    for ox, oy in off:
+        x = (2 * (jj + ox) / width - 1).reshape(-1)
+        y = (1 - 2 * (ii + oy) / height).reshape(-1)
+        o, d = camera.rays(x, y, aspect)
+        hits = scene.first_hit(o, d)
+        h = hits.hit
+        if not np.any(h):
+            continue
+        F = mesh.faces[hits.face[h]]
+        b = hits.bary[h]
+        if exitance_at is None:
+            M = np.einsum("ij,ijk->ik", b, M_v[F])
+        else:
+            M = exitance_at(hits.points[h])
+        n = np.einsum("ij,ijk->ik", b, mesh.vertex_normals[F])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        cos_o = np.abs(np.einsum("ij,ij->i", n, d[h]))
+        L = exit_radiance(M, cos_o, eta)
+        flat = np.flatnonzero(h)
+        rgb.reshape(-1, 3)[flat] += L
+        alpha.reshape(-1)[flat] += 1.0
+    return rgb / spp, alpha / spp
+
+
+def image_rgba(rgb, alpha) -> np.ndarray:
+    """(H, W, 4) float32 premultiplied RGBA for the EXR."""
+    return np.concatenate([rgb, alpha[..., None]], axis=-1).astype(np.float32)
+
+
+def display_rgba(rgb, alpha, *, operator="drago", bias=0.85, exposure=None, background=None) -> np.ndarray:
+    """(H, W, 4) uint8 PNG: straight-alpha tone-mapped colours; ``background`` (3,) display [0, 1] composites
+    onto that colour (alpha 255), None keeps the background transparent."""
+    from .tonemap import drago_tonemap, exposure_tonemap, srgb_encode  # noqa: PLC0415
+
+    cov = alpha > 0
+    straight = np.where(cov[..., None], rgb / np.where(cov, alpha, 1.0)[..., None], 0.0)
+    if operator == "drago":
+        disp = drago_tonemap(straight, bias=bias, exposure=1.0 if exposure is None else exposure, mask=cov)
+    elif operator == "exposure":
+        disp = exposure_tonemap(straight, exposure=exposure, mask=cov)
+    else:
+        raise MeshshadeError(f"unknown tone-mapping operator {operator!r} (drago or exposure)")
+    enc = srgb_encode(disp)
+    if background is None:
+        out = np.concatenate([enc, alpha[..., None]], axis=-1)
+    else:
+        bg = np.asarray(background, float)
+        out = np.concatenate([enc * alpha[..., None] + bg * (1 - alpha[..., None]),
+                              np.ones(alpha.shape + (1,))], axis=-1)
+    return np.round(np.clip(out, 0, 1) * 255).astype(np.uint8)
