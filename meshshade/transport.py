@@ -335,7 +335,8 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         bar = None
         if progress and k > chunk:
             from tqdm import tqdm  # noqa: PLC0415
-            bar = tqdm(total=k, desc="gather", unit="src", leave=False)
+            # no bar when stderr is not a terminal (pipes, logs): errors stay one clean line there
+            bar = tqdm(total=k, desc="gather", unit="src", leave=False, disable=None)
         n_pairs = 0
 
         def pairs():
@@ -356,9 +357,11 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         # vertex samples of directional/point lights stand for their vertex's area; beam samples are points
         radius = np.where(samples.vertex >= 0, np.sqrt(mesh.vertex_areas[np.maximum(samples.vertex, 0)] / np.pi),
                           0.0)
-        M, gstats = gather(kernel, mesh.n_vertices, samples.power, cut, pairs(), source_radius=radius)
-        if bar is not None:
-            bar.close()
+        try:
+            M, gstats = gather(kernel, mesh.n_vertices, samples.power, cut, pairs(), source_radius=radius)
+        finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
+            if bar is not None:
+                bar.close()
         stats.update(gstats, pairs_found=n_pairs)
         first_beam = next((i for i, L in enumerate(lights) if isinstance(L, BeamLight)), None)
         if first_beam is not None:
