@@ -482,3 +482,26 @@ def test_keyboard_interrupt_during_write_removes_temp_file(good_mesh, capsys, mo
     monkeypatch.setattr(mio.os, "replace", real_replace)
     assert rc == 130 and "Traceback" not in err
     assert _snapshot(tmp) == before
+
+
+@pytest.mark.parametrize("spec", ["directional:0,0,1", "point:0,0,-5"])
+def test_light_reaching_no_vertex_is_a_warning(tmp_path, capsys, spec):
+    """A directional or point light that reaches nothing (the open plate faces +z, the light comes from below)
+    is documented as a warning, not an error: exit 0, the output is written and all zero."""
+    xs = np.linspace(-5, 5, 11)
+    X, Y = np.meshgrid(xs, xs, indexing="ij")
+    V = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    F = [(i * 11 + j, (i + 1) * 11 + j, (i + 1) * 11 + j + 1) for i in range(10) for j in range(10)]
+    F += [(i * 11 + j, (i + 1) * 11 + j + 1, i * 11 + j + 1) for i in range(10) for j in range(10)]
+    mesh = tmp_path / "plate.ply"
+    write_ply(mesh, V, np.array(F))
+    before = mesh.read_bytes()
+    npz = tmp_path / "o.npz"
+    rc, _, err = _run(capsys, ["bake", str(mesh), *SKIN, "--light", spec, "--out", str(tmp_path / "o.ply"),
+                               "--npz", str(npz), "-q"])
+    assert rc == 0 and "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert all(line.startswith("meshshade: warning:") for line in lines)
+    assert any("reaches no vertex" in line for line in lines)
+    assert np.load(npz)["radiance"].max() == 0.0
+    assert mesh.read_bytes() == before and not list(tmp_path.glob(".*.tmp*"))
