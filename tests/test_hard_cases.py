@@ -386,3 +386,21 @@ def test_kernels_property_ci(alb, eta, rho, k1, k2, phi, R0, theta):
 def test_kernels_property_thorough(alb, eta, rho, k1, k2, phi, R0, theta):
     """10 000 draws of the same property (slow)."""
     _kernel_property(alb, eta, rho, k1, k2, phi, R0, theta)
+
+
+@pytest.mark.parametrize("distance", [1e4, 1e8, 1e12])
+def test_beam_from_far_away_enters_at_the_same_point(sphere10, distance):
+    """A beam from 10 m .. 1e9 m away (float32 ray casting) enters where the same beam from 40 mm does."""
+    from meshshade.lights import entry_samples
+
+    m = sphere10
+    d = np.array([0.3, 0.2, -40.0])
+    d /= np.linalg.norm(d)
+    near = entry_samples(m.vertices, m.faces, m.vertex_normals, m.vertex_areas,
+                         [BeamLight((0.0, 0.0, 40.0), tuple(d))], eta=1.3)
+    o = np.array([0.0, 0.0, 40.0]) - (distance - 40.0) * d
+    far = entry_samples(m.vertices, m.faces, m.vertex_normals, m.vertex_areas, [BeamLight(tuple(o), tuple(d))],
+                        eta=1.3)
+    assert far.face[0] == near.face[0]
+    np.testing.assert_allclose(far.positions[0], near.positions[0], atol=1e-9 * distance + 1e-9)
+    assert far.power[0] == pytest.approx(near.power[0], rel=1e-6)
