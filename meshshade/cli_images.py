@@ -69,8 +69,9 @@ def run_render(args) -> int:
 
 def add_compare_args(p: argparse.ArgumentParser) -> None:
     _add_image_args(p)
-    p.add_argument("--models", default="curved,dipole", help="two models A,B (default curved,dipole)")
+    p.add_argument("--models", default="curved,dipole", help="two models A,B among dipole, curved, exact-sphere, mc (default curved,dipole)")
     p.add_argument("--floor", type=float, default=1e-3, help="relative radiance floor for the ratios")
+    p.add_argument("--photons", type=int, default=100_000, help="photons when one model is mc (default 1e5)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
 
 
@@ -89,7 +90,7 @@ def run_compare(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     cmp = compare.run_comparison(mesh, material, light_list, models, camera=camera, width=args.width,
                                  height=args.height, spp=args.spp, per_pixel=args.per_pixel,
-                                 cutoff_tol=args.cutoff_tol, floor=args.floor)
+                                 cutoff_tol=args.cutoff_tol, floor=args.floor, mc_photons=args.photons)
     for p in compare.save_comparison(cmp, out, models=models, metadata=meta, operator=args.tonemap,
                                      bias=args.bias, background=bg):
         print(f"wrote {p}")

@@ -85,10 +85,12 @@ def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
 
 
 def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camera=None, width=256, height=256,
-                   spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR) -> dict:
+                   spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
+                   seed: int = 0) -> dict:
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
-    Returns ``{"camera", "bakes": [BakeResult, BakeResult], "images": [(rgb, alpha), (rgb, alpha)],
+    ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
+    rendered by interpolation. Returns ``{"camera", "bakes": [BakeResult, BakeResult], "images": [(rgb, alpha), (rgb, alpha)],
     "split": (rgb, alpha), "rel": (H, W) signed relative difference, "stats": dict}`` (arrays only, no files).
     """
     from . import render  # noqa: PLC0415
@@ -101,8 +103,16 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     scene = make_scene(mesh.vertices, mesh.faces)
     bakes, images = [], []
     for m in models:
-        res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol)
-        ex = render.PixelGather(mesh, res) if per_pixel else None
+        if m == "mc":  # Monte Carlo reference: per-vertex exitance (per-pixel gathering does not apply)
+            from types import SimpleNamespace  # noqa: PLC0415
+
+            from .montecarlo import simulate  # noqa: PLC0415
+
+            mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed)
+            res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
+        else:
+            res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol)
+            ex = render.PixelGather(mesh, res) if per_pixel else None
         images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
                                              exitance_at=ex, scene=scene))
         bakes.append(res)

@@ -53,3 +53,18 @@ def test_cli_compare(tmp_path):
     assert set(st["total_exitance_W"]) == {"curved", "dipole"}
     assert main(["compare", str(tmp_path / "s.ply"), "--material", "skin1", "--light", "directional:0,0,-1",
                  "--models", "curved", "--out", str(out)]) == 2
+
+
+def test_run_comparison_with_mc():
+    from meshshade import Material
+    from meshshade.compare import run_comparison
+    from meshshade.geometry.mesh import Mesh
+    from meshshade.lights import DirectionalLight
+
+    V, F = procedural.icosphere(10.0, 2)
+    mesh = Mesh.from_arrays(V, F)
+    cmp = run_comparison(mesh, Material.preset("skin1"), [DirectionalLight((0, 0, -1))], ("dipole", "mc"),
+                         width=24, height=24, spp=1, mc_photons=4000)
+    st = cmp["stats"]
+    assert st["models"] == ["dipole", "mc"] and st["vertices"]["count"] > 0
+    assert cmp["split"][0].shape == (24, 24, 3)
