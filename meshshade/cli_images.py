@@ -69,7 +69,8 @@ def run_render(args) -> int:
 
 def add_compare_args(p: argparse.ArgumentParser) -> None:
     _add_image_args(p)
-    p.add_argument("--models", default="curved,dipole", help="two models A,B among dipole, curved, exact-sphere, mc (default curved,dipole)")
+    p.add_argument("--models", default="curved,dipole",
+                   help="two models A,B among dipole, curved, exact-sphere, mc (default curved,dipole)")
     p.add_argument("--floor", type=float, default=1e-3, help="relative radiance floor for the ratios")
     p.add_argument("--photons", type=int, default=100_000, help="photons when one model is mc (default 1e5)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")

@@ -90,7 +90,8 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
     ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
-    rendered by interpolation. Returns ``{"camera", "bakes": [BakeResult, BakeResult], "images": [(rgb, alpha), (rgb, alpha)],
+    rendered by interpolation. Returns ``{"camera", "bakes": [BakeResult, BakeResult],
+    "images": [(rgb, alpha), (rgb, alpha)],
     "split": (rgb, alpha), "rel": (H, W) signed relative difference, "stats": dict}`` (arrays only, no files).
     """
     from . import render  # noqa: PLC0415

@@ -149,7 +149,8 @@ class PixelGather:
     """Exitance at arbitrary surface points: the bake's far field, plus the near field gathered per point.
 
     ``M(p) = sum_c b_c [M_bake(v_c) - M_near(v_c)] + M_near(p)``, where ``M_near`` sums the kernel times a
-    smooth window of the chord (1 up to ``near_mm``/2, smoothstep to 0 at ``near_mm``) over the entry samples (chord found by a k-d tree, turned into an arc with the source's normal
+    smooth window of the chord (1 up to ``near_mm``/2, smoothstep to 0 at ``near_mm``) over the entry samples
+    (chord found by a k-d tree, turned into an arc with the source's normal
     curvature in that direction, ``s = 2 asin(|k_n| c / 2) / |k_n|``, exact on a sphere) and the bracket is
     interpolated with the hit's barycentrics. The sharp part of the kernel (a beam's peak, the patch of each
     vertex sample) is thus evaluated at the pixel itself, while the smooth far field keeps the bake's geodesic

@@ -92,3 +92,15 @@ def test_cli_render(tmp_path):
     assert png.shape == (30, 40, 4) and np.all(png[..., 3] == 1)
     assert main(["render", str(tmp_path / "s.ply"), "--material", "skin1", "--light", "directional:0,0,-1",
                  "--camera", "bogus", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_pixel_gather_equals_bake_at_vertices():
+    from meshshade.lights import DirectionalLight
+
+    V, F = procedural.pebble(subdivisions=2)
+    mesh = Mesh.from_arrays(V, F)
+    res = bake(mesh, Material.preset("skin1"), [DirectionalLight((0.3, -0.5, -1))], model="curved")
+    g = render.PixelGather(mesh, res)
+    f = np.array([np.flatnonzero((mesh.faces == v).any(1))[0] for v in range(mesh.n_vertices)])
+    bary = (mesh.faces[f] == np.arange(mesh.n_vertices)[:, None]).astype(float)
+    np.testing.assert_allclose(g(mesh.vertices, f, bary), res.radiance, rtol=1e-9, atol=1e-12 * res.radiance.max())
