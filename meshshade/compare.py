@@ -137,7 +137,7 @@ def save_comparison(cmp: dict, out_dir, *, models, metadata: dict, operator="dra
     out = Path(out_dir)
     written = []
     rgb, alpha = cmp["split"]
-    meta = {**metadata, "camera": cmp["camera"].describe(), "layout": f"left {models[0]}, right {models[1]}"}
+    meta = {**metadata, "model": f"left {models[0]}, right {models[1]}", "camera": cmp["camera"].describe()}
     written.append(io.write_exr(out / "split.exr", render.image_rgba(rgb, alpha), meta))
     written.append(io.write_png(out / "split.png", render.display_rgba(rgb, alpha, operator=operator, bias=bias,
                                                                       background=background)))
