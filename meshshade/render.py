@@ -9,7 +9,7 @@ S_d (``F_t(eta, omega_o) / pi``), normalised so that the hemisphere integral giv
     L(omega_o) = F_t(eta, cos_o) M / (pi C(eta)),     C(eta) = 2 int_0^1 F_t(eta, mu) mu dmu
 
 (``F_t = 1 - F_r`` for light leaving into air, evaluated with the outside angle; by reciprocity the same as the
-entry transmittance). int L cos dω = M exactly. C(1.3) = 0.908. L is in W/(mm^2 sr).
+entry transmittance). int L cos dω = M exactly. C(1.3) = 0.939, C(1.5) = 0.908. L is in W/(mm^2 sr).
 
 Per-vertex vs per-pixel
 -----------------------
