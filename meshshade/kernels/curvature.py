@@ -121,7 +121,7 @@ _POLICY_ID = {"exp": 0, "clamp": 1, "soft": 2}
 #: "soft" policy: delta saturates smoothly as DELTA_SAT tanh(delta / DELTA_SAT) before exponentiation, so that
 #: far outside first-order range (nu >> tol, e.g. 20 mm from a 10 mm feature) the correction stays within
 #: e^{+-DELTA_SAT} of the dipole instead of growing like e^{k C(rho)}; identical to "exp" to third order in delta
-DELTA_SAT = 1.0
+DELTA_SAT = 2.0
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
 _GL_X = 0.5 * (_GL_X + 1.0)  # nodes on [0, 1]
