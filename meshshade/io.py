@@ -264,7 +264,7 @@ def load_mesh(path, units: str = "mm") -> Mesh:
     ------
     UnitsError for an unknown unit; MeshValidationError (one line naming the file) for anything else.
     """
-    factor = mm_per_unit(units)
+    mm_per_unit(units)  # an unknown unit fails before the file is read
     path = Path(path)
     V, F = read_mesh_arrays(path)
     if path.suffix.lower() in (".glb", ".gltf") and str(units).strip().lower() != "m":

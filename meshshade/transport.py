@@ -340,7 +340,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         n_pairs = 0
 
         def pairs():
-            nonlocal n_pairs, t0
+            nonlocal n_pairs
             for a in starts:
                 b = min(k, a + chunk)
                 nb = solver.query(samples.positions[a:b], samples.face[a:b], samples.bary[a:b],

@@ -1,7 +1,7 @@
 """Fast approximate geodesic neighbourhoods ("arc" method): ball-restricted Dijkstra + curvature-corrected chord.
 
 Same query and result (:class:`~meshshade.geometry.neighbourhood.Neighbourhoods`) as
-:class:`~meshshade.geometry.neighbourhood.GeodesicNeighbourhoods`, about 10-20x faster per pair.  Per source x_i (numba, ``prange`` over threads, each thread
+:class:`~meshshade.geometry.neighbourhood.GeodesicNeighbourhoods`, about 4-5x faster per pair in bakes (tools/bench_bake.py).  Per source x_i (numba, ``prange`` over threads, each thread
 with its own stamp-marked scratch arrays, so nothing is cleared between sources and no work is O(N^2)):
 
 1. Topology.  A Dijkstra over mesh edges from the source vertex (or the three corners of its face), entering only
@@ -51,10 +51,9 @@ Speed: ``tools/bench_fast_neighbourhood.py`` (see the commit message for figures
 from __future__ import annotations
 
 import numpy as np
-import numba as nb
 from numba import njit, prange
 
-from .neighbourhood import GeodesicNeighbourhoods, Neighbourhoods, _default_threads, tangent_azimuth
+from .neighbourhood import GeodesicNeighbourhoods, Neighbourhoods, _default_threads, assemble_neighbourhoods
 
 __all__ = ["FastGeodesicNeighbourhoods", "ACCURACY"]
 
@@ -367,26 +366,7 @@ class FastGeodesicNeighbourhoods:
                   else np.zeros(0, np.int32))
         dist = np.concatenate([r[2] for r in res]) if res else np.zeros(0)
         nfb = int(sum(int(r[3].sum()) for r in res))
-        indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
-        self.stats = {"pairs": int(indptr[-1]), "settled_fallbacks": nfb,
-                      "fallback_fraction": nfb / max(1, int(indptr[-1]))}
-        want_phi = d1 is not None and d2 is not None
-        ch = tan = phi = None
-        if chord or tangent or want_phi:
-            src = np.repeat(np.arange(k), counts)
-            diff = V[vertex] - pts[src]
-        if chord:
-            ch = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-        if tangent or want_phi:
-            tan = diff - np.einsum("ij,ij->i", diff, nrm[src])[:, None] * nrm[src]
-            ln = np.linalg.norm(tan, axis=1)
-            tan /= np.where(ln > 0, ln, 1.0)[:, None]
-            if want_phi:
-                D1 = np.asarray(d1, dtype=np.float64).reshape(k, 3)[src]
-                D2 = np.asarray(d2, dtype=np.float64).reshape(k, 3)[src]
-                kk1 = None if k1 is None else np.broadcast_to(np.asarray(k1, np.float64), (k,))[src]
-                kk2 = None if k2 is None else np.broadcast_to(np.asarray(k2, np.float64), (k,))[src]
-                phi = tangent_azimuth(tan, D1, D2, dist, kk1, kk2)
-            if not tangent:
-                tan = None
-        return Neighbourhoods(indptr, vertex, dist, ch, tan, phi, cut, self.method)
+        n_pairs = int(counts.sum())
+        self.stats = {"pairs": n_pairs, "settled_fallbacks": nfb, "fallback_fraction": nfb / max(1, n_pairs)}
+        return assemble_neighbourhoods(V, pts, nrm, counts, vertex, dist, cut, self.method, d1=d1, d2=d2, k1=k1,
+                                       k2=k2, chord=chord, tangent=tangent)

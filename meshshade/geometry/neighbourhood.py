@@ -446,29 +446,10 @@ class GeodesicNeighbourhoods:
                     if progress is not None:
                         progress(blocks[j][1], k)
         counts = np.concatenate([r[0] for r in results]) if results else np.zeros(0, np.int64)
-        indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
         vertex = np.concatenate([r[1] for r in results]) if results else np.zeros(0, np.int32)
         dist = np.concatenate([r[2] for r in results]) if results else np.zeros(0)
-        want_phi = d1 is not None and d2 is not None
-        ch = tan = phi = None
-        if chord or tangent or want_phi:
-            src = np.repeat(np.arange(k), counts)
-            diff = self.vertices[vertex] - pts[src]
-        if chord:
-            ch = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-        if tangent or want_phi:
-            tan = diff - np.einsum("ij,ij->i", diff, nrm[src])[:, None] * nrm[src]
-            ln = np.linalg.norm(tan, axis=1)
-            tan /= np.where(ln > 0, ln, 1.0)[:, None]
-            if want_phi:
-                D1 = np.asarray(d1, dtype=np.float64).reshape(k, 3)[src]
-                D2 = np.asarray(d2, dtype=np.float64).reshape(k, 3)[src]
-                kk1 = None if k1 is None else np.broadcast_to(np.asarray(k1, np.float64), (k,))[src]
-                kk2 = None if k2 is None else np.broadcast_to(np.asarray(k2, np.float64), (k,))[src]
-                phi = tangent_azimuth(tan, D1, D2, dist, kk1, kk2)
-            if not tangent:
-                tan = None
-        return Neighbourhoods(indptr, vertex, dist, ch, tan, phi, cut, self.method)
+        return assemble_neighbourhoods(self.vertices, pts, nrm, counts, vertex, dist, cut, self.method, d1=d1,
+                                       d2=d2, k1=k1, k2=k2, chord=chord, tangent=tangent)
 
     def distances_from(self, *, vertex: int | None = None, face: int | None = None, bary=None,
                        cutoff_mm: float = np.inf) -> np.ndarray:
@@ -483,6 +464,35 @@ class GeodesicNeighbourhoods:
         out = np.full(self.n_vertices, np.inf)
         out[nb.vertex] = nb.distance
         return out
+
+
+def assemble_neighbourhoods(V, pts, nrm, counts, vertex, dist, cut, method, *, d1=None, d2=None, k1=None, k2=None,
+                            chord=True, tangent=False) -> "Neighbourhoods":
+    """Build the CSR :class:`Neighbourhoods` from per-source ``counts`` and the flat ``vertex``/``dist`` arrays,
+    adding the chord, the unit tangent (projection of x_o - x_i on the source's tangent plane) and, when the
+    principal directions are given, the azimuth phi (:func:`tangent_azimuth`). Shared by every solver."""
+    k = counts.shape[0]
+    indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    want_phi = d1 is not None and d2 is not None
+    ch = tan = phi = None
+    if chord or tangent or want_phi:
+        src = np.repeat(np.arange(k), counts)
+        diff = V[vertex] - pts[src]
+    if chord:
+        ch = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+    if tangent or want_phi:
+        tan = diff - np.einsum("ij,ij->i", diff, nrm[src])[:, None] * nrm[src]
+        ln = np.linalg.norm(tan, axis=1)
+        tan /= np.where(ln > 0, ln, 1.0)[:, None]
+        if want_phi:
+            D1 = np.asarray(d1, dtype=np.float64).reshape(k, 3)[src]
+            D2 = np.asarray(d2, dtype=np.float64).reshape(k, 3)[src]
+            kk1 = None if k1 is None else np.broadcast_to(np.asarray(k1, np.float64), (k,))[src]
+            kk2 = None if k2 is None else np.broadcast_to(np.asarray(k2, np.float64), (k,))[src]
+            phi = tangent_azimuth(tan, D1, D2, dist, kk1, kk2)
+        if not tangent:
+            tan = None
+    return Neighbourhoods(indptr, vertex, dist, ch, tan, phi, cut, method)
 
 
 def tangent_azimuth(tangent, d1, d2, rho=None, k1=None, k2=None) -> np.ndarray:
