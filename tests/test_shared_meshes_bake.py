@@ -20,9 +20,9 @@ def scaled(shared_meshes, name):
     return Mesh(V, F)
 
 
-def check_bake(mesh, material):
+def check_bake(mesh, material, geodesic="exact"):
     light = DirectionalLight((0.3, -0.6, -0.75), 1.0)
-    out = {m: bake(mesh, material, [light], model=m) for m in ("dipole", "curved")}
+    out = {m: bake(mesh, material, [light], model=m, geodesic=geodesic) for m in ("dipole", "curved")}
     entering = out["dipole"].samples.power.sum()
     for model, res in out.items():
         assert np.all(np.isfinite(res.radiance)) and np.all(res.radiance >= 0), model
@@ -51,4 +51,6 @@ def test_bake_shared_mesh_bob_curved_vs_dipole(shared_meshes):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SIZES))
 def test_bake_every_shared_mesh(shared_meshes, name):
-    check_bake(scaled(shared_meshes, name), Material.preset("skin1"))
+    # the fast "arc" geodesics keep the nine bakes (up to 50k vertices) within minutes; the properties checked
+    # here (finite, non-negative, energy, where curvature matters) do not depend on the 1-11 % distance error
+    check_bake(scaled(shared_meshes, name), Material.preset("skin1"), geodesic="arc")
