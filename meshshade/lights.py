@@ -19,6 +19,7 @@ from typing import Union
 import numpy as np
 
 from .errors import LightError, MaterialError, MeshValidationError, UnitsError
+from .geometry.topology import winding_number
 from .kernels.fresnel import fresnel_reflectance, fresnel_transmittance_entry
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -265,24 +266,6 @@ class EntrySamples:
         return (f"EntrySamples(k={len(self)}, lights={self.incident_power.shape[0]}, "
                 f"entering={float(self.power.sum()):.6g} W, specular={float(self.specular_power.sum()):.6g} W, "
                 f"stats={self.stats})")
-
-
-def winding_number(vertices, faces, point) -> float:
-    """Generalised winding number of a closed triangle mesh about ``point`` (Jacobson et al. 2013).
-
-    Sum of the signed solid angles of the faces seen from the point (Van Oosterom & Strackee 1983,
-    tan(Omega/2) = a.(b x c) / (|a||b||c| + (a.b)|c| + (a.c)|b| + (b.c)|a|)) over 4 pi: ~1 inside a mesh with
-    outward faces, ~0 outside, 1/2 on the surface. vertices (n, 3) float64, faces (m, 3) int, point (3,).
-    """
-    V = np.asarray(vertices, dtype=np.float64)
-    F = np.asarray(faces)
-    q = np.asarray(point, dtype=np.float64)
-    a, b, c = V[F[:, 0]] - q, V[F[:, 1]] - q, V[F[:, 2]] - q
-    la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
-    num = np.einsum("ij,ij->i", a, np.cross(b, c))
-    den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", a, c) * lb
-           + np.einsum("ij,ij->i", b, c) * la)
-    return float(np.sum(2.0 * np.arctan2(num, den)) / (4.0 * np.pi))
 
 
 def _is_convex(vertices, faces) -> bool:
@@ -572,7 +555,7 @@ def _beam_sample(light: BeamLight, i: int, V, F, get_scene, eta) -> dict:
     origins = light.ray_origins()
     k = origins.shape[0]
     d = np.array(light.direction)
-    if abs(winding_number(V, F, np.array(light.origin))) > 0.5:
+    if abs(winding_number(np.array(light.origin), V, F)) > 0.5:
         raise LightError(f"beam light {i} starts inside the mesh (origin {light.origin} mm)")
     scene = get_scene()
     D = np.broadcast_to(d, (k, 3))
@@ -608,7 +591,7 @@ def _vertex_samples(light, i, V, F, N, A, culler, eta, stats) -> dict:
         target = None
     else:
         target = np.array(light.position)
-        if abs(winding_number(V, F, target)) > 0.5:
+        if abs(winding_number(target, V, F)) > 0.5:
             raise LightError(f"point light {i} at {light.position} mm is inside the mesh")
         delta = target - V
         dist_all = np.linalg.norm(delta, axis=1)

@@ -40,7 +40,8 @@ import numpy as np
 
 from .errors import LightError, MeshshadeError
 from .kernels.fresnel import fresnel_reflectance
-from .lights import BeamLight, DirectionalLight, PointLight, winding_number
+from .geometry.topology import winding_number
+from .lights import BeamLight, DirectionalLight, PointLight
 from .materials import Material
 
 ROULETTE_THRESHOLD = 1e-4
@@ -107,7 +108,7 @@ class _Emitter:
         for i, light in enumerate(self.lights):
             if isinstance(light, BeamLight):
                 o, d = np.array(light.origin), np.array(light.direction)
-                if abs(winding_number(V, F, o)) > 0.5:
+                if abs(winding_number(o, V, F)) > 0.5:
                     raise LightError(f"beam light {i} starts inside the mesh (origin {light.origin} mm)")
                 hits = scene.first_hit(o, d, exact=True)
                 f = int(hits.face[0])
@@ -123,7 +124,7 @@ class _Emitter:
                     w = light.irradiance * np.clip(cos, 0.0, None) * areas
                 else:
                     pos = np.array(light.position)
-                    if abs(winding_number(V, F, pos)) > 0.5:
+                    if abs(winding_number(pos, V, F)) > 0.5:
                         raise LightError(f"point light {i} at {light.position} mm is inside the mesh")
                     delta = pos - c
                     r2 = np.einsum("ij,ij->i", delta, delta)

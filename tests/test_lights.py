@@ -12,8 +12,9 @@ from scipy.integrate import quad
 from meshshade import lights as lights_mod
 from meshshade.errors import LightError, MeshshadeError, UnitsError
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
+from meshshade.geometry.topology import winding_number
 from meshshade.lights import (BeamLight, DirectionalLight, EntrySamples, PointLight, entry_samples,
-                              parse_light_spec, winding_number)
+                              parse_light_spec)
 from meshshade.raycast import NumpyScene, make_scene
 
 ETA = 1.3
@@ -390,9 +391,9 @@ def test_is_convex_certificate():
 
 def test_winding_number_inside_outside():
     V, F, _, _ = sphere(1.0, 2)
-    assert winding_number(V, F, [0.1, 0.2, 0.0]) == pytest.approx(1.0, abs=1e-9)
-    assert winding_number(V, F, [3.0, 0.0, 0.0]) == pytest.approx(0.0, abs=1e-9)
-    assert winding_number(V, F[:, ::-1], [0.0, 0.0, 0.0]) == pytest.approx(-1.0, abs=1e-9)
+    assert winding_number([0.1, 0.2, 0.0], V, F) == pytest.approx(1.0, abs=1e-9)
+    assert winding_number([3.0, 0.0, 0.0], V, F) == pytest.approx(0.0, abs=1e-9)
+    assert winding_number([0.0, 0.0, 0.0], V, F[:, ::-1]) == pytest.approx(-1.0, abs=1e-9)
 
 
 def test_finite_width_beam_spreads_power_over_many_entry_points():
