@@ -297,16 +297,14 @@ def image_rgba(rgb, alpha) -> np.ndarray:
 def display_rgba(rgb, alpha, *, operator="drago", bias=0.85, exposure=None, background=None) -> np.ndarray:
     """(H, W, 4) uint8 PNG: straight-alpha tone-mapped colours; ``background`` (3,) display [0, 1] composites
     onto that colour (alpha 255), None keeps the background transparent."""
-    from .tonemap import drago_tonemap, exposure_tonemap, srgb_encode  # noqa: PLC0415
+    from .tonemap import srgb_encode, tonemap_linear  # noqa: PLC0415
 
     cov = alpha > 0
     straight = np.where(cov[..., None], rgb / np.where(cov, alpha, 1.0)[..., None], 0.0)
-    if operator == "drago":
-        disp = drago_tonemap(straight, bias=bias, exposure=1.0 if exposure is None else exposure, mask=cov)
-    elif operator == "exposure":
-        disp = exposure_tonemap(straight, exposure=exposure, mask=cov)
-    else:
-        raise MeshshadeError(f"unknown tone-mapping operator {operator!r} (drago or exposure)")
+    try:
+        disp = tonemap_linear(straight, operator=operator, bias=bias, exposure=exposure, mask=cov)
+    except ValueError as exc:
+        raise MeshshadeError(str(exc)) from None
     enc = srgb_encode(disp)
     if background is None:
         out = np.concatenate([enc, alpha[..., None]], axis=-1)

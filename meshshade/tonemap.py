@@ -67,12 +67,15 @@ def to_uint8(display_linear):
     return np.round(srgb_encode(display_linear) * 255.0).astype(np.uint8)
 
 
-def tonemap(rgb, *, operator="drago", bias=0.85, exposure=None, mask=None):
-    """Tone map and sRGB-encode to uint8: ``operator`` is "drago" or "exposure"."""
+def tonemap_linear(rgb, *, operator="drago", bias=0.85, exposure=None, mask=None):
+    """Tone map to display-linear [0, 1] RGB: ``operator`` is "drago" or "exposure" (ValueError otherwise)."""
     if operator == "drago":
-        out = drago_tonemap(rgb, bias=bias, exposure=1.0 if exposure is None else exposure, mask=mask)
-    elif operator == "exposure":
-        out = exposure_tonemap(rgb, exposure=exposure, mask=mask)
-    else:
-        raise ValueError(f"unknown tone-mapping operator {operator!r}")
-    return to_uint8(out)
+        return drago_tonemap(rgb, bias=bias, exposure=1.0 if exposure is None else exposure, mask=mask)
+    if operator == "exposure":
+        return exposure_tonemap(rgb, exposure=exposure, mask=mask)
+    raise ValueError(f"unknown tone-mapping operator {operator!r} (drago or exposure)")
+
+
+def tonemap(rgb, *, operator="drago", bias=0.85, exposure=None, mask=None):
+    """Tone map and sRGB-encode to uint8 (see :func:`tonemap_linear`)."""
+    return to_uint8(tonemap_linear(rgb, operator=operator, bias=bias, exposure=exposure, mask=mask))
