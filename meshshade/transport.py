@@ -106,11 +106,12 @@ class PairKernel:
                 seen[key] = len(self.channels)
                 self.channels.append((c, [c]))
         self.stats: dict = {}
+        self._tables: dict = {}  # curved: one CurvatureTable per channel
         if model == "exact-sphere":
             H = 0.5 * (frames.k1 + frames.k2)
             convex = H > 0
-            self.sphere_radius = np.where(convex, 1.0 / np.where(convex, H, 1.0), np.inf)
-            q = np.where(convex, np.round(np.log(np.where(convex, self.sphere_radius, 1.0)) / np.log1p(
+            radius = np.where(convex, 1.0 / np.where(convex, H, 1.0), 1.0)  # local radius 2/(k1 + k2)
+            q = np.where(convex, np.round(np.log(radius) / np.log1p(
                 sphere_radius_rtol)), -1).astype(np.int64)
             self._radius_bin = q
             self._sphere_tables: dict = {}
@@ -140,10 +141,9 @@ class PairKernel:
         """One Chebyshev table of the curvature coefficients per channel, grown when a longer distance shows up."""
         from .kernels.curvature import CurvatureTable  # noqa: PLC0415
 
-        tables = self.__dict__.setdefault("_tables", {})
-        t = tables.get(c)
+        t = self._tables.get(c)
         if t is None or t.rho_max_opt < s_max * st:
-            t = tables[c] = CurvatureTable(par["albedo_prime"], par["eta"], max(s_max * st * 1.25, 10.0))
+            t = self._tables[c] = CurvatureTable(par["albedo_prime"], par["eta"], max(s_max * st * 1.25, 10.0))
         return t
 
     def _exact_sphere(self, c, st, par, src, s, chord):
@@ -195,11 +195,6 @@ class BakeResult:
     material: Material
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
-
-    @property
-    def total_exitance_power(self):
-        """Set by :func:`bake`: (3,) W, sum of M * vertex area."""
-        return self.stats.get("exitant_power")
 
 
 #: source patches are averaged over (ring average) for pairs closer than this many patch radii
