@@ -424,10 +424,10 @@ def test_curvature_table_profile_equals_direct_coefficients():
     # curvature_profile tabulates up to max(rho) = 120 (the table above: 100, direct beyond)
     np.testing.assert_allclose(curvature_profile(rho, cos2phi=c2, k1_opt=k1, k2_opt=k2, policy="exp", **SKIN), R,
                                rtol=1e-10)
-    # the default "soft" policy saturates delta: exp(D tanh(delta / D)), D = DELTA_SAT
+    # the default "soft" policy saturates delta: exp(delta / sqrt(1 + (delta / D)^2)), D = DELTA_SAT
     from meshshade.kernels.curvature import DELTA_SAT
 
-    soft = dipole_profile(rho, **SKIN) * np.exp(DELTA_SAT * np.tanh(delta / DELTA_SAT))
+    soft = dipole_profile(rho, **SKIN) * np.exp(delta / np.sqrt(1 + (delta / DELTA_SAT) ** 2))
     np.testing.assert_allclose(table.profile(rho, phi, k1_opt=k1, k2_opt=k2), soft, rtol=1e-10)
     assert "CurvatureTable(" in repr(table) and "intervals=" in repr(table)
 
