@@ -118,8 +118,9 @@ def add_bake_args(p: argparse.ArgumentParser) -> None:
     add_mesh_args(p)
     add_material_args(p)
     p.add_argument("--light", action="append", required=True, metavar="SPEC", help=LIGHT_HELP)
-    p.add_argument("--model", default="curved", choices=["dipole", "curved", "exact-sphere"],
-                   help="transport kernel (default curved)")
+    p.add_argument("--model", default="curved", choices=["dipole", "curved", "exact-sphere", "auto"],
+                   help="transport kernel (default curved); auto picks per entry sample the cheapest kernel and "
+                        "geodesic method the scene calls for and reports its choices (with --verbose)")
     p.add_argument("--cutoff-tol", type=float, default=1e-4,
                    help="neighbourhood radius: reflectance beyond it below this fraction (default 1e-4)")
     p.add_argument("--curvature-radius", type=float, default=None, metavar="MM",
@@ -156,6 +157,8 @@ def run_bake(args) -> int:
     transport.write_bake(result, mesh, args.out, npz=args.npz)
     if not args.quiet:
         print(transport.describe_result(result))
+        if result.plan is not None:
+            print(result.plan.describe())
         print(f"wrote {args.out}" + (f" and {args.npz}" if args.npz else ""))
     return 0
 

@@ -44,7 +44,8 @@ def _setup(args):
 
 def add_render_args(p: argparse.ArgumentParser) -> None:
     _add_image_args(p)
-    p.add_argument("--model", default="curved", help="transport kernel (default curved)")
+    p.add_argument("--model", default="curved", choices=["dipole", "curved", "exact-sphere", "auto"],
+                   help="transport kernel (default curved; auto: per entry sample what the scene calls for)")
     p.add_argument("--out", required=True, metavar="OUT[.exr|.png]", help="writes OUT.exr (linear) and OUT.png")
 
 
@@ -61,8 +62,9 @@ def run_render(args) -> int:
     ex = render.PixelGather(mesh, res) if args.per_pixel else None
     rgb, alpha = render.render_radiance(mesh, res.radiance, camera, args.width, args.height, args.spp,
                                         eta=material.eta, exitance_at=ex)
+    decisions = {"auto_decisions": res.plan.describe()} if res.plan is not None else {}
     io.write_exr(exr, render.image_rgba(rgb, alpha), {**meta, "model": args.model,
-                                                      "per_pixel": bool(args.per_pixel)})
+                                                      "per_pixel": bool(args.per_pixel), **decisions})
     io.write_png(png, render.display_rgba(rgb, alpha, operator=args.tonemap, bias=args.bias, background=bg))
     if not args.quiet:
         print(transport.describe_result(res))
@@ -73,7 +75,7 @@ def run_render(args) -> int:
 def add_compare_args(p: argparse.ArgumentParser) -> None:
     _add_image_args(p)
     p.add_argument("--models", default="curved,dipole",
-                   help="two models A,B among dipole, curved, exact-sphere, mc (default curved,dipole)")
+                   help="two models A,B among dipole, curved, exact-sphere, auto, mc (default curved,dipole)")
     p.add_argument("--floor", type=float, default=1e-3, help="relative radiance floor for the ratios")
     p.add_argument("--photons", type=int, default=100_000, help="photons when one model is mc (default 1e5)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")

@@ -123,6 +123,9 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
                           vertex_areas=mesh.vertex_areas, names=tuple(models), floor=floor)
     stats["camera"] = camera.describe()
     stats["timings_s"] = {m: b.timings for m, b in zip(models, bakes)}
+    for m, b in zip(models, bakes):  # what --model auto chose (counts per decision)
+        if getattr(b, "plan", None) is not None:
+            stats[f"{m}_decisions"] = b.plan.counts()
     return {"camera": camera, "bakes": bakes, "images": images, "split": (split_image(ra, rb), aa),
             "rel": relative_difference(ra, rb, floor=floor, mask=cov), "stats": stats}
 

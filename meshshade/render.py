@@ -174,7 +174,7 @@ class PixelGather:
         curv = SimpleNamespace(k1=result.k1, k2=result.k2, d1=result.d1)
         self.samples = result.samples
         self.frames = source_frames(result.samples, curv, mesh.faces)
-        self.kernel = PairKernel(result.model, result.material, self.frames)
+        self.kernel = PairKernel(result.model, result.material, self.frames, plan=getattr(result, "plan", None))
         if near_mm is None:  # few sources (beams): a wide near field is cheap and takes the peak's whole shoulder
             near_mm = (16.0 if len(result.samples) <= 4096 else 8.0) * mesh.mean_edge_length
         self.near_mm = float(near_mm)

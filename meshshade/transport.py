@@ -7,7 +7,9 @@ principal curvatures. Models:
 * ``dipole``: Jensen's usage, R_d(|x_o - x_i|) (chord distance);
 * ``curved``: the first-order k1/k2 kernel with its positivity policy (kernels/curvature.py);
 * ``exact-sphere``: the exact sphere series with the local radius 2/(k1 + k2) (for validation on spheres;
-  where the surface is not convex it falls back to the dipole and counts it).
+  where the surface is not convex it falls back to the dipole and counts it);
+* ``auto``: per entry sample the cheapest of these that the scene calls for, and exact or arc geodesics
+  (meshshade/auto.py; the decisions are counted in ``stats``).
 
 Each entry sample reaches the vertices within a cutoff radius chosen per channel from the dipole's closed-form
 tail (the reflectance beyond it is below ``cutoff_tol`` of the total). Sources are processed in chunks so that
@@ -27,7 +29,7 @@ from .materials import Material
 
 log = logging.getLogger("meshshade")
 
-MODELS = ("dipole", "curved", "exact-sphere")
+MODELS = ("dipole", "curved", "exact-sphere", "auto")
 #: pairs evaluated per chunk (memory ~ 100 bytes per pair)
 PAIRS_PER_CHUNK = 4_000_000
 
@@ -92,10 +94,12 @@ class PairKernel:
     """
 
     def __init__(self, model: str, material: Material, frames: SourceFrames, *, rtol: float = 1e-10,
-                 sphere_radius_rtol: float = 1e-3):
+                 sphere_radius_rtol: float = 1e-3, plan=None):
         if model not in MODELS:
             raise MeshshadeError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
-        self.model, self.material, self.frames = model, material, frames
+        if model == "auto" and plan is None:
+            raise ValueError("model 'auto' needs the per-sample plan (meshshade.auto.plan_sources)")
+        self.model, self.material, self.frames, self.plan = model, material, frames, plan
         self.channels: list[tuple[int, list[int]]] = []  # (representative channel, channels it stands for)
         seen: dict = {}
         for c in range(3):
@@ -107,7 +111,7 @@ class PairKernel:
                 self.channels.append((c, [c]))
         self.stats: dict = {}
         self._tables: dict = {}  # curved: one CurvatureTable per channel
-        if model == "exact-sphere":
+        if model in ("exact-sphere", "auto"):
             H = 0.5 * (frames.k1 + frames.k2)
             convex = H > 0
             radius = np.where(convex, 1.0 / np.where(convex, H, 1.0), 1.0)  # local radius 2/(k1 + k2)
@@ -115,19 +119,36 @@ class PairKernel:
                 sphere_radius_rtol)), -1).astype(np.int64)
             self._radius_bin = q
             self._sphere_tables: dict = {}
-            self.stats["exact_sphere_fallback_dipole"] = int((~convex).sum())
-            self.stats["exact_sphere_radius_bins"] = int(np.unique(q[convex]).size)
+            if model == "exact-sphere":
+                self.stats["exact_sphere_fallback_dipole"] = int((~convex).sum())
+                self.stats["exact_sphere_radius_bins"] = int(np.unique(q[convex]).size)
         self.rtol = rtol
         self.sphere_radius_rtol = sphere_radius_rtol
 
     def evaluate(self, c: int, src, s, chord, phi) -> np.ndarray:
         """R [mm^-2] of channel ``c`` for pairs with source indices ``src`` (into the frames), geodesic distance
         ``s`` [mm], chord [mm] and azimuth ``phi`` [rad]."""
+        if self.model != "auto":
+            return self._evaluate(self.model, c, src, s, chord, phi)
+        from .auto import KERNEL_NAMES  # noqa: PLC0415
+
+        out = np.empty(s.shape)
+        kind = self.plan.kernel[src]
+        for i, name in enumerate(KERNEL_NAMES):
+            m = kind == i
+            if np.any(m):  # "dipole" in auto: the planar dipole of the geodesic distance (curved at k = 0)
+                out[m] = self._evaluate("dipole-geodesic" if name == "dipole" else name, c, src[m], s[m],
+                                        chord[m], phi[m])
+        return out
+
+    def _evaluate(self, model, c, src, s, chord, phi):
         ch = self.material.channel(c)
         st, par = ch["sigma_t_prime"], {"albedo_prime": ch["albedo_prime"], "eta": ch["eta"]}
-        if self.model == "dipole":
+        if model == "dipole":
             return dipole_profile(chord * st, **par) * st * st
-        if self.model == "curved":
+        if model == "dipole-geodesic":
+            return dipole_profile(s * st, **par) * st * st
+        if model == "curved":
             table = self._curvature_table(c, st, par, float(s.max()) if s.size else 0.0)
             f = self.frames
             R, valid = table.profile(s * st, phi, k1_opt=f.k1[src] / st, k2_opt=f.k2[src] / st,
@@ -180,7 +201,8 @@ class BakeResult:
     beam_distance : (n,) mm or None — geodesic distance of each vertex from the first beam's entry point
                     (inf beyond the neighbourhood)
     cutoff_mm : (3,) — neighbourhood radius per channel
-    timings : dict stage -> seconds; stats : dict of counts (pairs, skipped work, fallbacks)
+    timings : dict stage -> seconds; stats : dict of counts (pairs, skipped work, fallbacks, auto decisions)
+    plan : meshshade.auto.AutoPlan or None — the per-sample decisions of ``model="auto"``
     """
 
     radiance: np.ndarray
@@ -195,6 +217,7 @@ class BakeResult:
     material: Material
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    plan: object = None
 
 
 #: source patches are averaged over (ring average) for pairs closer than this many patch radii
@@ -270,7 +293,7 @@ def describe_scale(mesh, material: Material) -> str:
 
 def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol: float = 1e-4,
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool = False,
-         rtol: float = 1e-10, geodesic: str = "exact") -> BakeResult:
+         rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None) -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
 
     Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
@@ -278,10 +301,11 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
 
     ``geodesic``: "exact" (polyhedral window propagation, the reference; default) or "arc" (curvature-corrected
     chords over an edge-path search: 1e-4 on smooth meshes such as spheres and tori and about 5x faster, but
-    1-11 % low on average on bumpy scanned meshes; see geometry/fast_neighbourhood.py).
+    1-11 % low on average on bumpy scanned meshes; see geometry/fast_neighbourhood.py). With ``model="auto"``
+    the geodesic method is chosen per entry sample (``geodesic`` is ignored) and ``auto_options`` may override
+    the tolerances of :func:`meshshade.auto.plan_sources`.
     """
     from .geometry.curvature import principal_curvatures  # noqa: PLC0415
-    from .geometry.neighbourhood import GeodesicNeighbourhoods  # noqa: PLC0415
     from .lights import BeamLight, entry_samples  # noqa: PLC0415
     from .raycast import make_scene  # noqa: PLC0415
 
@@ -291,6 +315,8 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         raise MeshshadeError(f"cutoff tolerance must lie in (0, 1), got {cutoff_tol}")
     if curvature_radius_mm is not None and not (np.isfinite(curvature_radius_mm) and curvature_radius_mm > 0):
         raise MeshshadeError(f"curvature radius must be a positive number of mm, got {curvature_radius_mm}")
+    if geodesic not in ("exact", "arc"):
+        raise MeshshadeError(f"unknown geodesic method {geodesic!r}; choose exact or arc")
     lights = list(lights) if isinstance(lights, (list, tuple)) else [lights]
     timings, t0 = {}, time.perf_counter()
 
@@ -308,25 +334,34 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     lap("rays")
     frames = source_frames(samples, curv, F)
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
-    kernel = PairKernel(model, material, frames, rtol=rtol)
-    if geodesic == "exact":
-        solver = GeodesicNeighbourhoods(V, F, mesh.vertex_normals)  # skips degenerate faces itself
-    elif geodesic == "arc":
-        from .geometry.fast_neighbourhood import FastGeodesicNeighbourhoods  # noqa: PLC0415
-        solver = FastGeodesicNeighbourhoods(V, F, mesh.vertex_normals)
+    k = len(samples)
+    plan = None
+    if model == "auto":
+        from .auto import neighbourhood_curvature, plan_sources, vertex_adjacency  # noqa: PLC0415
+
+        indptr, indices = vertex_adjacency(mesh.n_vertices, F)
+        kn = neighbourhood_curvature(samples, np.maximum(np.abs(curv.k1), np.abs(curv.k2)), F, indptr, indices,
+                                     float(cut.max()), mesh.mean_edge_length)
+        plan = plan_sources(frames.k1, frames.k2, kn, material, cut, **(auto_options or {}))
+        groups = [("exact", np.flatnonzero(plan.exact_geodesic)), ("arc", np.flatnonzero(~plan.exact_geodesic))]
+        lap("auto")
     else:
-        raise MeshshadeError(f"unknown geodesic method {geodesic!r}; choose exact or arc")
+        groups = [(geodesic, np.arange(k))]
+    groups = [(g, idx) for g, idx in groups if idx.size]
+    kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan)
+    solvers = {g: _neighbourhood_solver(g, mesh) for g, _ in groups}
     lap("neighbourhoods")
-    stats = {"entry_samples": len(samples), "cutoff_mm": cut.tolist(), **samples.stats}
+    stats = {"entry_samples": k, "cutoff_mm": cut.tolist(), **samples.stats}
+    if plan is not None:
+        stats.update(plan.counts())
+        log.info(plan.describe())
     beam_distance = None
     M = np.zeros((mesh.n_vertices, 3))
-    k = len(samples)
     if k:
         # chunk sizes from the expected neighbours per source (area of the cutoff disc over area per vertex)
         per_vertex_area = mesh.total_area / max(mesh.n_vertices, 1)
         expected = max(1.0, np.pi * cut.max() ** 2 / per_vertex_area)
         chunk = int(max(1, min(k, PAIRS_PER_CHUNK // expected)))
-        starts = range(0, k, chunk)
         bar = None
         if progress and k > chunk:
             from tqdm import tqdm  # noqa: PLC0415
@@ -336,18 +371,20 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
 
         def pairs():
             nonlocal n_pairs
-            for a in starts:
-                b = min(k, a + chunk)
-                nb = solver.query(samples.positions[a:b], samples.face[a:b], samples.bary[a:b],
-                                  samples.vertex[a:b], frames.normals[a:b], cut.max(), d1=frames.d1[a:b],
-                                  d2=frames.d2[a:b], k1=frames.k1[a:b], k2=frames.k2[a:b])
-                src = a + nb.source_index()
-                n_pairs += src.size
-                lap("neighbourhoods")
-                yield src, nb.vertex.astype(np.int64), nb.distance, nb.chord, nb.phi
-                lap("gather")
-                if bar is not None:
-                    bar.update(b - a)
+            for g, idx in groups:
+                solver = solvers[g]
+                for a in range(0, idx.size, chunk):
+                    sel = idx[a:a + chunk]
+                    nb = solver.query(samples.positions[sel], samples.face[sel], samples.bary[sel],
+                                      samples.vertex[sel], frames.normals[sel], cut.max(), d1=frames.d1[sel],
+                                      d2=frames.d2[sel], k1=frames.k1[sel], k2=frames.k2[sel])
+                    src = sel[nb.source_index()]
+                    n_pairs += src.size
+                    lap("neighbourhoods")
+                    yield src, nb.vertex.astype(np.int64), nb.distance, nb.chord, nb.phi
+                    lap("gather")
+                    if bar is not None:
+                        bar.update(sel.size)
 
         # vertex samples of directional/point lights stand for their vertex's area; beam samples are points
         radius = np.where(samples.vertex >= 0, np.sqrt(mesh.vertex_areas[np.maximum(samples.vertex, 0)] / np.pi),
@@ -361,8 +398,9 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         first_beam = next((i for i, L in enumerate(lights) if isinstance(L, BeamLight)), None)
         if first_beam is not None:
             j = int(np.flatnonzero(samples.light_index == first_beam)[0])
-            nb = solver.query(samples.positions[j:j + 1], samples.face[j:j + 1], samples.bary[j:j + 1],
-                              samples.vertex[j:j + 1], samples.normals[j:j + 1], cut.max())
+            g = next(g for g, idx in groups if np.any(idx == j))
+            nb = solvers[g].query(samples.positions[j:j + 1], samples.face[j:j + 1], samples.bary[j:j + 1],
+                                  samples.vertex[j:j + 1], samples.normals[j:j + 1], cut.max())
             beam_distance = np.full(mesh.n_vertices, np.inf)
             beam_distance[nb.vertex] = nb.distance
             lap("neighbourhoods")
@@ -370,7 +408,16 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
     stats["entering_power"] = float(samples.power.sum())
     return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, beam_distance, cut, model, material,
-                      timings, stats)
+                      timings, stats, plan)
+
+
+def _neighbourhood_solver(method: str, mesh):
+    """The geodesic neighbourhood solver of ``method`` ("exact" or "arc") for ``mesh``."""
+    if method == "exact":
+        from .geometry.neighbourhood import GeodesicNeighbourhoods  # noqa: PLC0415
+        return GeodesicNeighbourhoods(mesh.vertices, mesh.faces, mesh.vertex_normals)  # skips degenerate faces
+    from .geometry.fast_neighbourhood import FastGeodesicNeighbourhoods  # noqa: PLC0415
+    return FastGeodesicNeighbourhoods(mesh.vertices, mesh.faces, mesh.vertex_normals)
 
 
 def describe_result(result: BakeResult) -> str:
@@ -392,6 +439,8 @@ def write_bake(result: BakeResult, mesh, out, *, npz=None) -> None:
     colours = tonemap(M, operator="drago")
     comments = [f"meshshade model {result.model}", f"meshshade material {result.material.describe()}",
                 "meshshade radiance_r/g/b: linear radiant exitance in W/mm^2 per unit light power/irradiance"]
+    if result.plan is not None:
+        comments.append(f"meshshade {result.plan.describe()}")
     io.write_mesh_ply(out, mesh, props, colours, comments=comments)
     if npz:
         arrays = dict(radiance=M, k1=result.k1, k2=result.k2, d1=result.d1, d2=result.d2,
@@ -399,4 +448,7 @@ def write_bake(result: BakeResult, mesh, out, *, npz=None) -> None:
                       entry_positions=result.samples.positions, entry_power=result.samples.power)
         if result.beam_distance is not None:
             arrays["beam_distance"] = result.beam_distance
+        if result.plan is not None:  # per entry sample: 0 dipole, 1 curved, 2 exact-sphere; exact geodesics
+            arrays["auto_kernel"] = result.plan.kernel
+            arrays["auto_exact_geodesic"] = result.plan.exact_geodesic
         io.write_npz(npz, **arrays)

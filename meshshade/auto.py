@@ -1,0 +1,163 @@
+"""``--model auto``: decide per entry sample which effects the scene calls for (simulate only what is needed).
+
+Every entry sample i (where light enters, with principal curvatures k1 >= k2 and the neighbourhood radius
+rho_c of each channel c) gets two decisions, both from closed-form bounds, never from a trial evaluation:
+
+**Kernel.** The first-order kernel's relative correction is ``delta = k_n(phi) a(rho) + k_n(phi + pi/2) b(rho)``
+(physics.md e.3), so over the whole neighbourhood ``|delta| <= kmax (|a| + |b|)`` with ``kmax = max(|k1|, |k2|)``
+and ``|a| + |b|`` taken at its largest on [0, rho_c] (:func:`curvature_bound_mm`; for a sphere it is C(rho_c),
+the issue's ``|k| C(rho_cut)``). Then
+
+* ``dipole`` — the surface is flat on the scale of transport: ``kmax W <= curvature_tol`` (default 1e-2, so the
+  curvature terms would change no pair by more than 1 %); the planar dipole of the geodesic distance
+  (the curved kernel at k = 0, exactly) is used;
+* ``exact-sphere`` — convex and umbilic (``k1 - k2 <= umbilic_tol k1``) *and* too curved for first order
+  (``kmax (W + 1/sigma_t') > validity_tol``, the kernel's own validity measure, kernels/curvature.py): the exact
+  sphere series with the local radius 2/(k1 + k2);
+* ``curved`` — everything else: the first-order k1/k2 kernel.
+
+**Geodesic distance.** Exact polyhedral geodesics cost ~2 us per pair; the "arc" method (curvature-corrected
+chords over an edge-path search, geometry/fast_neighbourhood.py) is 4-5x cheaper and agrees with exact to 1e-4
+wherever the surface between source and receiver is a smooth normal section, but undershoots where the surface
+in between is bumpy or folded. The decision therefore looks at the *largest* curvature within the
+neighbourhood, not only at the source: ``kn_i`` = max of ``kmax`` over the vertices within about rho of the
+source (graph dilation, :func:`dilated_max`). Where ``kn_i rho <= geodesic_tol`` (default 0.3: even an
+uncorrected chord would be short by at most (k rho)^2/24 = 0.4 %) the arc method is used, otherwise the exact one.
+
+The other choices of the issue need no per-sample decision and are made elsewhere: the neighbourhood radius per
+channel from the dipole's tail (transport.cutoff_radii), shadow rays skipped where the mesh cannot occlude
+(lights.py), equal channels computed once (transport.PairKernel), the far field summed by clusters
+(farfield.py), Monte Carlo never unless asked. ``AutoPlan.counts()`` reports the decisions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kernels.curvature import curvature_ratios
+from .materials import Material
+
+KERNEL_NAMES = ("dipole", "curved", "exact-sphere")
+DIPOLE, CURVED, EXACT_SPHERE = 0, 1, 2
+
+#: defaults (see module docstring)
+CURVATURE_TOL = 1e-2
+GEODESIC_TOL = 0.3
+UMBILIC_TOL = 0.1
+VALIDITY_TOL = 0.25
+
+
+@dataclass(frozen=True)
+class AutoPlan:
+    """Per entry sample: ``kernel`` (k,) int8 in {DIPOLE, CURVED, EXACT_SPHERE}; ``exact_geodesic`` (k,) bool."""
+
+    kernel: np.ndarray
+    exact_geodesic: np.ndarray
+    tolerances: dict
+
+    def counts(self) -> dict:
+        """Counts per decision, for metadata and ``--verbose``."""
+        out = {f"auto_kernel_{name}": int(np.sum(self.kernel == i)) for i, name in enumerate(KERNEL_NAMES)}
+        out["auto_geodesic_exact"] = int(self.exact_geodesic.sum())
+        out["auto_geodesic_arc"] = int(self.exact_geodesic.size - self.exact_geodesic.sum())
+        return out
+
+    def describe(self) -> str:
+        c = self.counts()
+        return (f"auto: kernel dipole {c['auto_kernel_dipole']}, curved {c['auto_kernel_curved']}, "
+                f"exact-sphere {c['auto_kernel_exact-sphere']} entry samples; geodesics exact "
+                f"{c['auto_geodesic_exact']}, arc {c['auto_geodesic_arc']}")
+
+
+def curvature_bound_mm(material: Material, radius_mm) -> np.ndarray:
+    """(3,) mm: per channel, ``W_c = max over rho in [0, radius_c] of (|a(rho)| + |b(rho)|)`` in mm.
+
+    ``kmax W_c`` bounds the first-order relative correction |delta| of every pair within the radius.
+    ``radius_mm``: scalar or (3,). The maximum is taken on a 64-point grid plus the end point (a and b are
+    smooth and grow nearly linearly, so the end point is the maximum in practice).
+    """
+    radius = np.broadcast_to(np.asarray(radius_mm, dtype=np.float64), (3,))
+    out = np.empty(3)
+    for c in range(3):
+        ch = material.channel(c)
+        st = ch["sigma_t_prime"]
+        rho = np.linspace(0.0, radius[c] * st, 65)
+        a, b = curvature_ratios(rho, albedo_prime=ch["albedo_prime"], eta=ch["eta"])
+        out[c] = float(np.max(np.abs(a) + np.abs(b))) / st
+    return out
+
+
+def vertex_adjacency(n_vertices: int, faces) -> tuple[np.ndarray, np.ndarray]:
+    """CSR ``(indptr, indices)`` of the vertex graph of ``faces`` (each undirected edge in both rows)."""
+    F = np.asarray(faces, dtype=np.int64)
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    e = np.concatenate([e, e[:, ::-1]])
+    e = np.unique(e[e[:, 0] != e[:, 1]], axis=0)  # sorted by row, then column
+    indptr = np.zeros(n_vertices + 1, dtype=np.int64)
+    np.add.at(indptr, e[:, 0] + 1, 1)
+    return np.cumsum(indptr), e[:, 1].copy()
+
+
+def dilated_max(values, indptr, indices, rings: int) -> np.ndarray:
+    """Per vertex, the max of ``values`` over the vertices within ``rings`` edges (vectorised; O(rings E))."""
+    out = np.asarray(values, dtype=np.float64).copy()
+    n = out.size
+    has = np.diff(indptr) > 0
+    starts = indptr[:-1][has]
+    for _ in range(int(rings)):
+        if indices.size == 0:
+            break
+        nb = np.maximum.reduceat(out[indices], starts)
+        new = out.copy()
+        new[np.flatnonzero(has)] = np.maximum(out[has], nb)
+        if np.array_equal(new, out):
+            break
+        out = new
+    assert out.size == n
+    return out
+
+
+def plan_sources(k1, k2, k_neighbourhood, material: Material, radius_mm, *, curvature_tol: float = CURVATURE_TOL,
+                 geodesic_tol: float = GEODESIC_TOL, umbilic_tol: float = UMBILIC_TOL,
+                 validity_tol: float = VALIDITY_TOL) -> AutoPlan:
+    """Decide kernel and geodesic method per entry sample (module docstring).
+
+    k1, k2 : (k,) 1/mm, the sample's principal curvatures (k1 >= k2); k_neighbourhood : (k,) 1/mm, the largest
+    |principal curvature| within about ``radius_mm`` of the sample; radius_mm : scalar or (3,) neighbourhood
+    radius per channel (mm).
+    """
+    for name, v in (("curvature_tol", curvature_tol), ("geodesic_tol", geodesic_tol),
+                    ("umbilic_tol", umbilic_tol), ("validity_tol", validity_tol)):
+        if not v >= 0:  # also rejects NaN; inf switches a decision off
+            raise ValueError(f"{name} must be a number >= 0 (inf allowed), got {v}")
+    k1 = np.asarray(k1, dtype=np.float64)
+    k2 = np.asarray(k2, dtype=np.float64)
+    kmax = np.maximum(np.abs(k1), np.abs(k2))
+    radius = np.broadcast_to(np.asarray(radius_mm, dtype=np.float64), (3,))
+    W = curvature_bound_mm(material, radius)
+    inv_st = 1.0 / np.asarray(material.sigma_t_prime, dtype=np.float64)
+    flat = kmax * W.max() <= curvature_tol
+    out_of_range = kmax * (W + inv_st).max() > validity_tol
+    umbilic = (k2 > 0) & (k1 - k2 <= umbilic_tol * k1)
+    kernel = np.full(k1.shape, CURVED, dtype=np.int8)
+    kernel[flat] = DIPOLE
+    kernel[~flat & out_of_range & umbilic] = EXACT_SPHERE
+    exact_geo = np.asarray(k_neighbourhood, dtype=np.float64) * radius.max() > geodesic_tol
+    tol = {"curvature_tol": curvature_tol, "geodesic_tol": geodesic_tol, "umbilic_tol": umbilic_tol,
+           "validity_tol": validity_tol}
+    return AutoPlan(kernel, exact_geo, tol)
+
+
+def neighbourhood_curvature(samples, vertex_kmax, faces, indptr, indices, radius_mm: float,
+                            mean_edge_mm: float, max_rings: int = 256) -> np.ndarray:
+    """(k,) 1/mm: for each entry sample, the largest |principal curvature| of the vertices within about
+    ``radius_mm`` (graph rings of the mean edge length; a face sample takes the max over its corners)."""
+    rings = int(min(max_rings, np.ceil(radius_mm / max(mean_edge_mm, 1e-300)) + 1))
+    dil = dilated_max(vertex_kmax, indptr, indices, rings)
+    at_v = samples.vertex >= 0
+    out = np.empty(len(samples))
+    out[at_v] = dil[samples.vertex[at_v]]
+    if np.any(~at_v):
+        out[~at_v] = dil[np.asarray(faces)[samples.face[~at_v]]].max(axis=1)
+    return out

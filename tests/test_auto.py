@@ -1,0 +1,167 @@
+"""``--model auto``: the per-sample decisions (meshshade/auto.py) and their use in the bake and the CLI."""
+import numpy as np
+import pytest
+import trimesh
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import shortest_path
+
+from meshshade import auto, transport
+from meshshade.cli import main
+from meshshade.geometry.mesh import Mesh
+from meshshade.geometry.procedural import icosphere, torus
+from meshshade.io import write_ply
+from meshshade.kernels.curvature import curvature_ratios
+from meshshade.lights import BeamLight, DirectionalLight
+from meshshade.materials import material_from_options
+
+SKIN = material_from_options("skin1")
+
+
+# ------------------------------------------------------------------------------------------- graph dilation
+def test_dilated_max_matches_breadth_first_search(rng):
+    V, F = icosphere(1.0, 2)
+    n = len(V)
+    vals = rng.random(n)
+    indptr, indices = auto.vertex_adjacency(n, F)
+    # independent route: hop distances of the unweighted vertex graph from scipy's csgraph
+    A = csr_matrix((np.ones(indices.size), indices, indptr), shape=(n, n))
+    hops = shortest_path(A, unweighted=True)
+    for rings in (0, 1, 2, 5):
+        want = np.array([vals[hops[v] <= rings].max() for v in range(n)])
+        np.testing.assert_array_equal(auto.dilated_max(vals, indptr, indices, rings), want)
+
+
+def test_vertex_adjacency_is_symmetric_and_has_no_self_loops():
+    V, F = torus(3.0, 1.0, 24, 12)
+    indptr, indices = auto.vertex_adjacency(len(V), F)
+    A = csr_matrix((np.ones(indices.size), indices, indptr), shape=(len(V),) * 2)
+    assert (A != A.T).nnz == 0
+    assert A.diagonal().sum() == 0
+    assert np.all(np.diff(indptr) == 6)  # the structured torus is 6-regular
+
+
+# ------------------------------------------------------------------------------------------- bounds
+@pytest.mark.parametrize("name", ["skin1", "marble", "ketchup"])
+def test_curvature_bound_bounds_delta_of_every_pair(name, rng):
+    """|delta| = |k_n(phi) a + k_n(phi + pi/2) b| <= kmax W for random curvatures, azimuths and rho <= radius."""
+    with pytest.warns(Warning) if name == "ketchup" else _nullcontext():
+        mat = material_from_options(name)
+    radius = np.array([12.0, 7.0, 3.0])
+    W = auto.curvature_bound_mm(mat, radius)
+    for c in range(3):
+        ch = mat.channel(c)
+        st = ch["sigma_t_prime"]
+        rho_mm = rng.random(4000) * radius[c]
+        a, b = curvature_ratios(rho_mm * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"])
+        k1, k2 = rng.normal(0, 0.05, (2, rho_mm.size))
+        phi = rng.random(rho_mm.size) * 2 * np.pi
+        kn = k1 * np.cos(phi) ** 2 + k2 * np.sin(phi) ** 2
+        kn90 = k1 * np.sin(phi) ** 2 + k2 * np.cos(phi) ** 2
+        delta = kn * a / st + kn90 * b / st  # a, b in optical units, curvature in 1/mm
+        kmax = np.maximum(np.abs(k1), np.abs(k2))
+        assert np.all(np.abs(delta) <= kmax * W[c] * (1 + 1e-12))
+        # and the bound is attained (to the grid) on a sphere at the radius: W = C(radius) there
+        a_r, b_r = curvature_ratios(radius[c] * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"])
+        assert W[c] == pytest.approx((abs(a_r) + abs(b_r)) / st, rel=0.02)
+
+
+class _nullcontext:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+# ------------------------------------------------------------------------------------------- decisions
+def test_plan_flat_surface_uses_dipole_and_arc():
+    k = np.zeros(5)
+    plan = auto.plan_sources(k, k, k, SKIN, 20.0)
+    assert np.all(plan.kernel == auto.DIPOLE) and not plan.exact_geodesic.any()
+    assert plan.counts()["auto_kernel_dipole"] == 5 and plan.counts()["auto_geodesic_arc"] == 5
+
+
+def test_plan_small_sphere_uses_exact_sphere_and_saddle_uses_curved():
+    R0 = 10.0
+    k1 = np.array([1 / R0, 0.05, 0.03])
+    k2 = np.array([1 / R0, -0.05, 0.0])
+    plan = auto.plan_sources(k1, k2, np.abs(k1) + np.abs(k2), SKIN, transport.cutoff_radii(SKIN, 1e-4))
+    assert plan.kernel.tolist() == [auto.EXACT_SPHERE, auto.CURVED, auto.CURVED]
+    assert plan.exact_geodesic.all()
+
+
+def test_plan_threshold_is_the_documented_bound():
+    """Just below / above curvature_tol / (W): dipole / curved (the decision is the stated inequality)."""
+    radius = transport.cutoff_radii(SKIN, 1e-4)
+    W = auto.curvature_bound_mm(SKIN, radius).max()
+    k = np.array([0.99, 1.01]) * 1e-2 / W
+    plan = auto.plan_sources(k, k * 0.5, k, SKIN, radius)
+    assert plan.kernel.tolist() == [auto.DIPOLE, auto.CURVED]
+
+
+def test_plan_rejects_bad_tolerances():
+    with pytest.raises(ValueError, match="curvature_tol"):
+        auto.plan_sources([0.0], [0.0], [0.0], SKIN, 5.0, curvature_tol=-1)
+    with pytest.raises(ValueError, match="geodesic_tol"):
+        auto.plan_sources([0.0], [0.0], [0.0], SKIN, 5.0, geodesic_tol=float("nan"))
+
+
+# ------------------------------------------------------------------------------------------- bake
+@pytest.fixture(scope="module")
+def sphere10():
+    return Mesh.from_arrays(*icosphere(10.0, 3))
+
+
+def test_auto_with_everything_forced_curved_equals_curved(sphere10):
+    """With curvature_tol = 0, validity_tol = inf and geodesic_tol = 0 auto must reproduce `curved` exactly."""
+    light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
+    ref = transport.bake(sphere10, SKIN, light, model="curved")
+    got = transport.bake(sphere10, SKIN, light, model="auto",
+                         auto_options=dict(curvature_tol=0.0, validity_tol=np.inf, geodesic_tol=0.0))
+    assert got.stats["auto_kernel_curved"] == got.stats["entry_samples"]
+    np.testing.assert_allclose(got.radiance, ref.radiance, rtol=1e-12, atol=0)
+
+
+def test_auto_on_small_sphere_picks_the_exact_sphere(sphere10):
+    """R0 = 10 mm in skin is umbilic and outside first-order validity: auto = the exact-sphere model there."""
+    light = [BeamLight((0.3, 0.2, 40.0), (0, 0, -1))]
+    ref = transport.bake(sphere10, SKIN, light, model="exact-sphere")
+    got = transport.bake(sphere10, SKIN, light, model="auto")
+    assert got.stats["auto_kernel_exact-sphere"] == 1 and got.stats["auto_geodesic_exact"] == 1
+    np.testing.assert_allclose(got.radiance, ref.radiance, rtol=1e-12, atol=0)
+
+
+def test_auto_flat_forced_dipole_equals_geodesic_dipole(sphere10):
+    """curvature_tol = inf: every sample uses the planar dipole of the geodesic distance = curved at k = 0."""
+    light = [BeamLight((0.3, 0.2, 40.0), (0, 0, -1))]
+    got = transport.bake(sphere10, SKIN, light, model="auto", auto_options=dict(curvature_tol=np.inf,
+                                                                                  geodesic_tol=0.0))
+    assert got.stats["auto_kernel_dipole"] == 1
+    from meshshade.kernels.dipole import dipole_profile
+    d = got.beam_distance
+    ok = np.isfinite(d) & (d > 1.0)
+    F_t = got.samples.power[0]
+    for c in range(3):
+        ch = SKIN.channel(c)
+        st = ch["sigma_t_prime"]
+        want = F_t * dipole_profile(d[ok] * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"]) * st * st
+        keep = d[ok] <= got.cutoff_mm[c]
+        np.testing.assert_allclose(got.radiance[ok, c][keep], want[keep], rtol=1e-10)
+
+
+# ------------------------------------------------------------------------------------------- CLI
+def test_cli_auto_reports_decisions(tmp_path, capsys):
+    V, F = icosphere(10.0, 3)
+    src = tmp_path / "s.ply"
+    write_ply(src, V, F)
+    out, npz = tmp_path / "o.ply", tmp_path / "o.npz"
+    assert main(["bake", str(src), "--material", "skin1", "--light", "beam:0,0,40:0,0,-1", "--model", "auto",
+                 "--out", str(out), "--npz", str(npz)]) == 0
+    text = capsys.readouterr().out
+    assert "auto: kernel dipole 0, curved 0, exact-sphere 1 entry samples" in text
+    header = out.read_bytes().split(b"end_header")[0].decode("ascii")
+    assert "comment meshshade auto: kernel dipole 0, curved 0, exact-sphere 1" in header
+    assert trimesh.load(out, process=False).vertices.shape == V.shape
+    data = np.load(npz)
+    assert data["auto_kernel"].tolist() == [auto.EXACT_SPHERE]
+    assert data["auto_exact_geodesic"].tolist() == [True]
