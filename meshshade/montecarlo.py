@@ -22,9 +22,10 @@ Channels: one walk per distinct (sigma_s', sigma_a) pair; channels with equal co
 share one walk and are copied. (Per-channel weights on one path are only valid when sigma_t is equal across
 channels; separate walks are simpler and always correct.)
 
-Wavefront: all live photons advance together by one free path per iteration with numpy; dead photons are
-replaced by new ones from the lights as long as photons remain (a regenerating pool of ``pool`` photons, so
-the long tail of the walk does not starve the Embree batches).
+Engines: the default pooled engine (:mod:`meshshade.montecarlo_engine`) walks a regenerating pool of photons
+with numba kernels, certifies short free flights with a safe-distance grid and asks Embree only for the others;
+``fast_interior=False`` selects the baseline numpy wavefront (:mod:`meshshade.montecarlo_wavefront`, one Embree
+query per photon and step). Both follow the physics above and give the same distributions.
 
 Uncertainty: photon ``i`` belongs to batch ``i % n_batches``; every reported quantity is also tallied per batch
 and its standard error is the batch-means estimate std(batch values, ddof=1)/sqrt(n_batches).
@@ -201,9 +202,11 @@ class MCResult:
     face_power : (m, 3) W leaving each face; vertex_power : (n, 3) W, exit power split by barycentrics;
     radiance : (n, 3) W/mm^2, vertex_power / vertex area (exitance), with radiance_stderr;
     totals : dict key -> (3,) fractions of the incident power (TOTAL_KEYS) and ``<key>_stderr``;
-    lost : (3,) fraction lost to numerical leaks (rays that miss the mesh from inside), normally 0;
+    lost : (3,) fraction lost to numerical leaks (rays that miss the mesh from inside) and to photons cut off at
+        the hard time limit of a ``time_budget`` run, normally 0;
     beam_exits : per channel, dict of arrays ``face``, ``bary``, ``weight`` (W), ``batch`` for photons of the
-        first beam light (for radial profiles); beam_entry : (face, bary) of that beam, or None.
+        first beam light (for radial profiles); beam_entry : (face, bary) of that beam, or None;
+    boundary_tests : ray casts (Embree queries) made by the walk.
     """
 
     material: Material
@@ -224,6 +227,7 @@ class MCResult:
     beam_exits: list = field(default_factory=list)
     beam_entry: tuple | None = None
     beam_distance: np.ndarray | None = None
+    boundary_tests: int = 0
 
     @property
     def events_per_second(self) -> float:
@@ -238,142 +242,10 @@ def _batch_stats(per_batch):
     return total, stderr
 
 
-class _Walk:
-    """One grey walk (one channel group) with a regenerating wavefront."""
-
-    def __init__(self, V, F, normals, emitter, scene, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam,
-                 grid=None):
-        self.V, self.F, self.N, self.em, self.scene, self.grid = V, F, normals, emitter, scene, grid
-        self.sigma_t = sigma_s + sigma_a
-        self.albedo = sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
-        self.g, self.eta, self.B, self.keep_beam = g, eta, n_batches, keep_beam
-        m, L = F.shape[0], len(emitter.lights)
-        self.face = np.zeros((n_batches, m))
-        self.face_vert = np.zeros((n_batches, V.shape[0]))
-        self.tot = np.zeros((n_batches, 7))  # specular, diffuse, transmitted, absorbed, lost, incident, entering
-        self.events = 0
-        self.boundary = 0
-        self.beam_light = next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), None)
-        self.exits = {"face": [], "bary": [], "weight": [], "batch": []}
-        self.L = L
-
-    def run(self, n_photons, rng, *, pool, time_budget=None, progress=None):
-        t0 = time.perf_counter()
-        emitted = 0
-        keys = ("pos", "dir", "w", "w0", "batch", "light", "pend", "rng")
-        live = {k: np.zeros((0, 3) if k in ("pos", "dir") else 0) for k in keys}
-        live["batch"] = live["batch"].astype(np.int64)
-        live["light"] = live["light"].astype(np.int64)
-        live["rng"] = live["rng"].astype(np.uint64)
-        stop_emitting = False
-        while True:
-            if time_budget is not None and time.perf_counter() - t0 > time_budget:
-                stop_emitting = True
-            k = min(pool - live["w"].size, n_photons - emitted) if not stop_emitting else 0
-            if k > 0:
-                live = self._add(live, k, emitted, n_photons, rng)
-                emitted += k
-                if progress is not None:
-                    progress.update(k)
-            if live["w"].size == 0:
-                break
-            live = self._step(live, rng)
-        return emitted
-
-    def _add(self, live, k, emitted, n_total, rng):
-        light, face, pos, dirs, w_in, spec, inc = self.em.emit(k, n_total, rng)
-        batch = (emitted + np.arange(k)) % self.B
-        np.add.at(self.tot, (batch, 0), spec)
-        np.add.at(self.tot, (batch, 5), inc)
-        np.add.at(self.tot, (batch, 6), w_in)
-        ok = w_in > 0.0
-        new = {"pos": pos[ok], "dir": dirs[ok], "w": w_in[ok], "w0": w_in[ok], "batch": batch[ok],
-               "light": light[ok], "pend": np.full(int(ok.sum()), -1.0),
-               "rng": rng.integers(0, 2**63, size=int(ok.sum()), dtype=np.uint64)}
-        return {key: np.concatenate([live[key], new[key]]) for key in live}
-
-    def _step(self, live, rng):
-        pos, d, w, batch = live["pos"], live["dir"], live["w"], live["batch"]
-        n = w.size
-        hits = self.scene.first_hit(pos, d)
-        s = -np.log1p(-rng.random(n)) / self.sigma_t if self.sigma_t > 0 else np.full(n, np.inf)
-        s = np.where(live["pend"] >= 0.0, live["pend"], s)   # a free path drawn by the interior kernel
-        live["pend"][:] = -1.0
-        t_hit = np.where(hits.face >= 0, np.maximum(hits.t, 0.0), np.inf)
-        # a ray from inside must hit the back of a face; a miss or a front hit means the photon leaked out
-        fn = self.N[np.maximum(hits.face, 0)]
-        cos_i = np.einsum("ij,ij->i", d, fn)
-        leaked = (hits.face < 0) | (cos_i <= 0.0)
-        at_boundary = (t_hit <= s) & ~leaked
-        scatter = (s < t_hit) & ~leaked & ~at_boundary
-        keep = scatter.copy()
-        # --- leaks
-        if np.any(leaked):
-            np.add.at(self.tot, (batch[leaked], 4), w[leaked])
-        # --- interactions: absorb, scatter
-        idx = np.flatnonzero(scatter)
-        if idx.size:
-            pos[idx] += s[idx, None] * d[idx]
-            np.add.at(self.tot, (batch[idx], 3), w[idx] * (1.0 - self.albedo))
-            w[idx] *= self.albedo
-            d[idx] = scatter_directions(d[idx], self.g, rng)
-            self.events += idx.size
-        # --- boundary: Fresnel reflect or exit
-        idx = np.flatnonzero(at_boundary)
-        if idx.size:
-            self.boundary += idx.size
-            ci = np.clip(cos_i[idx], 0.0, 1.0)
-            R = fresnel_reflectance(ci, self.eta, 1.0)
-            refl = rng.random(idx.size) < R
-            r_idx, e_idx = idx[refl], idx[~refl]
-            if r_idx.size:
-                nr = fn[r_idx]
-                d[r_idx] = d[r_idx] - 2.0 * cos_i[r_idx, None] * nr
-                pos[r_idx] = self.scene.offset_origins(hits.points[r_idx], nr, sign=-1.0)
-                keep[r_idx] = True
-            if e_idx.size:
-                f = hits.face[e_idx]
-                u, v = hits.uv[e_idx, 0], hits.uv[e_idx, 1]
-                bary = np.stack([1.0 - u - v, u, v], axis=1)
-                we, be = w[e_idx], batch[e_idx]
-                np.add.at(self.face, (be, f), we)
-                for j in range(3):
-                    np.add.at(self.face_vert, (be, self.F[f, j]), we * bary[:, j])
-                facing = self.em.facing[live["light"][e_idx], f]
-                np.add.at(self.tot, (be[facing], 1), we[facing])
-                np.add.at(self.tot, (be[~facing], 2), we[~facing])
-                if self.keep_beam and self.beam_light is not None:
-                    mine = live["light"][e_idx] == self.beam_light
-                    for key, val in (("face", f), ("bary", bary), ("weight", we), ("batch", be)):
-                        self.exits[key].append(val[mine])
-        # --- Russian roulette (net change booked as absorbed: exact balance, unbiased)
-        low = keep & (w < ROULETTE_THRESHOLD * live["w0"])
-        idx = np.flatnonzero(low)
-        if idx.size:
-            survive = rng.random(idx.size) * ROULETTE_BOOST < 1.0
-            delta = np.where(survive, -(ROULETTE_BOOST - 1.0) * w[idx], w[idx])
-            np.add.at(self.tot, (batch[idx], 3), delta)
-            w[idx] = np.where(survive, w[idx] * ROULETTE_BOOST, 0.0)
-            keep[idx[~survive]] = False
-        live = {key: val[keep] for key, val in live.items()}
-        if self.grid is not None and live["w"].size and self.sigma_t > 0:
-            from .montecarlo_interior import interior_walk  # noqa: PLC0415
-
-            g = self.grid
-            absorbed, alive, ev = interior_walk(live["pos"], live["dir"], live["w"], live["w0"], live["pend"],
-                                                g.safe, g.origin, g.h, self.sigma_t, self.albedo, self.g,
-                                                ROULETTE_THRESHOLD, ROULETTE_BOOST, 100_000, live["rng"])
-            self.events += int(ev)
-            self.tot[:, 3] += np.bincount(live["batch"], weights=absorbed, minlength=self.B)
-            if not np.all(alive):
-                live = {key: val[alive] for key, val in live.items()}
-        return live
-
-
 def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000, seed: int = 0,
-             time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int = 1 << 16,
+             time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int | None = None,
              keep_beam_exits: bool = True, beam_distances: bool = True, fast_interior: bool = True,
-             progress: bool = False) -> MCResult:
+             engine: str = "auto", progress: bool = False) -> MCResult:
     """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
 
     Parameters
@@ -382,17 +254,28 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     material : Material (uses sigma_s', sigma_a, eta and g)
     lights : light or sequence of BeamLight / DirectionalLight / PointLight
     photons : photons per channel group (with ``time_budget``: an upper bound, None = unbounded)
-    seed : int, makes the run reproducible (per channel group a child of ``numpy.random.SeedSequence(seed)``)
-    time_budget : float seconds or None; emission stops once it is spent (live photons are finished)
+    seed : int >= 0, makes the run reproducible: with the pooled engine photon ``i`` of channel group ``k`` draws
+        every random number from a stream keyed by (seed, k, i), so the result is bitwise identical for any
+        number of threads and photon i's path does not depend on ``pool``
+    time_budget : float seconds or None, counted from the call: emission stops when the photons in flight are
+        predicted to finish within the budget; photons still in flight at 1.25 x the budget are cut off and
+        their weight is reported as ``lost`` (see :mod:`meshshade.montecarlo_engine` for the bound)
     n_batches : batches for the standard errors (>= 2)
+    pool : photon slots advanced together (default 2**18 for the pooled engine, 2**16 for the baseline)
     beam_distances : compute per-vertex geodesic distances from the first beam's entry point
-    fast_interior : numba free flights inside a conservative safe-distance grid (no ray cast needed there);
-        False gives the plain Embree-every-step wavefront (same distribution, different random stream)
+    fast_interior : True: the pooled engine (numba interior walks inside a conservative safe-distance grid,
+        one batched Embree query per round, :mod:`meshshade.montecarlo_engine`); False: the plain numpy
+        wavefront with an Embree query every step (the baseline: same distribution, different random streams)
+    engine : pooled engine's Embree calls: "direct" (rtcIntersect1 from the numba threads,
+        :mod:`meshshade.montecarlo_embree`), "batched" (one embreex call per round) or "auto" (direct when the
+        Embree library can be bound, else batched). Both give the same photon paths up to float32 ties.
 
     Returns
     -------
     MCResult
     """
+    from .montecarlo_engine import PoolWalk  # noqa: PLC0415
+    from .montecarlo_wavefront import WavefrontWalk  # noqa: PLC0415
     from .raycast import make_scene  # noqa: PLC0415
 
     if isinstance(lights, (BeamLight, DirectionalLight, PointLight)):
@@ -403,14 +286,26 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         raise MeshshadeError(f"need at least {n_batches} photons (one per batch), got {photons}")
     if n_batches < 2:
         raise MeshshadeError("n_batches must be at least 2 for a standard error")
+    if int(seed) < 0:
+        raise MeshshadeError(f"seed must be a non-negative integer, got {seed}")
+    t_start = time.perf_counter()
     n_photons = int(photons) if photons is not None else 1 << 62
     V, F = mesh.vertices, mesh.faces
     normals, areas = mesh.face_normals, mesh.face_areas
     scene = make_scene(V, F)
-    grid = None
+    grid = direct = None
+    if engine not in ("auto", "direct", "batched"):
+        raise MeshshadeError(f"engine must be 'auto', 'direct' or 'batched', got {engine!r}")
     if fast_interior:
         from .montecarlo_interior import SafeDistanceGrid  # noqa: PLC0415
         grid = SafeDistanceGrid(V, F)
+        if engine != "batched" and getattr(scene, "backend", "") == "embree":
+            from .montecarlo_embree import DirectEmbreeScene  # noqa: PLC0415
+            try:
+                direct = DirectEmbreeScene(V, F, scene.center)
+            except (RuntimeError, OSError):
+                if engine == "direct":
+                    raise
     emitter = _Emitter(V, F, normals, areas, lights, scene, material.eta)
     g = material.g
     sigma_s = material.sigma_s_prime / (1.0 - g)
@@ -423,7 +318,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     vert_p = np.zeros((V.shape[0], 3)); vert_se = np.zeros_like(vert_p)
     tot = np.zeros((7, 3)); tot_se = np.zeros((7, 3))
     frac = np.zeros((5, 3)); frac_se = np.zeros((5, 3))
-    events = boundary = 0
+    events = boundary = rays = 0
     emitted_max = 0
     exits = [None] * 3
     bar = None
@@ -432,12 +327,21 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         bar = tqdm(total=None if photons is None else n_photons * len(groups), desc="mc", unit="photon",
                    leave=False)
     try:
-        for ((ss, sa), chans), child in zip(groups.items(), children):
-            walk = _Walk(V, F, normals, emitter, scene, sigma_s=ss, sigma_a=sa, g=g, eta=material.eta,
-                         n_batches=n_batches, keep_beam=keep_beam_exits, grid=grid)
-            budget = None if time_budget is None else time_budget / len(groups)
-            emitted = walk.run(n_photons, np.random.default_rng(child), pool=pool, time_budget=budget,
-                               progress=bar)
+        for gi, (((ss, sa), chans), child) in enumerate(zip(groups.items(), children)):
+            common = dict(sigma_s=ss, sigma_a=sa, g=g, eta=material.eta, n_batches=n_batches,
+                          keep_beam=keep_beam_exits)
+            budget = None
+            if time_budget is not None:  # what is left, shared by the remaining groups
+                budget = max(time_budget - (time.perf_counter() - t_start), 0.0) / (len(groups) - gi)
+            if fast_interior:
+                walk = PoolWalk(V, F, normals, emitter, scene, grid, seed=seed, group=gi, direct=direct, **common)
+                emitted = walk.run(n_photons, pool=pool, time_budget=budget, progress=bar)
+                rays += walk.rays
+            else:
+                walk = WavefrontWalk(V, F, normals, emitter, scene, **common)
+                emitted = walk.run(n_photons, np.random.default_rng(child), pool=pool or 1 << 16,
+                                   time_budget=budget, progress=bar)
+                rays += walk.rays
             emitted_max = max(emitted_max, emitted)
             scale = n_photons / emitted if emitted else 1.0
             # photon weights were P/n_photons: rescale when the time budget stopped emission early
@@ -480,7 +384,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     return MCResult(material=material, face_power=face_p, face_power_stderr=face_se, vertex_power=vert_p,
                     radiance=radiance, radiance_stderr=radiance_se, totals=totals, lost=frac[4],
                     incident_power=tot[5], entering_power=tot[6], photons=emitted_max, events=events,
-                    boundary_events=boundary, seconds=seconds, n_batches=n_batches,
+                    boundary_events=boundary, seconds=seconds, n_batches=n_batches, boundary_tests=rays,
                     beam_exits=exits if keep_beam_exits else [], beam_entry=beam_entry,
                     beam_distance=beam_distance)
 

@@ -1,0 +1,203 @@
+"""Pooled Monte Carlo engine: numba interior walks and one batched Embree query per round.
+
+A pool of ``pool`` photon slots is advanced in rounds:
+
+1. ``refill`` (serial): free slots take the next photons of the emitter's pre-sampled entry list, in photon-index
+   order (entries are drawn in fixed chunks of ``ENTRY_CHUNK`` photons, chunk ``c`` from
+   ``numpy.random.default_rng([seed, group, c])``, so photon ``i``'s entry does not depend on the pool);
+2. ``advance`` (numba, threads): every live photon scatters while its sampled free path is shorter than the
+   conservative distance-to-surface bound of the :class:`~meshshade.montecarlo_interior.SafeDistanceGrid`, at
+   most ``MAX_STEPS`` events per round;
+3. one Embree call (float32 face selection) for every photon whose free path may reach the surface;
+4. ``resolve`` (numba, threads): float64 distance on the selected face; scattering before the surface, Fresnel
+   reflection, exit or leak;
+5. ``reduce_round`` (serial, slot order) adds the round's absorbed/lost/exit weights to the per-batch tallies.
+
+Every random number of photon ``i`` comes from its own counter-based stream keyed by (seed, group, i)
+(:mod:`meshshade.montecarlo_kernels`): the result is bitwise identical for any number of numba threads, and
+photon ``i``'s path is the same for any pool size (tallies then differ only by floating-point summation order).
+
+Time budget: emission stops once ``elapsed + predicted drain >= budget``, where the drain of the photons in flight
+is predicted from the measured seconds per completed photon (x 1.5); while a budget is set the number of live
+photons starts at ``BUDGET_START_LIVE`` and doubles only while its predicted drain is below ``BUDGET_DRAIN_FRACTION``
+of the budget. Hard bound: at ``budget * (1 + HARD_OVERSHOOT)`` the photons still in flight are cut off and their
+weight is booked as ``lost`` (so the energy balance stays exact and the truncation is visible in the result).
+The overshoot is therefore at most ``HARD_OVERSHOOT * budget`` plus one round, and a round is bounded by
+``MAX_STEPS`` interior events and one boundary test per live photon.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import montecarlo_embree as E
+from . import montecarlo_kernels as K
+from .lights import BeamLight
+from .montecarlo import ROULETTE_BOOST as K_BOOST, ROULETTE_THRESHOLD as K_THRESH
+from .raycast import OFFSET_ABS, OFFSET_REL
+
+ENTRY_CHUNK = 1 << 14
+MAX_STEPS = 64
+#: below this many live photons (or rays) the serial kernels run (identical results, no thread launch)
+PARALLEL_MIN = 8192
+BUDGET_START_LIVE = 4096
+BUDGET_DRAIN_FRACTION = 0.2
+HARD_OVERSHOOT = 0.25
+DEFAULT_POOL = 1 << 18
+
+
+def first_hit_faces32(scene, o32, d32, tfar):
+    """(k,) int32 face of the first hit within ``tfar`` (-1: none) of float32 rays relative to ``scene.center``.
+
+    One batched embreex call on the scene's Embree object (no float64 round trip; ``tfar`` is overwritten); the
+    numpy backend goes through ``first_hit``. A public ``EmbreeScene.first_hit_faces_local(o32, d32, tfar)`` in
+    raycast.py would replace the private access.
+    """
+    embree = getattr(scene, "_scene", None)
+    if embree is not None:
+        return embree.run(o32, d32, dists=tfar)
+    hits = scene.first_hit(o32.astype(np.float64) + scene.center, d32.astype(np.float64))
+    return np.where(hits.t <= tfar, hits.face, -1).astype(np.int32)
+
+
+class PoolWalk:
+    """One channel group's walk on a regenerating pool of photon slots (same tallies as montecarlo._Walk)."""
+
+    def __init__(self, V, F, normals, emitter, scene, grid, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam,
+                 seed, group, direct=None):
+        self.V, self.F, self.N, self.em, self.scene, self.grid = V, F, normals, emitter, scene, grid
+        self.sigma_t = sigma_s + sigma_a
+        self.albedo = sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
+        self.g, self.eta, self.B, self.keep_beam = g, eta, n_batches, keep_beam
+        self.seed, self.group = int(seed), int(group)
+        self.face = np.zeros((n_batches, F.shape[0]))
+        self.face_vert = np.zeros((n_batches, V.shape[0]))
+        self.tot = np.zeros((n_batches, 7))  # specular, diffuse, transmitted, absorbed, lost, incident, entering
+        self.events = 0
+        self.boundary = 0
+        self.rays = 0
+        self.rounds = 0
+        self.beam_light = next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), None)
+        self.exits = {"face": [], "bary": [], "weight": [], "batch": []}
+        tri = V[F]
+        self._v0 = np.ascontiguousarray(tri[:, 0])
+        self._e1 = np.ascontiguousarray(tri[:, 1] - tri[:, 0])
+        self._e2 = np.ascontiguousarray(tri[:, 2] - tri[:, 0])
+        self._N = np.ascontiguousarray(normals, dtype=np.float64)
+        self._F = np.ascontiguousarray(F, dtype=np.int64)
+        self._facing = np.ascontiguousarray(emitter.facing)
+        self._base = np.uint64(K.stream_base(np.uint64(self.seed & 0xFFFFFFFFFFFFFFFF), self.group))
+        self._center = np.ascontiguousarray(scene.center, dtype=np.float64)
+        self._margin = E.TFAR_MARGIN_REL * scene.scale
+        self.direct = direct
+        # float32 copy of the bound (half the cache footprint), rounded down so that it stays conservative
+        safe32 = grid.safe.astype(np.float32)
+        self._safe = np.where(safe32 > grid.safe, np.nextafter(safe32, np.float32(0)), safe32)
+
+    # --- entries ----------------------------------------------------------------------------------------------
+    def _entries(self, chunk, n_photons):
+        """Pre-sampled entries of photons chunk * ENTRY_CHUNK ... (clipped at n_photons)."""
+        start = chunk * ENTRY_CHUNK
+        k = int(min(ENTRY_CHUNK, n_photons - start))
+        rng = np.random.default_rng([self.seed, self.group, chunk])
+        light, _, pos, dirs, w_in, spec, inc = self.em.emit(k, n_photons, rng)
+        return [np.ascontiguousarray(pos), np.ascontiguousarray(dirs), w_in, spec, inc, light.astype(np.int64),
+                start + np.arange(k, dtype=np.int64)]
+
+    def run(self, n_photons, *, pool=None, time_budget=None, progress=None):
+        """Walk ``n_photons`` photons (fewer if ``time_budget`` seconds run out); returns the number emitted."""
+        t0 = time.perf_counter()
+        P = int(min(pool or DEFAULT_POOL, n_photons))
+        st = _PoolState(P)
+        queue, e, chunk = None, 0, 0
+        n_chunks = -(-n_photons // ENTRY_CHUNK)
+        emitted = 0
+        stop = False
+        max_live = P if time_budget is None else min(P, BUDGET_START_LIVE)
+        live = 0
+        while True:
+            now = time.perf_counter() - t0
+            if time_budget is not None:
+                if now >= time_budget * (1.0 + HARD_OVERSHOOT):
+                    K.cut_off(st.status, st.w, st.batch, self.tot)
+                    break
+                done = emitted - live
+                per_photon = now / done if done > 0 else np.inf
+                if not stop and emitted and now + 1.5 * live * per_photon >= time_budget:
+                    stop = True
+                if not stop and 1.5 * 2 * max_live * per_photon < BUDGET_DRAIN_FRACTION * time_budget:
+                    max_live = min(P, 2 * max_live)
+            if not stop:
+                while (queue is None or queue[0].shape[0] - e < P) and chunk < n_chunks:
+                    new = self._entries(chunk, n_photons)
+                    chunk += 1
+                    queue = new if queue is None else [np.concatenate([q[e:], x]) for q, x in zip(queue, new)]
+                    e = 0
+                e_old = e
+                e, live = K.refill(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.batch,
+                                   st.light, st.pid, *queue, e, queue[0].shape[0], max_live, self._base, self.B,
+                                   self.tot)
+                emitted += e - e_old
+                if progress is not None and e > e_old:
+                    progress.update(e - e_old)
+                if e >= queue[0].shape[0] and chunk >= n_chunks:
+                    stop = True
+            if live == 0:
+                if stop:
+                    break
+                continue
+            self._round(st, live)
+            live = int(np.count_nonzero(st.status))
+        return emitted
+
+    def _round(self, st, live):
+        g = self.grid
+        common = (self._v0, self._e1, self._e2, self._N, self._center, self.scene.scale, OFFSET_REL, OFFSET_ABS)
+        if self.direct is not None:
+            walk = E.walk_parallel if live >= PARALLEL_MIN else E.walk_serial
+            ev, bd, nr = walk(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.lost,
+                              st.exit_face, st.exit_bary, st.exit_w, self._safe, g.origin, 1.0 / g.h, *common,
+                              self._margin, self.sigma_t, self.albedo, self.g, self.eta, K_THRESH, K_BOOST,
+                              MAX_STEPS, self.direct.intersect, self.direct.handle)
+        else:
+            adv = K.advance_parallel if live >= PARALLEL_MIN else K.advance_serial
+            ev = adv(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.need,
+                     self._safe, g.origin, 1.0 / g.h, self.sigma_t, self.albedo, self.g, K_THRESH, K_BOOST, MAX_STEPS)
+            idx, o32, d32, tfar = K.gather_rays(st.need, st.pos, st.d, st.pend, self._center, self._margin)
+            nr = bd = 0
+            if idx.shape[0]:
+                prim = first_hit_faces32(self.scene, o32, d32, tfar)
+                res = K.resolve_parallel if idx.shape[0] >= PARALLEL_MIN else K.resolve_serial
+                ev2, bd = res(idx, prim, st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed,
+                              st.lost, st.exit_face, st.exit_bary, st.exit_w, *common, self.eta, self.albedo, self.g,
+                              K_THRESH, K_BOOST)
+                ev += ev2
+                nr = idx.shape[0]
+        self.events += int(ev)
+        self.boundary += int(bd)
+        self.rays += int(nr)
+        beam = -1 if self.beam_light is None or not self.keep_beam else self.beam_light
+        nb = K.reduce_round(st.batch, st.light, st.absorbed, st.lost, st.exit_face, st.exit_bary, st.exit_w,
+                            self._F, self._facing, self.tot, self.face, self.face_vert, beam, st.beam_face,
+                            st.beam_bary, st.beam_w, st.beam_batch)
+        if nb:
+            for k, arr in (("face", st.beam_face), ("bary", st.beam_bary), ("weight", st.beam_w),
+                           ("batch", st.beam_batch)):
+                self.exits[k].append(arr[:nb].copy())
+        self.rounds += 1
+
+
+class _PoolState:
+    """Arrays of the photon slots."""
+
+    def __init__(self, P):
+        self.status = np.zeros(P, dtype=np.int8)
+        self.pos, self.d = np.zeros((P, 3)), np.zeros((P, 3))
+        self.w, self.w0, self.pend = np.zeros(P), np.zeros(P), np.full(P, -1.0)
+        self.key, self.ctr = np.zeros(P, dtype=np.uint64), np.zeros(P, dtype=np.uint64)
+        self.batch, self.light, self.pid = (np.zeros(P, dtype=np.int64) for _ in range(3))
+        self.absorbed, self.lost, self.need = np.zeros(P), np.zeros(P), np.zeros(P, dtype=np.bool_)
+        self.exit_face, self.exit_bary, self.exit_w = np.full(P, -1, dtype=np.int64), np.zeros((P, 3)), np.zeros(P)
+        self.beam_face, self.beam_batch = np.zeros(P, dtype=np.int64), np.zeros(P, dtype=np.int64)
+        self.beam_bary, self.beam_w = np.zeros((P, 3)), np.zeros(P)

@@ -1,0 +1,435 @@
+"""Numba kernels of the pooled Monte Carlo engine (:mod:`meshshade.montecarlo_engine`).
+
+Every photon owns a counter-based random stream (below), so its path depends only on (seed, channel group,
+photon index): never on the thread count, the scheduling or the pool size. Kernels that run over the pool in
+parallel (``prange``) write only to their own photon's slot; every sum over photons is done afterwards by a
+serial kernel in slot order, so the tallies are also bitwise independent of the thread count.
+
+Random numbers: photon ``i`` runs its own SplitMix64 generator (Steele, Lea & Flood 2014, OOPSLA; passes
+BigCrush): draw ``k`` is ``u_k = mix(key + k * golden) / 2**64`` (top 53 bits), with the photon's key
+``key = mix(base + (i + 1) * golden)`` and ``base`` derived from (seed, group) the same way. ``mix`` (the SplitMix64
+finaliser) is a bijection of 64-bit words, so distinct photons have distinct keys. Two photons' streams are
+shifted copies of one Weyl sequence; they share draws only if their keys lie within (draws per photon) x golden
+of each other, a chance of ~N**2 L / 2**64 (N photons of L draws: ~1e-6 for 1e6 photons of 1e4 draws), and then
+only as an uncorrelated-looking reuse of numbers at different points of two different paths.
+
+Physics is that of :mod:`meshshade.montecarlo` (MCML conventions); the resolution of a boundary test repeats the
+float64 ray-triangle reconstruction of :meth:`meshshade.raycast._SceneBase._hits_on_faces` (Moller & Trumbore
+1997, barycentrics clipped onto the triangle) and the ray offsets of
+:meth:`~meshshade.raycast._SceneBase.offset_epsilon`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
+_ONE = np.uint64(1)
+_INV53 = 1.0 / 9007199254740992.0
+FREE, ALIVE = np.int8(0), np.int8(1)
+_OPTS = dict(cache=True, error_model="numpy")
+
+
+@njit(inline="always", **_OPTS)
+def _mix(z):
+    """SplitMix64 finaliser (a bijection of uint64)."""
+    z = (z ^ (z >> _S30)) * _M1
+    z = (z ^ (z >> _S27)) * _M2
+    return z ^ (z >> _S31)
+
+
+@njit(inline="always", **_OPTS)
+def _uniform(key, ctr):
+    """(u in [0, 1), next counter) of the stream ``key`` at counter ``ctr`` (SplitMix64 seeded with ``key``)."""
+    ctr = ctr + _ONE
+    z = _mix(key + ctr * _GOLDEN)
+    return float(z >> _S11) * _INV53, ctr
+
+
+@njit(**_OPTS)
+def stream_base(seed, group):
+    """uint64 base of the photon keys of channel group ``group`` (seed: uint64)."""
+    return _mix(_mix(seed + _GOLDEN) + np.uint64(group + 1) * _GOLDEN)
+
+
+@njit(**_OPTS)
+def photon_key(base, index):
+    return _mix(base + np.uint64(index + 1) * _GOLDEN)
+
+
+@njit(**_OPTS)
+def uniform_stream(key, n):
+    """First ``n`` uniforms of stream ``key`` (for tests)."""
+    out = np.empty(n)
+    c = np.uint64(0)
+    for k in range(n):
+        out[k], c = _uniform(key, c)
+    return out
+
+
+@njit(inline="always", **_OPTS)
+def _safe(safe, origin, inv_h, x, y, z):
+    """Conservative distance to the surface at (x, y, z) from the SafeDistanceGrid (0 outside the grid)."""
+    a = math.floor((x - origin[0]) * inv_h)
+    b = math.floor((y - origin[1]) * inv_h)
+    c = math.floor((z - origin[2]) * inv_h)
+    if a < 0 or b < 0 or c < 0 or a >= safe.shape[0] or b >= safe.shape[1] or c >= safe.shape[2]:
+        return 0.0
+    return safe[int(a), int(b), int(c)]
+
+
+@njit(inline="always", **_OPTS)
+def _hg_scatter(dx, dy, dz, g, key, c):
+    """Henyey-Greenstein scattering of unit (dx, dy, dz): (nx, ny, nz, counter).
+
+    cos(theta) by inversion, the azimuth by Marsaglia's (1972) disc rejection, the frame by Duff et al. (2017).
+    """
+    u, c = _uniform(key, c)
+    if abs(g) < 1e-6:
+        ct = 1.0 - 2.0 * u
+    else:
+        tmp = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
+        ct = min(1.0, max(-1.0, (1.0 + g * g - tmp * tmp) / (2.0 * g)))
+    st = math.sqrt(max(0.0, 1.0 - ct * ct))
+    while True:  # uniform azimuth without trigonometry: (p, q) uniform in the unit disc, angle doubled
+        u, c = _uniform(key, c)
+        p = 2.0 * u - 1.0
+        u, c = _uniform(key, c)
+        q = 2.0 * u - 1.0
+        r2 = p * p + q * q
+        if 0.0 < r2 <= 1.0:
+            break
+    sign = 1.0 if dz >= 0.0 else -1.0
+    a = -1.0 / (sign + dz)
+    bb = dx * dy * a
+    cp, sp = st * (p * p - q * q) / r2, st * 2.0 * p * q / r2
+    nx = cp * (1.0 + sign * dx * dx * a) + sp * bb + ct * dx
+    ny = cp * (sign * bb) + sp * (sign + dy * dy * a) + ct * dy
+    nz = cp * (-sign * dx) + sp * (-dy) + ct * dz
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    return nx / norm, ny / norm, nz / norm, c
+
+
+@njit(inline="always", **_OPTS)
+def fresnel_out(cos_i, eta):
+    """Unpolarised Fresnel reflectance from index ``eta`` into 1 (scalar twin of kernels.fresnel, eta_i=eta)."""
+    if eta == 1.0:
+        return 0.0
+    cos_i = min(1.0, max(0.0, cos_i))
+    e = 1.0 / eta
+    e2 = e * e
+    d = (e - 1.0) * (e + 1.0)
+    cos2_t = (d + cos_i * cos_i) / e2
+    if cos2_t <= 0.0 or cos_i == 0.0:
+        return 1.0
+    cos_t = math.sqrt(cos2_t)
+    dp = cos_i + e * cos_t
+    dl = e * cos_i + cos_t
+    rp = -d / (dp * dp)
+    rl = d * (cos_i * cos_i * (d + 2.0) - 1.0) / (e2 * dl * dl)
+    return min(1.0, max(0.0, 0.5 * (rp * rp + rl * rl)))
+
+
+@njit(inline="always", **_OPTS)
+def scatter_event(i, s, pos, d, w, w0, pend, key, ctr, absorbed, status, albedo, g, thresh, boost):
+    """Photon i flies ``s`` mm, deposits (1 - albedo) of its weight, scatters (HG) and plays Russian roulette
+    (net weight change booked in ``absorbed``: exact balance, unbiased)."""
+    dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+    pos[i, 0] += s * dx
+    pos[i, 1] += s * dy
+    pos[i, 2] += s * dz
+    wi = w[i]
+    ab = wi * (1.0 - albedo)
+    wi *= albedo
+    k = key[i]
+    d[i, 0], d[i, 1], d[i, 2], c = _hg_scatter(dx, dy, dz, g, k, ctr[i])
+    if wi < thresh * w0[i]:
+        u, c = _uniform(k, c)
+        if u * boost < 1.0:
+            ab -= (boost - 1.0) * wi
+            wi *= boost
+        else:
+            ab += wi
+            wi = 0.0
+            status[i] = FREE
+    absorbed[i] += ab
+    w[i], ctr[i], pend[i] = wi, c, -1.0
+
+
+@njit(inline="always", **_OPTS)
+def surface_event(i, f, pos, d, w, w0, pend, key, ctr, absorbed, lost, status, exit_face, exit_bary, exit_w,
+                  v0, e1, e2, normals, center, scale, off_rel, off_abs, eta, albedo, g, thresh, boost):
+    """Outcome of photon i's boundary test whose Embree hit (within tfar = free path + margin) is face f (-1: none).
+
+    Returns (scattering events, boundary events) = (1, 0), (0, 1) or (0, 0) for a leak.
+    """
+    s = pend[i]
+    if f < 0:
+        if s < math.inf:  # no surface within the free path (tfar): an interior event
+            scatter_event(i, s, pos, d, w, w0, pend, key, ctr, absorbed, status, albedo, g, thresh, boost)
+            return 1, 0
+        lost[i] += w[i]  # an unbounded ray from inside must hit the mesh
+        w[i] = 0.0
+        status[i] = FREE
+        return 0, 0
+    dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+    nxf, nyf, nzf = normals[f, 0], normals[f, 1], normals[f, 2]
+    cos_i = dx * nxf + dy * nyf + dz * nzf
+    if not cos_i > 0.0:  # a ray from inside must hit the back of a face: numerical leak
+        lost[i] += w[i]
+        w[i] = 0.0
+        status[i] = FREE
+        return 0, 0
+    ox, oy, oz = pos[i, 0], pos[i, 1], pos[i, 2]
+    a0, a1, a2 = e1[f, 0], e1[f, 1], e1[f, 2]
+    b0, b1, b2 = e2[f, 0], e2[f, 1], e2[f, 2]
+    px, py, pz = dy * b2 - dz * b1, dz * b0 - dx * b2, dx * b1 - dy * b0
+    det = a0 * px + a1 * py + a2 * pz
+    sx, sy, sz = ox - v0[f, 0], oy - v0[f, 1], oz - v0[f, 2]
+    qx, qy, qz = sy * a2 - sz * a1, sz * a0 - sx * a2, sx * a1 - sy * a0
+    inv = 1.0 / det
+    u = (sx * px + sy * py + sz * pz) * inv
+    v = (dx * qx + dy * qy + dz * qz) * inv
+    t = (b0 * qx + b1 * qy + b2 * qz) * inv
+    if not (math.isfinite(u) and math.isfinite(v) and math.isfinite(t)):  # grazing: nearest vertex
+        u, v = 0.0, 0.0
+        t = -(sx * dx + sy * dy + sz * dz)
+    if s < max(t, 0.0):  # the free path ends before the surface
+        scatter_event(i, s, pos, d, w, w0, pend, key, ctr, absorbed, status, albedo, g, thresh, boost)
+        return 1, 0
+    u = max(u, 0.0)
+    v = max(v, 0.0)
+    if u + v > 1.0:
+        tot = u + v
+        u /= tot
+        v /= tot
+    hx = v0[f, 0] + u * a0 + v * b0
+    hy = v0[f, 1] + u * a1 + v * b1
+    hz = v0[f, 2] + u * a2 + v * b2
+    uu, c = _uniform(key[i], ctr[i])
+    ctr[i] = c
+    pend[i] = -1.0
+    if uu < fresnel_out(cos_i, eta):  # reflect, moved back inside by the scene's ray offset
+        d[i, 0], d[i, 1], d[i, 2] = dx - 2.0 * cos_i * nxf, dy - 2.0 * cos_i * nyf, dz - 2.0 * cos_i * nzf
+        rc = math.sqrt((hx - center[0]) ** 2 + (hy - center[1]) ** 2 + (hz - center[2]) ** 2)
+        eps = off_rel * (scale + rc) + off_abs * math.sqrt(hx * hx + hy * hy + hz * hz)
+        nn = math.sqrt(nxf * nxf + nyf * nyf + nzf * nzf)
+        pos[i, 0], pos[i, 1], pos[i, 2] = hx - eps * nxf / nn, hy - eps * nyf / nn, hz - eps * nzf / nn
+    else:  # leaves through face f (tallied by reduce_round)
+        exit_face[i] = f
+        exit_bary[i, 0], exit_bary[i, 1], exit_bary[i, 2] = 1.0 - u - v, u, v
+        exit_w[i] = w[i]
+        w[i] = 0.0
+        status[i] = FREE
+    return 0, 1
+
+
+@njit(inline="always", **_OPTS)
+def free_path(i, pend, key, ctr, sigma_t):
+    """Photon i's pending free path (mm), drawn s = -ln(1 - u)/sigma_t if none is pending."""
+    s = pend[i]
+    if s < 0.0:
+        u, c = _uniform(key[i], ctr[i])
+        ctr[i] = c
+        s = -math.log(1.0 - u) / sigma_t
+        pend[i] = s
+    return s
+
+
+@njit(inline="always", **_OPTS)
+def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origin, inv_h, sigma_t, albedo, g,
+                 thresh, boost, max_steps):
+    """Photon i scatters while its free path is certified by the safe-distance bound, at most ``max_steps`` times.
+
+    Returns (events, need): ``need`` is True when the pending free path (kept in ``pend``) may reach the surface.
+    The state lives in local variables inside the loop (written back once).
+    """
+    x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
+    dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+    wi, s, k, c = w[i], pend[i], key[i], ctr[i]
+    thr = thresh * w0[i]
+    ab = 0.0
+    ev = 0
+    need = False
+    alive = True
+    while True:
+        if s < 0.0:
+            u, c = _uniform(k, c)
+            s = -math.log(1.0 - u) / sigma_t
+        if s >= _safe(safe, origin, inv_h, x, y, z):
+            need = True
+            break
+        if ev >= max_steps:
+            break
+        x += s * dx
+        y += s * dy
+        z += s * dz
+        s = -1.0
+        ab += wi * (1.0 - albedo)
+        wi *= albedo
+        ev += 1
+        dx, dy, dz, c = _hg_scatter(dx, dy, dz, g, k, c)
+        if wi < thr:
+            u, c = _uniform(k, c)
+            if u * boost < 1.0:
+                ab -= (boost - 1.0) * wi
+                wi *= boost
+            else:
+                ab += wi
+                wi = 0.0
+                alive = False
+                break
+    pos[i, 0], pos[i, 1], pos[i, 2] = x, y, z
+    d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
+    w[i], pend[i], ctr[i] = wi, s, c
+    absorbed[i] += ab
+    if not alive:
+        status[i] = FREE
+    return ev, need
+
+
+def _advance(status, pos, d, w, w0, pend, key, ctr, absorbed, need, safe, origin, inv_h, sigma_t, albedo, g,
+             thresh, boost, max_steps):
+    """:func:`interior_run` for every live photon (``need`` marks the photons waiting for a boundary test).
+
+    Photons stopped by ``max_steps`` continue next round. Returns the number of scattering events.
+    """
+    n = status.shape[0]
+    events = 0
+    for i in prange(n):
+        need[i] = False
+        if status[i] == ALIVE:
+            ev, nd = interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origin, inv_h, sigma_t,
+                                  albedo, g, thresh, boost, max_steps)
+            need[i] = nd
+            events += ev
+    return events
+
+
+def _resolve(idx, prim, status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w,
+             v0, e1, e2, normals, center, scale, off_rel, off_abs, eta, albedo, g, thresh, boost):
+    """:func:`surface_event` for photons ``idx`` with Embree first-hit faces ``prim``; (events, boundary events)."""
+    m = idx.shape[0]
+    events = 0
+    boundary = 0
+    for j in prange(m):
+        ev, bd = surface_event(idx[j], prim[j], pos, d, w, w0, pend, key, ctr, absorbed, lost, status, exit_face,
+                               exit_bary, exit_w, v0, e1, e2, normals, center, scale, off_rel, off_abs, eta,
+                               albedo, g, thresh, boost)
+        events += ev
+        boundary += bd
+    return events, boundary
+
+
+advance_parallel = njit(parallel=True, nogil=True, **_OPTS)(_advance)
+advance_serial = njit(nogil=True, **_OPTS)(_advance)
+resolve_parallel = njit(parallel=True, nogil=True, **_OPTS)(_resolve)
+resolve_serial = njit(nogil=True, **_OPTS)(_resolve)
+
+
+@njit(nogil=True, **_OPTS)
+def gather_rays(need, pos, d, pend, center, margin):
+    """Slots needing a boundary test (ascending), their float32 rays relative to the scene centre and their
+    float32 tfar = free path + ``margin`` (the margin covers Embree's float32 error, so a hit within the free path
+    is never missed)."""
+    idx = np.flatnonzero(need)
+    o32 = np.empty((idx.size, 3), dtype=np.float32)
+    d32 = np.empty((idx.size, 3), dtype=np.float32)
+    tfar = np.empty(idx.size, dtype=np.float32)
+    for j in range(idx.size):
+        i = idx[j]
+        for a in range(3):
+            o32[j, a] = pos[i, a] - center[a]
+            d32[j, a] = d[i, a]
+        tfar[j] = min(pend[i] + margin, 1e37)
+    return idx, o32, d32, tfar
+
+
+@njit(nogil=True, **_OPTS)
+def reduce_round(batch, light, absorbed, lost, exit_face, exit_bary, exit_w, F, facing, tot, face, face_vert,
+                 beam_light, beam_face, beam_bary, beam_w, beam_batch):
+    """Serial, slot-ordered sums of one round into the per-batch tallies (bitwise independent of threads).
+
+    tot[:, 1] diffuse (exit on a face facing the photon's light), 2 transmitted, 3 absorbed, 4 lost. Exits of
+    photons of light ``beam_light`` (-1: none) are copied to ``beam_*``; returns how many.
+    """
+    nb = 0
+    for i in range(batch.shape[0]):
+        b = batch[i]
+        if absorbed[i] != 0.0:
+            tot[b, 3] += absorbed[i]
+            absorbed[i] = 0.0
+        if lost[i] != 0.0:
+            tot[b, 4] += lost[i]
+            lost[i] = 0.0
+        f = exit_face[i]
+        if f < 0:
+            continue
+        exit_face[i] = -1
+        we = exit_w[i]
+        face[b, f] += we
+        for a in range(3):
+            face_vert[b, F[f, a]] += we * exit_bary[i, a]
+        tot[b, 1 if facing[light[i], f] else 2] += we
+        if light[i] == beam_light:
+            beam_face[nb], beam_w[nb], beam_batch[nb] = f, we, b
+            for a in range(3):
+                beam_bary[nb, a] = exit_bary[i, a]
+            nb += 1
+    return nb
+
+
+@njit(nogil=True, **_OPTS)
+def refill(status, pos, d, w, w0, pend, key, ctr, batch, light, pid, e_pos, e_dir, e_w, e_spec, e_inc, e_light,
+           e_pid, start, limit, max_live, base, n_batches, tot):
+    """Fill free slots (in slot order) from entries ``start`` .. ``limit - 1`` of the pre-sampled entry list.
+
+    Each consumed entry books its incident, specular and entering power (tot[:, 5], 0, 6); entries with no
+    entering weight (shadowed) take no slot. At most ``max_live`` photons are live afterwards.
+    Returns (next entry, live photons).
+    """
+    e = start
+    live = 0
+    for i in range(status.shape[0]):
+        if status[i] == ALIVE:
+            live += 1
+    for i in range(status.shape[0]):
+        if status[i] == ALIVE:
+            continue
+        while e < limit and live < max_live:
+            b = e_pid[e] % n_batches
+            tot[b, 0] += e_spec[e]
+            tot[b, 5] += e_inc[e]
+            tot[b, 6] += e_w[e]
+            if e_w[e] > 0.0:
+                status[i] = ALIVE
+                for a in range(3):
+                    pos[i, a] = e_pos[e, a]
+                    d[i, a] = e_dir[e, a]
+                w[i] = w0[i] = e_w[e]
+                pend[i] = -1.0
+                key[i] = photon_key(base, e_pid[e])
+                ctr[i] = np.uint64(0)
+                batch[i], light[i], pid[i] = b, e_light[e], e_pid[e]
+                live += 1
+                e += 1
+                break
+            e += 1
+        if e >= limit or live >= max_live:
+            break
+    return e, live
+
+
+@njit(nogil=True, **_OPTS)
+def cut_off(status, w, batch, tot):
+    """Hard time limit: the weight still in flight is booked as lost (tot[:, 4]); all slots freed."""
+    for i in range(status.shape[0]):
+        if status[i] == ALIVE:
+            tot[batch[i], 4] += w[i]
+            w[i] = 0.0
+            status[i] = FREE
