@@ -1,29 +1,37 @@
-"""Pooled Monte Carlo engine: numba interior walks and one batched Embree query per round.
+"""Pooled Monte Carlo engine: numba walks on a regenerating photon pool, boundary hits from Embree.
 
 A pool of ``pool`` photon slots is advanced in rounds:
 
 1. ``refill`` (serial): free slots take the next photons of the emitter's pre-sampled entry list, in photon-index
    order (entries are drawn in fixed chunks of ``ENTRY_CHUNK`` photons, chunk ``c`` from
    ``numpy.random.default_rng([seed, group, c])``, so photon ``i``'s entry does not depend on the pool);
-2. ``advance`` (numba, threads): every live photon scatters while its sampled free path is shorter than the
-   conservative distance-to-surface bound of the :class:`~meshshade.montecarlo_interior.SafeDistanceGrid`, at
-   most ``MAX_STEPS`` events per round;
-3. one Embree call (float32 face selection) for every photon whose free path may reach the surface;
-4. ``resolve`` (numba, threads): float64 distance on the selected face; scattering before the surface, Fresnel
-   reflection, exit or leak;
-5. ``reduce_round`` (serial, slot order) adds the round's absorbed/lost/exit weights to the per-batch tallies.
+2. the walk (numba, threads over photons): a photon scatters without any ray while its sampled free path is
+   shorter than the conservative distance-to-surface bound of the
+   :class:`~meshshade.montecarlo_interior.SafeDistanceGrid`; otherwise Embree selects the first face hit within
+   the free path (float32), the distance is recomputed in float64 on that face, and the photon scatters before
+   the surface, is Fresnel-reflected or leaves (:func:`~meshshade.montecarlo_kernels.surface_event`). At most
+   ``MAX_STEPS`` events per photon and round.
+
+   * ``direct`` (default): every thread calls Embree's ``rtcIntersect1`` itself
+     (:mod:`meshshade.montecarlo_embree`), so the boundary tests run on all cores;
+   * ``batched``: the interior kernel stops every photon at its first uncertified free path, ONE embreex call
+     traces all of them (embreex holds the GIL: one core), a second kernel resolves them.
+3. ``reduce_round`` (serial, slot order) adds the round's absorbed/lost/exit weights to the per-batch tallies.
 
 Every random number of photon ``i`` comes from its own counter-based stream keyed by (seed, group, i)
 (:mod:`meshshade.montecarlo_kernels`): the result is bitwise identical for any number of numba threads, and
-photon ``i``'s path is the same for any pool size (tallies then differ only by floating-point summation order).
+photon ``i``'s path is the same for any pool size and either Embree mode (the tallies then differ only by the
+floating-point summation order).
 
 Time budget: emission stops once ``elapsed + predicted drain >= budget``, where the drain of the photons in flight
-is predicted from the measured seconds per completed photon (x 1.5); while a budget is set the number of live
-photons starts at ``BUDGET_START_LIVE`` and doubles only while its predicted drain is below ``BUDGET_DRAIN_FRACTION``
-of the budget. Hard bound: at ``budget * (1 + HARD_OVERSHOOT)`` the photons still in flight are cut off and their
-weight is booked as ``lost`` (so the energy balance stays exact and the truncation is visible in the result).
-The overshoot is therefore at most ``HARD_OVERSHOOT * budget`` plus one round, and a round is bounded by
-``MAX_STEPS`` interior events and one boundary test per live photon.
+is predicted from the measured seconds per completed photon (x ``DRAIN_SAFETY``); with a budget the number of
+live photons starts at ``BUDGET_START_LIVE`` and doubles only while its predicted drain stays below
+``BUDGET_DRAIN_FRACTION`` of the budget and the last round took less than half of ``ROUND_FRACTION`` of it (a
+round costs at most ``MAX_STEPS`` events per live photon, so rounds stay near ``ROUND_FRACTION * budget``).
+Hard bound: at ``budget * (1 + HARD_OVERSHOOT)`` the photons still in flight are cut off and their weight is
+booked as ``lost`` (the energy balance stays exact and the truncation is visible in the result). The overshoot is
+therefore at most ``HARD_OVERSHOOT * budget`` plus one round (~``ROUND_FRACTION * budget``) plus the result
+assembly; normally the drain prediction ends the walk before the budget and nothing is lost.
 """
 from __future__ import annotations
 
@@ -43,6 +51,8 @@ MAX_STEPS = 64
 PARALLEL_MIN = 8192
 BUDGET_START_LIVE = 4096
 BUDGET_DRAIN_FRACTION = 0.2
+DRAIN_SAFETY = 1.5
+ROUND_FRACTION = 0.05
 HARD_OVERSHOOT = 0.25
 DEFAULT_POOL = 1 << 18
 
@@ -116,6 +126,7 @@ class PoolWalk:
         stop = False
         max_live = P if time_budget is None else min(P, BUDGET_START_LIVE)
         live = 0
+        last_round = 0.0
         while True:
             now = time.perf_counter() - t0
             if time_budget is not None:
@@ -124,9 +135,10 @@ class PoolWalk:
                     break
                 done = emitted - live
                 per_photon = now / done if done > 0 else np.inf
-                if not stop and emitted and now + 1.5 * live * per_photon >= time_budget:
+                if not stop and emitted and now + DRAIN_SAFETY * live * per_photon >= time_budget:
                     stop = True
-                if not stop and 1.5 * 2 * max_live * per_photon < BUDGET_DRAIN_FRACTION * time_budget:
+                if (not stop and last_round < 0.5 * ROUND_FRACTION * time_budget
+                        and DRAIN_SAFETY * 2 * max_live * per_photon < BUDGET_DRAIN_FRACTION * time_budget):
                     max_live = min(P, 2 * max_live)
             if not stop:
                 while (queue is None or queue[0].shape[0] - e < P) and chunk < n_chunks:
@@ -147,7 +159,9 @@ class PoolWalk:
                 if stop:
                     break
                 continue
+            t_round = time.perf_counter()
             self._round(st, live)
+            last_round = time.perf_counter() - t_round
             live = int(np.count_nonzero(st.status))
         return emitted
 
