@@ -11,7 +11,9 @@ the issue's ``|k| C(rho_cut)``). Then
 * ``dipole`` — the surface is flat on the scale of transport: ``kmax W <= curvature_tol`` (default 1e-2, so the
   curvature terms would change no pair by more than 1 %); the planar dipole of the geodesic distance
   (the curved kernel at k = 0, exactly) is used;
-* ``exact-sphere`` — convex and umbilic (``k1 - k2 <= umbilic_tol k1``) *and* too curved for first order
+* ``exact-sphere`` — convex and umbilic (``k1 - k2 <= umbilic_tol k1``) with every principal curvature
+  within the cutoff inside ``umbilic_tol`` of the mean curvature (the neighbourhood *is* that sphere; a sphere
+  fitted to one umbilic point of a bumpy surface would fill its whole neighbourhood with light), *and* too curved for first order
   (``kmax (W + 1/sigma_t') > validity_tol``, the kernel's own validity measure, kernels/curvature.py): the exact
   sphere series with the local radius 2/(k1 + k2);
 * ``curved`` — everything else: the first-order k1/k2 kernel.
@@ -50,10 +52,13 @@ VALIDITY_TOL = 0.25
 
 @dataclass(frozen=True)
 class AutoPlan:
-    """Per entry sample: ``kernel`` (k,) int8 in {DIPOLE, CURVED, EXACT_SPHERE}; ``exact_geodesic`` (k,) bool."""
+    """Per entry sample: ``kernel`` (k,) int8 in {DIPOLE, CURVED, EXACT_SPHERE}; ``exact_geodesic`` (k,) bool
+    (exact geodesics in the near zone); ``far_dipole`` (k,) bool (the surface is flat on the scale of the
+    cutoff around the sample, so its far field may be summed by clusters with the planar dipole of the chord)."""
 
     kernel: np.ndarray
     exact_geodesic: np.ndarray
+    far_dipole: np.ndarray
     tolerances: dict
 
     def counts(self) -> dict:
@@ -118,14 +123,17 @@ def dilated_max(values, indptr, indices, rings: int) -> np.ndarray:
     return out
 
 
-def plan_sources(k1, k2, k_neighbourhood, material: Material, radius_mm, *, curvature_tol: float = CURVATURE_TOL,
-                 geodesic_tol: float = GEODESIC_TOL, umbilic_tol: float = UMBILIC_TOL,
-                 validity_tol: float = VALIDITY_TOL) -> AutoPlan:
-    """Decide kernel and geodesic method per entry sample (module docstring).
+def plan_sources(k1, k2, k_near, k_far, material: Material, near_mm, cutoff_mm, *, kmin_far=None,
+                 curvature_tol: float = CURVATURE_TOL, geodesic_tol: float = GEODESIC_TOL,
+                 umbilic_tol: float = UMBILIC_TOL, validity_tol: float = VALIDITY_TOL) -> AutoPlan:
+    """Decide kernel, near-zone geodesic method and far-field treatment per entry sample (module docstring).
 
-    k1, k2 : (k,) 1/mm, the sample's principal curvatures (k1 >= k2); k_neighbourhood : (k,) 1/mm, the largest
-    |principal curvature| within about ``radius_mm`` of the sample; radius_mm : scalar or (3,) neighbourhood
-    radius per channel (mm).
+    k1, k2 : (k,) 1/mm, the sample's principal curvatures (k1 >= k2); k_near, k_far : (k,) 1/mm, the largest
+    |principal curvature| within about the near radius and the cutoff of the sample; near_mm : (k,) mm, the
+    radius of the sample's near zone (its cutoff where there is no far field); cutoff_mm : scalar or (3,) mm,
+    the neighbourhood radius per channel; kmin_far : (k,) 1/mm or None, the smallest principal curvature
+    within the cutoff (the exact sphere is chosen only where the whole neighbourhood is that sphere: all
+    principal curvatures within ``umbilic_tol`` of the sample's; None: k2).
     """
     for name, v in (("curvature_tol", curvature_tol), ("geodesic_tol", geodesic_tol),
                     ("umbilic_tol", umbilic_tol), ("validity_tol", validity_tol)):
@@ -134,30 +142,39 @@ def plan_sources(k1, k2, k_neighbourhood, material: Material, radius_mm, *, curv
     k1 = np.asarray(k1, dtype=np.float64)
     k2 = np.asarray(k2, dtype=np.float64)
     kmax = np.maximum(np.abs(k1), np.abs(k2))
-    radius = np.broadcast_to(np.asarray(radius_mm, dtype=np.float64), (3,))
-    W = curvature_bound_mm(material, radius)
+    W = curvature_bound_mm(material, cutoff_mm)
     inv_st = 1.0 / np.asarray(material.sigma_t_prime, dtype=np.float64)
     flat = kmax * W.max() <= curvature_tol
     out_of_range = kmax * (W + inv_st).max() > validity_tol
-    umbilic = (k2 > 0) & (k1 - k2 <= umbilic_tol * k1)
+    kmin_far = k2 if kmin_far is None else np.asarray(kmin_far, dtype=np.float64)
+    H = 0.5 * (k1 + k2)
+    umbilic = ((k2 > 0) & (k1 - k2 <= umbilic_tol * k1) & (np.asarray(k_far) <= (1 + umbilic_tol) * H)
+               & (kmin_far >= (1 - umbilic_tol) * H))
     kernel = np.full(k1.shape, CURVED, dtype=np.int8)
     kernel[flat] = DIPOLE
     kernel[~flat & out_of_range & umbilic] = EXACT_SPHERE
-    exact_geo = np.asarray(k_neighbourhood, dtype=np.float64) * radius.max() > geodesic_tol
+    near = np.broadcast_to(np.asarray(near_mm, dtype=np.float64), k1.shape)
+    exact_geo = np.asarray(k_near, dtype=np.float64) * near > geodesic_tol
+    far_dipole = np.asarray(k_far, dtype=np.float64) * W.max() <= curvature_tol
     tol = {"curvature_tol": curvature_tol, "geodesic_tol": geodesic_tol, "umbilic_tol": umbilic_tol,
            "validity_tol": validity_tol}
-    return AutoPlan(kernel, exact_geo, tol)
+    return AutoPlan(kernel, exact_geo, far_dipole, tol)
 
 
-def neighbourhood_curvature(samples, vertex_kmax, faces, indptr, indices, radius_mm: float,
+def neighbourhood_curvature(samples, vertex_kmax, faces, indptr, indices, radius_mm,
                             mean_edge_mm: float, max_rings: int = 256) -> np.ndarray:
     """(k,) 1/mm: for each entry sample, the largest |principal curvature| of the vertices within about
-    ``radius_mm`` (graph rings of the mean edge length; a face sample takes the max over its corners)."""
-    rings = int(min(max_rings, np.ceil(radius_mm / max(mean_edge_mm, 1e-300)) + 1))
-    dil = dilated_max(vertex_kmax, indptr, indices, rings)
+    ``radius_mm`` (scalar or (k,): graph rings of the mean edge length; a face sample takes the max over its
+    corners)."""
+    radius = np.broadcast_to(np.asarray(radius_mm, dtype=np.float64), (len(samples),))
     at_v = samples.vertex >= 0
     out = np.empty(len(samples))
-    out[at_v] = dil[samples.vertex[at_v]]
-    if np.any(~at_v):
-        out[~at_v] = dil[np.asarray(faces)[samples.face[~at_v]]].max(axis=1)
+    for r in np.unique(radius):
+        rings = int(min(max_rings, np.ceil(r / max(mean_edge_mm, 1e-300)) + 1))
+        dil = dilated_max(vertex_kmax, indptr, indices, rings)
+        sel = radius == r
+        out[sel & at_v] = dil[samples.vertex[sel & at_v]]
+        tri = sel & ~at_v
+        if np.any(tri):
+            out[tri] = dil[np.asarray(faces)[samples.face[tri]]].max(axis=1)
     return out

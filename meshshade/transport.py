@@ -251,20 +251,25 @@ def patch_average_factor(s_mm, a_mm, *, albedo_prime, eta, sigma_t_prime):
     return np.where((a > 0) & np.isfinite(f) & (f > 0), f, 1.0)
 
 
-def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, source_radius=None
-           ) -> tuple[np.ndarray, dict]:
+def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, source_radius=None,
+           chord_cutoff_mm=None) -> tuple[np.ndarray, dict]:
     """Accumulate M[v, c] = sum_i power_i R_c(pair) over the pair chunks yielded by ``pairs_iter``.
 
     ``pairs_iter`` yields ``(src, vertex, s, chord, phi)`` arrays (src indexes ``power`` and the kernel's
-    frames). Channel c uses only pairs with s <= cutoff_mm[c] (beyond, its reflectance is negligible).
+    frames). Channel c uses only pairs with s <= cutoff_mm[c] (beyond, its reflectance is negligible);
+    ``cutoff_mm`` is (3,), or (k, 3) per source and channel. ``chord_cutoff_mm`` (k, 3) or None: pairs must
+    also have chord <= it (the near zone of sources whose far field is summed by clusters).
     ``source_radius`` (k,) mm: patch radius of each source (0 for a pencil beam), see
     :func:`patch_average_factor`.
     """
     M = np.zeros((n_vertices, 3))
+    cutoff_mm = np.asarray(cutoff_mm, dtype=np.float64)
     n_pairs = np.zeros(3, dtype=np.int64)
     for src, vtx, s, chord, phi in pairs_iter:
         for c, same in kernel.channels:
-            keep = s <= cutoff_mm[c]
+            keep = s <= (cutoff_mm[c] if cutoff_mm.ndim == 1 else cutoff_mm[src, c])
+            if chord_cutoff_mm is not None:
+                keep &= chord <= chord_cutoff_mm[src, c]
             if not np.any(keep):
                 continue
             R = kernel.evaluate(c, src[keep], s[keep], chord[keep], phi[keep])
@@ -293,7 +298,8 @@ def describe_scale(mesh, material: Material) -> str:
 
 def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol: float = 1e-4,
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool = False,
-         rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None) -> BakeResult:
+         rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
+         far_field: str | None = None, far_tol: float = 1e-2, far_rel_tol: float = 1e-2) -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
 
     Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
@@ -304,6 +310,15 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     1-11 % low on average on bumpy scanned meshes; see geometry/fast_neighbourhood.py). With ``model="auto"``
     the geodesic method is chosen per entry sample (``geodesic`` is ignored) and ``auto_options`` may override
     the tolerances of :func:`meshshade.auto.plan_sources`.
+
+    ``far_field``: "off", "clustered" or "direct" (default: "clustered" for ``auto``, "off" otherwise). When on,
+    the pairs of *vertex* entry samples (directional and point lights; beams have few samples and keep the full
+    geodesic neighbourhood) are split at the chord radius ``r_near`` per channel beyond which the dipole's tail
+    holds ``far_tol`` of its energy (farfield.far_field_radius): closer pairs are gathered over geodesic
+    neighbourhoods with the model's kernel, farther ones are summed with the planar dipole of the chord distance
+    by a source tree with relative error <= ``far_rel_tol`` on that part (farfield.py; "direct" sums them
+    exactly, for validation). Pairs whose chord is within r_near but whose geodesic distance is not (across a
+    fold) are dropped, as the geodesic neighbourhood drops them without the far field.
     """
     from .geometry.curvature import principal_curvatures  # noqa: PLC0415
     from .lights import BeamLight, entry_samples  # noqa: PLC0415
@@ -335,23 +350,48 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     frames = source_frames(samples, curv, F)
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
     k = len(samples)
+    far_field = far_field or ("clustered" if model == "auto" else "off")
+    if far_field not in ("off", "clustered", "direct"):
+        raise MeshshadeError(f"unknown far-field method {far_field!r}; choose off, clustered or direct")
+    area = samples.vertex >= 0  # vertex samples of directional and point lights
+    near = cut.copy()
+    if far_field != "off" and np.any(area):
+        from .farfield import far_field_radius  # noqa: PLC0415
+        # the far field is a point-to-point sum: keep every pair that needs the source-patch average near
+        a_max = float(np.sqrt(mesh.vertex_areas[samples.vertex[area]].max() / np.pi))
+        near = np.minimum(np.maximum(far_field_radius(material, far_tol), PATCH_AVERAGE_RADII * a_max), cut)
+    if not np.any(near < cut):
+        far_field = "off"
     plan = None
     if model == "auto":
         from .auto import neighbourhood_curvature, plan_sources, vertex_adjacency  # noqa: PLC0415
 
         indptr, indices = vertex_adjacency(mesh.n_vertices, F)
-        kn = neighbourhood_curvature(samples, np.maximum(np.abs(curv.k1), np.abs(curv.k2)), F, indptr, indices,
-                                     float(cut.max()), mesh.mean_edge_length)
-        plan = plan_sources(frames.k1, frames.k2, kn, material, cut, **(auto_options or {}))
-        groups = [("exact", np.flatnonzero(plan.exact_geodesic)), ("arc", np.flatnonzero(~plan.exact_geodesic))]
+        kmax = np.maximum(np.abs(curv.k1), np.abs(curv.k2))
+        near_radius = (np.where(area, NEAR_MARGIN * near.max(), cut.max()) if far_field != "off"
+                       else np.full(k, cut.max()))
+        k_near = neighbourhood_curvature(samples, kmax, F, indptr, indices, near_radius, mesh.mean_edge_length)
+        k_far = neighbourhood_curvature(samples, kmax, F, indptr, indices, cut.max(), mesh.mean_edge_length)
+        kmin_far = -neighbourhood_curvature(samples, -curv.k2, F, indptr, indices, cut.max(), mesh.mean_edge_length)
+        plan = plan_sources(frames.k1, frames.k2, k_near, k_far, material, near_radius, cut, kmin_far=kmin_far,
+                            **(auto_options or {}))
         lap("auto")
-    else:
-        groups = [(geodesic, np.arange(k))]
-    groups = [(g, idx) for g, idx in groups if idx.size]
+    zone = _zones(k, area, far_field, geodesic, plan)
+    clustered = zone >= ZONE_EXACT_NEAR  # sources whose pairs beyond r_near go to the far-field sum
+    groups = [(z, np.flatnonzero(zone == z)) for z in range(len(ZONES))]
+    groups = [(z, idx) for z, idx in groups if idx.size]
+    # per source and channel: the radius of the geodesic gather; clustered sources keep the near pairs by
+    # *chord* <= r_near (the far-field sum takes chord > r_near, so nothing is counted twice or lost), found
+    # within a geodesic radius NEAR_MARGIN r_near (pairs beyond it are across a fold or gap: dropped, as the
+    # geodesic neighbourhood drops them without a far field)
+    src_cut = np.where(clustered[:, None], NEAR_MARGIN * near[None, :], cut[None, :])
+    chord_cut = np.where(clustered[:, None], near[None, :], np.inf)
     kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan)
-    solvers = {g: _neighbourhood_solver(g, mesh) for g, _ in groups}
+    methods = {m for z, _ in groups for m in ZONES[z][1:] if m}
+    solvers = {m: _neighbourhood_solver(m, mesh) for m in methods}
     lap("neighbourhoods")
-    stats = {"entry_samples": k, "cutoff_mm": cut.tolist(), **samples.stats}
+    stats = {"entry_samples": k, "cutoff_mm": cut.tolist(), **samples.stats,
+             **{f"zone_{ZONES[z][0]}": int(idx.size) for z, idx in groups}}
     if plan is not None:
         stats.update(plan.counts())
         log.info(plan.describe())
@@ -360,7 +400,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     if k:
         # chunk sizes from the expected neighbours per source (area of the cutoff disc over area per vertex)
         per_vertex_area = mesh.total_area / max(mesh.n_vertices, 1)
-        expected = max(1.0, np.pi * cut.max() ** 2 / per_vertex_area)
+        expected = max(1.0, np.pi * float(np.mean(src_cut.max(axis=1) ** 2)) / per_vertex_area)
         chunk = int(max(1, min(k, PAIRS_PER_CHUNK // expected)))
         bar = None
         if progress and k > chunk:
@@ -369,19 +409,28 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
             bar = tqdm(total=k, desc="gather", unit="src", leave=False, disable=None)
         n_pairs = 0
 
+        def query(method, sel, radius):
+            nb = solvers[method].query(samples.positions[sel], samples.face[sel], samples.bary[sel],
+                                       samples.vertex[sel], frames.normals[sel], radius, d1=frames.d1[sel],
+                                       d2=frames.d2[sel], k1=frames.k1[sel], k2=frames.k2[sel])
+            return sel[nb.source_index()], nb.vertex.astype(np.int64), nb.distance, nb.chord, nb.phi
+
         def pairs():
             nonlocal n_pairs
-            for g, idx in groups:
-                solver = solvers[g]
+            for z, idx in groups:
+                _, inner, outer = ZONES[z]
                 for a in range(0, idx.size, chunk):
                     sel = idx[a:a + chunk]
-                    nb = solver.query(samples.positions[sel], samples.face[sel], samples.bary[sel],
-                                      samples.vertex[sel], frames.normals[sel], cut.max(), d1=frames.d1[sel],
-                                      d2=frames.d2[sel], k1=frames.k1[sel], k2=frames.k2[sel])
-                    src = sel[nb.source_index()]
-                    n_pairs += src.size
+                    if outer is None:  # one method over the source's whole gather radius
+                        p = query(inner, sel, src_cut[sel].max(axis=1))
+                    else:  # exact geodesics in the near zone, arc geodesics for the rest of the neighbourhood
+                        pi, po = query(inner, sel, NEAR_MARGIN * near.max()), query(outer, sel, cut.max())
+                        n = np.int64(mesh.n_vertices)
+                        fresh = ~np.isin(po[0] * n + po[1], pi[0] * n + pi[1])
+                        p = tuple(np.concatenate([x, y[fresh]]) for x, y in zip(pi, po))
+                    n_pairs += p[0].size
                     lap("neighbourhoods")
-                    yield src, nb.vertex.astype(np.int64), nb.distance, nb.chord, nb.phi
+                    yield p
                     lap("gather")
                     if bar is not None:
                         bar.update(sel.size)
@@ -390,17 +439,28 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         radius = np.where(samples.vertex >= 0, np.sqrt(mesh.vertex_areas[np.maximum(samples.vertex, 0)] / np.pi),
                           0.0)
         try:
-            M, gstats = gather(kernel, mesh.n_vertices, samples.power, cut, pairs(), source_radius=radius)
+            M, gstats = gather(kernel, mesh.n_vertices, samples.power, src_cut, pairs(), source_radius=radius,
+                               chord_cutoff_mm=chord_cut)
         finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
             if bar is not None:
                 bar.close()
         stats.update(gstats, pairs_found=n_pairs)
+        if np.any(clustered):
+            from .farfield import far_field_exitance, far_field_exitance_direct  # noqa: PLC0415
+            fn = far_field_exitance if far_field == "clustered" else far_field_exitance_direct
+            M_far, fstats = fn((samples.positions[clustered], samples.power[clustered]), V, material, near, cut,
+                               rel_tol=far_rel_tol)
+            M += M_far
+            stats.update(far_field=far_field, near_mm=near.tolist(), far_field_rel_tol=far_rel_tol,
+                         far_pairs_exact=fstats["pairs_exact"],
+                         far_clusters_accepted=fstats.get("clusters_accepted", 0))
+            lap("far field")
         first_beam = next((i for i, L in enumerate(lights) if isinstance(L, BeamLight)), None)
         if first_beam is not None:
             j = int(np.flatnonzero(samples.light_index == first_beam)[0])
-            g = next(g for g, idx in groups if np.any(idx == j))
-            nb = solvers[g].query(samples.positions[j:j + 1], samples.face[j:j + 1], samples.bary[j:j + 1],
-                                  samples.vertex[j:j + 1], samples.normals[j:j + 1], cut.max())
+            method = ZONES[zone[j]][1]
+            nb = solvers[method].query(samples.positions[j:j + 1], samples.face[j:j + 1], samples.bary[j:j + 1],
+                                       samples.vertex[j:j + 1], samples.normals[j:j + 1], src_cut[j].max())
             beam_distance = np.full(mesh.n_vertices, np.inf)
             beam_distance[nb.vertex] = nb.distance
             lap("neighbourhoods")
@@ -409,6 +469,35 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     stats["entering_power"] = float(samples.power.sum())
     return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, beam_distance, cut, model, material,
                       timings, stats, plan)
+
+
+#: how a source's pairs are found: (name, method within the gather radius, method beyond r_near or None).
+#: Zones from ZONE_EXACT_NEAR on gather only to r_near; their farther pairs go to the clustered far field.
+ZONES = (("exact", "exact", None), ("arc", "arc", None), ("exact_near_arc_far", "exact", "arc"),
+         ("exact_near", "exact", None), ("arc_near", "arc", None))
+ZONE_EXACT_NEAR = 3
+#: geodesic search radius of the near zone, in units of r_near (pairs are kept by chord <= r_near)
+NEAR_MARGIN = 1.1
+
+
+def _zones(k: int, area, far_field: str, geodesic: str, plan) -> np.ndarray:
+    """(k,) zone index per entry sample (see ZONES).
+
+    Without a plan: every source uses ``geodesic``; with a far field, vertex samples gather only to r_near.
+    With the auto plan: exact or arc per sample; vertex samples whose surroundings are flat to the cutoff
+    (``plan.far_dipole``) gather to r_near and leave the rest to the clustered dipole; the other vertex samples
+    keep their curved kernel over the whole neighbourhood, with exact geodesics only in the near zone.
+    """
+    far = area & (far_field != "off")
+    if plan is None:
+        zone = np.full(k, 0 if geodesic == "exact" else 1, dtype=np.int64)
+        zone[far] += ZONE_EXACT_NEAR
+        return zone
+    ex = plan.exact_geodesic
+    zone = np.where(ex, 0, 1).astype(np.int64)
+    zone[far & ex & ~plan.far_dipole] = 2
+    zone[far & plan.far_dipole] = np.where(ex[far & plan.far_dipole], 3, 4)
+    return zone
 
 
 def _neighbourhood_solver(method: str, mesh):
@@ -424,8 +513,10 @@ def describe_result(result: BakeResult) -> str:
     s = result.stats
     t = ", ".join(f"{k} {v:.3g} s" for k, v in result.timings.items())
     ex = s["exitant_power"]
+    far = (f" (area lights: geodesic near field within {max(s['near_mm']):.3g} mm, {s['far_field']} far field "
+           f"beyond)" if "near_mm" in s else "")
     return (f"{result.model}: {s['entry_samples']} entry samples, {s.get('pairs_found', 0)} pairs within "
-            f"{max(s['cutoff_mm']):.3g} mm; entering {s['entering_power']:.4g} W, exitant "
+            f"{max(s['cutoff_mm']):.3g} mm{far}; entering {s['entering_power']:.4g} W, exitant "
             f"{ex[0]:.4g}/{ex[1]:.4g}/{ex[2]:.4g} W (r/g/b); {t}")
 
 
