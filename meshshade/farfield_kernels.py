@@ -86,20 +86,23 @@ def third_derivative_bound_opt(r_lo, al, mu, zv):
 
 
 @njit(cache=True, inline="always")
-def cluster_accepted(m3_6, r_lo, r_hi, mu, zv, tau):
-    """m3/6 T(r_lo) <= tau R(r_hi), evaluated as a ratio scaled by exp(mu d_r(r_hi)) (no under/overflow; an
-    overflow to inf rejects the cluster)."""
+def cluster_bound(m3_6, r_lo, r_hi, al, mu, zv, tau):
+    """The cluster's error bound m3/6 T(r_lo) (optical units, per unit power) if it is at most tau R(r_hi),
+    else -1 (open the cluster). The test is a ratio scaled by exp(mu d_r(r_hi)), so nothing under- or overflows
+    to a wrong decision (an overflow to inf rejects)."""
     lr = np.sqrt(r_lo * r_lo + 1.0)
     hr = np.sqrt(r_hi * r_hi + 1.0)
     hv = np.sqrt(r_hi * r_hi + zv * zv)
     t_r = _tau_poly(lr, mu)
     g_r, g_v = _g_poly(hr, mu), zv * _g_poly(hv, mu)
     if m3_6 * t_r > tau * (g_r + g_v):  # exp-free lower bound of the ratio (exp(mu(hr - lr)) >= 1): reject
-        return False
+        return -1.0
     lv = np.sqrt(r_lo * r_lo + zv * zv)
     num = t_r * np.exp(mu * (hr - lr)) + zv * _tau_poly(lv, mu) * np.exp(mu * (hr - lv))
     den = g_r + g_v * np.exp(-mu * (hv - hr))
-    return m3_6 * num <= tau * den
+    if not m3_6 * num <= tau * den:
+        return -1.0
+    return al / FOUR_PI * m3_6 * num * np.exp(-mu * hr)  # = m3/6 T(r_lo)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -261,7 +264,8 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
                     s = st[c]
                     m3_6 = M3[node, c] * s * s * s / 6.0
                     r_lo, r_hi = (d - a) * s, (d + a) * s
-                    if cluster_accepted(m3_6, r_lo, r_hi, mu[c], zv[c], tau):
+                    bound = cluster_bound(m3_6, r_lo, r_hi, al[c], mu[c], zv[c], tau)
+                    if bound >= 0.0:
                         G, G1, G2 = dipole_taylor_opt(d * s, al[c], mu[c], zv[c])
                         q = Q[node, c]
                         vqv = (q[0] * dx * dx + q[1] * dy * dy + q[2] * dz * dz
@@ -269,7 +273,7 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
                         # optical units: Q s^2 and v s, so vQv s^4 and tr Q s^2; the sum is rescaled by s^2
                         quad = 0.5 * (G2 * vqv * s**4 + G1 * (q[0] + q[1] + q[2]) * s * s)
                         m_acc[c] += (P[node, c] * G + quad) * s * s
-                        e_acc[c] += P[node, c] * m3_6 * third_derivative_bound_opt(r_lo, al[c], mu[c], zv[c]) * s * s
+                        e_acc[c] += P[node, c] * bound * s * s
                         n_clusters += 1
                         continue
                 open_mask |= 1 << c
