@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import ctypes
 import glob
+import math
 import os
 
 import numpy as np
@@ -150,7 +151,8 @@ def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit
     """Every live photon walks up to ``max_steps`` events (scattering or surface) or until it dies.
 
     Free paths certified by the safe-distance grid need no ray; the others are traced by Embree from this
-    thread. Returns (scattering events, boundary events, rays).
+    thread. The photon's state stays in local variables for the whole round. Returns (scattering events,
+    boundary events, rays).
     """
     n = status.shape[0]
     events = 0
@@ -160,28 +162,54 @@ def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit
         if status[i] != K.ALIVE:
             continue
         rh, rhi = _rayhit()
+        x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        wi, s, k, c = w[i], pend[i], key[i], ctr[i]
+        thr = thresh * w0[i]
+        ab_sum = 0.0
+        alive = True
         ev = 0
         bd = 0
         nr = 0
         steps = 0
-        while True:
-            e_, need = K.interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origin, inv_h,
-                                      sigma_t, albedo, g, thresh, boost, max_steps - steps)
-            ev += e_
-            steps += e_ + 1
-            if not need or steps > max_steps:
+        while steps < max_steps:
+            steps += 1
+            if s < 0.0:
+                u, c = K._uniform(k, c)
+                s = -math.log(1.0 - u) / sigma_t
+            kind = K.SCATTER
+            if s >= K._safe(safe, origin, inv_h, x, y, z):
+                f = _trace(intersect, scene, rh, rhi, x - center[0], y - center[1], z - center[2], dx, dy, dz,
+                           min(s + margin, 1e37))
+                nr += 1
+                kind, x, y, z, dx, dy, dz, c, u, v = K.surface_s(f, x, y, z, dx, dy, dz, s, k, c, v0, e1, e2,
+                                                                 normals, center, scale, off_rel, off_abs, eta)
+            if kind == K.SCATTER:
+                x, y, z, dx, dy, dz, wi, c, ab, alive = K.scatter_s(x, y, z, dx, dy, dz, wi, s, k, c, thr, albedo,
+                                                                    g, boost)
+                ab_sum += ab
+                ev += 1
+            elif kind == K.LEAK:
+                lost[i] += wi
+                wi = 0.0
+                alive = False
+            elif kind == K.EXIT:
+                exit_face[i] = f
+                exit_bary[i, 0], exit_bary[i, 1], exit_bary[i, 2] = 1.0 - u - v, u, v
+                exit_w[i] = wi
+                wi = 0.0
+                alive = False
+                bd += 1
+            else:
+                bd += 1
+            s = -1.0
+            if not alive:
+                status[i] = K.FREE
                 break
-            s = pend[i]
-            f = _trace(intersect, scene, rh, rhi, pos[i, 0] - center[0], pos[i, 1] - center[1],
-                       pos[i, 2] - center[2], d[i, 0], d[i, 1], d[i, 2], min(s + margin, 1e37))
-            nr += 1
-            e_, b_ = K.surface_event(i, f, pos, d, w, w0, pend, key, ctr, absorbed, lost, status, exit_face,
-                                     exit_bary, exit_w, v0, e1, e2, normals, center, scale, off_rel, off_abs, eta,
-                                     albedo, g, thresh, boost)
-            ev += e_
-            bd += b_
-            if status[i] != K.ALIVE:
-                break
+        pos[i, 0], pos[i, 1], pos[i, 2] = x, y, z
+        d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
+        w[i], pend[i], ctr[i] = wi, s, c
+        absorbed[i] += ab_sum
         events += ev
         boundary += bd
         rays += nr

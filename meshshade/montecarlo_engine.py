@@ -47,6 +47,7 @@ from .raycast import OFFSET_ABS, OFFSET_REL
 
 ENTRY_CHUNK = 1 << 14
 MAX_STEPS = 64
+MAX_STEPS_GROWTH = 1024
 #: below this many live photons (or rays) the serial kernels run (identical results, no thread launch)
 PARALLEL_MIN = 8192
 BUDGET_START_LIVE = 4096
@@ -141,7 +142,7 @@ class PoolWalk:
                         and DRAIN_SAFETY * 2 * max_live * per_photon < BUDGET_DRAIN_FRACTION * time_budget):
                     max_live = min(P, 2 * max_live)
             if not stop:
-                while (queue is None or queue[0].shape[0] - e < P) and chunk < n_chunks:
+                while (queue is None or queue[0].shape[0] - e < max_live) and chunk < n_chunks:
                     new = self._entries(chunk, n_photons)
                     chunk += 1
                     queue = new if queue is None else [np.concatenate([q[e:], x]) for q, x in zip(queue, new)]
@@ -160,12 +161,15 @@ class PoolWalk:
                     break
                 continue
             t_round = time.perf_counter()
-            self._round(st, live)
+            # every live slot lies below max_live (refill fills the lowest free slots first); while photons die
+            # out, more steps per round keep the work per round (and the number of thread launches) bounded
+            steps = MAX_STEPS * min(max_live // live, MAX_STEPS_GROWTH)
+            self._round(st.view(max_live), live, steps)
             last_round = time.perf_counter() - t_round
-            live = int(np.count_nonzero(st.status))
+            live = int(np.count_nonzero(st.status[:max_live]))
         return emitted
 
-    def _round(self, st, live):
+    def _round(self, st, live, steps):
         g = self.grid
         common = (self._v0, self._e1, self._e2, self._N, self._center, self.scene.scale, OFFSET_REL, OFFSET_ABS)
         if self.direct is not None:
@@ -173,11 +177,11 @@ class PoolWalk:
             ev, bd, nr = walk(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.lost,
                               st.exit_face, st.exit_bary, st.exit_w, self._safe, g.origin, 1.0 / g.h, *common,
                               self._margin, self.sigma_t, self.albedo, self.g, self.eta, K_THRESH, K_BOOST,
-                              MAX_STEPS, self.direct.intersect, self.direct.handle)
+                              steps, self.direct.intersect, self.direct.handle)
         else:
             adv = K.advance_parallel if live >= PARALLEL_MIN else K.advance_serial
             ev = adv(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.need,
-                     self._safe, g.origin, 1.0 / g.h, self.sigma_t, self.albedo, self.g, K_THRESH, K_BOOST, MAX_STEPS)
+                     self._safe, g.origin, 1.0 / g.h, self.sigma_t, self.albedo, self.g, K_THRESH, K_BOOST, steps)
             idx, o32, d32, tfar = K.gather_rays(st.need, st.pos, st.d, st.pend, self._center, self._margin)
             nr = bd = 0
             if idx.shape[0]:
@@ -204,6 +208,12 @@ class PoolWalk:
 
 class _PoolState:
     """Arrays of the photon slots."""
+
+    def view(self, n):
+        """The first ``n`` slots (numpy views)."""
+        out = _PoolState.__new__(_PoolState)
+        out.__dict__.update({k: v[:n] for k, v in self.__dict__.items()})
+        return out
 
     def __init__(self, P):
         self.status = np.zeros(P, dtype=np.int8)

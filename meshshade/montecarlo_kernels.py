@@ -32,6 +32,7 @@ _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(
 _ONE = np.uint64(1)
 _INV53 = 1.0 / 9007199254740992.0
 FREE, ALIVE = np.int8(0), np.int8(1)
+SCATTER, REFLECT, EXIT, LEAK = 0, 1, 2, 3
 _OPTS = dict(cache=True, error_model="numpy")
 
 
@@ -136,19 +137,20 @@ def fresnel_out(cos_i, eta):
 
 
 @njit(inline="always", **_OPTS)
-def scatter_event(i, s, pos, d, w, w0, pend, key, ctr, absorbed, status, albedo, g, thresh, boost):
-    """Photon i flies ``s`` mm, deposits (1 - albedo) of its weight, scatters (HG) and plays Russian roulette
-    (net weight change booked in ``absorbed``: exact balance, unbiased)."""
-    dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-    pos[i, 0] += s * dx
-    pos[i, 1] += s * dy
-    pos[i, 2] += s * dz
-    wi = w[i]
+def scatter_s(x, y, z, dx, dy, dz, wi, s, k, c, thr, albedo, g, boost):
+    """Fly ``s`` mm, deposit (1 - albedo) of the weight, scatter (HG), Russian roulette below ``thr``.
+
+    Returns (x, y, z, dx, dy, dz, weight, counter, absorbed, alive); ``absorbed`` includes the roulette's net
+    weight change (exact balance, unbiased).
+    """
+    x += s * dx
+    y += s * dy
+    z += s * dz
     ab = wi * (1.0 - albedo)
     wi *= albedo
-    k = key[i]
-    d[i, 0], d[i, 1], d[i, 2], c = _hg_scatter(dx, dy, dz, g, k, ctr[i])
-    if wi < thresh * w0[i]:
+    dx, dy, dz, c = _hg_scatter(dx, dy, dz, g, k, c)
+    alive = True
+    if wi < thr:
         u, c = _uniform(k, c)
         if u * boost < 1.0:
             ab -= (boost - 1.0) * wi
@@ -156,41 +158,30 @@ def scatter_event(i, s, pos, d, w, w0, pend, key, ctr, absorbed, status, albedo,
         else:
             ab += wi
             wi = 0.0
-            status[i] = FREE
-    absorbed[i] += ab
-    w[i], ctr[i], pend[i] = wi, c, -1.0
+            alive = False
+    return x, y, z, dx, dy, dz, wi, c, ab, alive
 
 
 @njit(inline="always", **_OPTS)
-def surface_event(i, f, pos, d, w, w0, pend, key, ctr, absorbed, lost, status, exit_face, exit_bary, exit_w,
-                  v0, e1, e2, normals, center, scale, off_rel, off_abs, eta, albedo, g, thresh, boost):
-    """Outcome of photon i's boundary test whose Embree hit (within tfar = free path + margin) is face f (-1: none).
+def surface_s(f, x, y, z, dx, dy, dz, s, k, c, v0, e1, e2, normals, center, scale, off_rel, off_abs, eta):
+    """Outcome of a boundary test whose Embree hit within tfar = free path + margin is face f (-1: none).
 
-    Returns (scattering events, boundary events) = (1, 0), (0, 1) or (0, 0) for a leak.
+    Returns (kind, x, y, z, dx, dy, dz, counter, u, v): kind SCATTER (the free path ends before the surface:
+    the caller scatters), REFLECT (position moved back inside by the scene's ray offset, direction mirrored),
+    EXIT (leaves through f at barycentrics (1-u-v, u, v)) or LEAK (no or front-facing hit from inside).
+    The distance and barycentrics are recomputed in float64 on face f (Moller-Trumbore, clipped).
     """
-    s = pend[i]
     if f < 0:
-        if s < math.inf:  # no surface within the free path (tfar): an interior event
-            scatter_event(i, s, pos, d, w, w0, pend, key, ctr, absorbed, status, albedo, g, thresh, boost)
-            return 1, 0
-        lost[i] += w[i]  # an unbounded ray from inside must hit the mesh
-        w[i] = 0.0
-        status[i] = FREE
-        return 0, 0
-    dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        return (SCATTER if s < math.inf else LEAK), x, y, z, dx, dy, dz, c, 0.0, 0.0
     nxf, nyf, nzf = normals[f, 0], normals[f, 1], normals[f, 2]
     cos_i = dx * nxf + dy * nyf + dz * nzf
-    if not cos_i > 0.0:  # a ray from inside must hit the back of a face: numerical leak
-        lost[i] += w[i]
-        w[i] = 0.0
-        status[i] = FREE
-        return 0, 0
-    ox, oy, oz = pos[i, 0], pos[i, 1], pos[i, 2]
+    if not cos_i > 0.0:  # a ray from inside must hit the back of a face
+        return LEAK, x, y, z, dx, dy, dz, c, 0.0, 0.0
     a0, a1, a2 = e1[f, 0], e1[f, 1], e1[f, 2]
     b0, b1, b2 = e2[f, 0], e2[f, 1], e2[f, 2]
     px, py, pz = dy * b2 - dz * b1, dz * b0 - dx * b2, dx * b1 - dy * b0
     det = a0 * px + a1 * py + a2 * pz
-    sx, sy, sz = ox - v0[f, 0], oy - v0[f, 1], oz - v0[f, 2]
+    sx, sy, sz = x - v0[f, 0], y - v0[f, 1], z - v0[f, 2]
     qx, qy, qz = sy * a2 - sz * a1, sz * a0 - sx * a2, sx * a1 - sy * a0
     inv = 1.0 / det
     u = (sx * px + sy * py + sz * pz) * inv
@@ -199,9 +190,8 @@ def surface_event(i, f, pos, d, w, w0, pend, key, ctr, absorbed, lost, status, e
     if not (math.isfinite(u) and math.isfinite(v) and math.isfinite(t)):  # grazing: nearest vertex
         u, v = 0.0, 0.0
         t = -(sx * dx + sy * dy + sz * dz)
-    if s < max(t, 0.0):  # the free path ends before the surface
-        scatter_event(i, s, pos, d, w, w0, pend, key, ctr, absorbed, status, albedo, g, thresh, boost)
-        return 1, 0
+    if s < max(t, 0.0):
+        return SCATTER, x, y, z, dx, dy, dz, c, 0.0, 0.0
     u = max(u, 0.0)
     v = max(v, 0.0)
     if u + v > 1.0:
@@ -211,34 +201,52 @@ def surface_event(i, f, pos, d, w, w0, pend, key, ctr, absorbed, lost, status, e
     hx = v0[f, 0] + u * a0 + v * b0
     hy = v0[f, 1] + u * a1 + v * b1
     hz = v0[f, 2] + u * a2 + v * b2
-    uu, c = _uniform(key[i], ctr[i])
-    ctr[i] = c
-    pend[i] = -1.0
-    if uu < fresnel_out(cos_i, eta):  # reflect, moved back inside by the scene's ray offset
-        d[i, 0], d[i, 1], d[i, 2] = dx - 2.0 * cos_i * nxf, dy - 2.0 * cos_i * nyf, dz - 2.0 * cos_i * nzf
+    uu, c = _uniform(k, c)
+    if uu < fresnel_out(cos_i, eta):
         rc = math.sqrt((hx - center[0]) ** 2 + (hy - center[1]) ** 2 + (hz - center[2]) ** 2)
-        eps = off_rel * (scale + rc) + off_abs * math.sqrt(hx * hx + hy * hy + hz * hz)
-        nn = math.sqrt(nxf * nxf + nyf * nyf + nzf * nzf)
-        pos[i, 0], pos[i, 1], pos[i, 2] = hx - eps * nxf / nn, hy - eps * nyf / nn, hz - eps * nzf / nn
-    else:  # leaves through face f (tallied by reduce_round)
+        eps = (off_rel * (scale + rc) + off_abs * math.sqrt(hx * hx + hy * hy + hz * hz)) / math.sqrt(
+            nxf * nxf + nyf * nyf + nzf * nzf)
+        return (REFLECT, hx - eps * nxf, hy - eps * nyf, hz - eps * nzf, dx - 2.0 * cos_i * nxf,
+                dy - 2.0 * cos_i * nyf, dz - 2.0 * cos_i * nzf, c, u, v)
+    return EXIT, hx, hy, hz, dx, dy, dz, c, u, v
+
+
+@njit(inline="always", **_OPTS)
+def surface_event(i, f, pos, d, w, w0, pend, key, ctr, absorbed, lost, status, exit_face, exit_bary, exit_w,
+                  v0, e1, e2, normals, center, scale, off_rel, off_abs, eta, albedo, g, thresh, boost):
+    """:func:`surface_s` (then scattering, reflection, exit or leak) on photon i's slot; (events, boundary)."""
+    s, k = pend[i], key[i]
+    kind, x, y, z, dx, dy, dz, c, u, v = surface_s(f, pos[i, 0], pos[i, 1], pos[i, 2], d[i, 0], d[i, 1], d[i, 2],
+                                                   s, k, ctr[i], v0, e1, e2, normals, center, scale, off_rel,
+                                                   off_abs, eta)
+    ev = 0
+    bd = 0
+    pend[i] = -1.0
+    if kind == SCATTER:
+        x, y, z, dx, dy, dz, wi, c, ab, alive = scatter_s(x, y, z, dx, dy, dz, w[i], s, k, c, thresh * w0[i],
+                                                          albedo, g, boost)
+        absorbed[i] += ab
+        w[i] = wi
+        if not alive:
+            status[i] = FREE
+        ev = 1
+    elif kind == LEAK:
+        lost[i] += w[i]
+        w[i] = 0.0
+        status[i] = FREE
+    elif kind == EXIT:
         exit_face[i] = f
         exit_bary[i, 0], exit_bary[i, 1], exit_bary[i, 2] = 1.0 - u - v, u, v
         exit_w[i] = w[i]
         w[i] = 0.0
         status[i] = FREE
-    return 0, 1
-
-
-@njit(inline="always", **_OPTS)
-def free_path(i, pend, key, ctr, sigma_t):
-    """Photon i's pending free path (mm), drawn s = -ln(1 - u)/sigma_t if none is pending."""
-    s = pend[i]
-    if s < 0.0:
-        u, c = _uniform(key[i], ctr[i])
-        ctr[i] = c
-        s = -math.log(1.0 - u) / sigma_t
-        pend[i] = s
-    return s
+        bd = 1
+    else:
+        bd = 1
+    pos[i, 0], pos[i, 1], pos[i, 2] = x, y, z
+    d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
+    ctr[i] = c
+    return ev, bd
 
 
 @njit(inline="always", **_OPTS)
@@ -247,13 +255,12 @@ def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origi
     """Photon i scatters while its free path is certified by the safe-distance bound, at most ``max_steps`` times.
 
     Returns (events, need): ``need`` is True when the pending free path (kept in ``pend``) may reach the surface.
-    The state lives in local variables inside the loop (written back once).
     """
     x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
     dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
     wi, s, k, c = w[i], pend[i], key[i], ctr[i]
     thr = thresh * w0[i]
-    ab = 0.0
+    ab_sum = 0.0
     ev = 0
     need = False
     alive = True
@@ -266,28 +273,16 @@ def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origi
             break
         if ev >= max_steps:
             break
-        x += s * dx
-        y += s * dy
-        z += s * dz
+        x, y, z, dx, dy, dz, wi, c, ab, alive = scatter_s(x, y, z, dx, dy, dz, wi, s, k, c, thr, albedo, g, boost)
+        ab_sum += ab
         s = -1.0
-        ab += wi * (1.0 - albedo)
-        wi *= albedo
         ev += 1
-        dx, dy, dz, c = _hg_scatter(dx, dy, dz, g, k, c)
-        if wi < thr:
-            u, c = _uniform(k, c)
-            if u * boost < 1.0:
-                ab -= (boost - 1.0) * wi
-                wi *= boost
-            else:
-                ab += wi
-                wi = 0.0
-                alive = False
-                break
+        if not alive:
+            break
     pos[i, 0], pos[i, 1], pos[i, 2] = x, y, z
     d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
     w[i], pend[i], ctr[i] = wi, s, c
-    absorbed[i] += ab
+    absorbed[i] += ab_sum
     if not alive:
         status[i] = FREE
     return ev, need

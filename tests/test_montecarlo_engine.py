@@ -151,6 +151,7 @@ def test_time_budget_hard_cut_off_books_lost(monkeypatch):
     mesh, mat, lights = _long_lived()
     monkeypatch.setattr(engine, "DRAIN_SAFETY", 0.0)      # never stop emission early: force the hard limit
     monkeypatch.setattr(engine, "HARD_OVERSHOOT", 0.0)
+    simulate(mesh, mat, lights, photons=None, time_budget=0.05, beam_distances=False)   # compile cut_off
     budget = 0.3
     t = time.perf_counter()
     r = simulate(mesh, mat, lights, photons=None, time_budget=budget, beam_distances=False)

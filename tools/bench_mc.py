@@ -1,11 +1,23 @@
-"""Monte Carlo throughput (scattering events/s), printed as JSON: python tools/bench_mc.py [--photons N]."""
+"""Monte Carlo throughput (scattering events/s) of the pooled engine next to the baseline wavefront, as JSON.
+
+    python tools/bench_mc.py [--photons N] [--baseline-photons M] [--threads T]
+
+Per case: the pooled engine with Embree called from the numba threads ("direct", the default), the same engine
+with one embreex call per round ("batched"), and the numpy wavefront with an Embree query every step
+("baseline", fast_interior=False), all in the same run; ``speedup`` = events/s over the baseline's. ``cpu_seconds``
+is the process CPU time of the walk (load-independent cost: ns per event = cpu_seconds / events), and the load
+average is printed because other processes share the cores.
+"""
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
+import time
 import warnings
 
+import numba
 import numpy as np
 
 from meshshade.geometry.mesh import Mesh
@@ -15,12 +27,8 @@ from meshshade.materials import Material
 from meshshade.montecarlo import simulate
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--photons", type=int, default=100_000)
-    args = ap.parse_args()
-    warnings.simplefilter("ignore")
-    cases = {
+def cases():
+    return {
         "mcml_semi_infinite_box": (Mesh.from_arrays(*box((10.0, 10.0, 5.0))), Material(9.0, 1.0, eta=1.5),
                                    BeamLight((0.123, 0.0456, 10.0), (0, 0, -1))),
         "mcml_slab_box": (Mesh.from_arrays(*box((20.0, 20.0, 0.2))), Material(2.25, 1.0, eta=1.0, g=0.75),
@@ -28,17 +36,47 @@ def main() -> None:
         "skin_sphere_R10_level5": (Mesh.from_arrays(*icosphere(10.0, 5)), Material(1.0, 0.01, eta=1.3),
                                    BeamLight((0.01, 0.02, 30.0), (0, 0, -1))),
     }
-    simulate(cases["mcml_slab_box"][0], cases["mcml_slab_box"][1], [cases["mcml_slab_box"][2]], photons=1000,
-             beam_distances=False)  # numba compile / cache load
-    out = {"machine": platform.processor() or platform.machine(), "photons": args.photons, "cases": {}}
-    for name, (mesh, mat, beam) in cases.items():
-        for fast in (False, True):
-            r = simulate(mesh, mat, [beam], photons=args.photons, seed=1, beam_distances=False,
-                         fast_interior=fast)
-            out["cases"][f"{name}{'' if fast else '_embree_every_step'}"] = {
-                "faces": int(mesh.n_faces), "events": int(r.events), "boundary_events": int(r.boundary_events),
-                "seconds": round(r.seconds, 3), "events_per_second": float(f"{r.events_per_second:.3g}"),
-                "diffuse_reflectance": float(np.round(r.totals["diffuse_reflectance"][0], 5))}
+
+
+def run(mesh, mat, beam, photons, **kw):
+    c0 = time.process_time()
+    r = simulate(mesh, mat, [beam], photons=photons, seed=1, beam_distances=False, **kw)
+    cpu = time.process_time() - c0
+    return r, {"photons": int(r.photons), "events": int(r.events), "boundary_tests": int(r.boundary_tests),
+               "tests_per_event": round(r.boundary_tests / max(r.events, 1), 3),
+               "seconds": round(r.seconds, 3), "cpu_seconds": round(cpu, 3),
+               "events_per_second": float(f"{r.events_per_second:.3g}"),
+               "cpu_ns_per_event": round(cpu / max(r.events, 1) * 1e9, 1),
+               "diffuse_reflectance": float(np.round(r.totals["diffuse_reflectance"][0], 5)),
+               "diffuse_reflectance_stderr": float(f"{r.totals['diffuse_reflectance_stderr'][0]:.2g}")}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--photons", type=int, default=400_000, help="photons for the pooled engine")
+    ap.add_argument("--baseline-photons", type=int, default=50_000, help="photons for the slow baseline")
+    ap.add_argument("--threads", type=int, default=None, help="numba threads (default: all cores)")
+    ap.add_argument("--no-batched", action="store_true", help="skip the embreex-batched variant")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    if args.threads:
+        numba.set_num_threads(args.threads)
+    all_cases = cases()
+    warm = all_cases["mcml_slab_box"]
+    for kw in ({}, {"engine": "batched"}, {"fast_interior": False}):   # numba compile / cache load
+        simulate(*warm[:2], [warm[2]], photons=1000, beam_distances=False, **kw)
+    out = {"machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+           "numba_threads": numba.get_num_threads(), "load_average_before": os.getloadavg(), "cases": {}}
+    for name, (mesh, mat, beam) in all_cases.items():
+        res = {"faces": int(mesh.n_faces)}
+        _, res["direct"] = run(mesh, mat, beam, args.photons, engine="direct")
+        if not args.no_batched:
+            _, res["batched"] = run(mesh, mat, beam, args.photons, engine="batched")
+        _, res["baseline"] = run(mesh, mat, beam, args.baseline_photons, fast_interior=False)
+        base = res["baseline"]["events_per_second"]
+        res["speedup"] = {k: round(res[k]["events_per_second"] / base, 2) for k in ("direct", "batched") if k in res}
+        out["cases"][name] = res
+    out["load_average_after"] = os.getloadavg()
     print(json.dumps(out, indent=2))
 
 
