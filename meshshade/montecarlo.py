@@ -35,6 +35,7 @@ Pure computation, no file I/O (``write_mc`` delegates writing to :mod:`meshshade
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -351,7 +352,9 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
             inc = walk.tot[:, 5]
             ratios = walk.tot[:, :5] / np.where(inc > 0, inc, np.nan)[:, None]          # (B, 5) per batch
             fr = tt[:5] / tt[5] if tt[5] > 0 else np.zeros(5)
-            fse_tot = np.nanstd(ratios, axis=0, ddof=1) / np.sqrt(n_batches)
+            with warnings.catch_warnings():   # a budget run with fewer photons than batches: NaN, not a warning
+                warnings.simplefilter("ignore", RuntimeWarning)
+                fse_tot = np.nanstd(ratios, axis=0, ddof=1) / np.sqrt(n_batches)
             for c in chans:
                 face_p[:, c], face_se[:, c], vert_p[:, c], vert_se[:, c] = fp, fse, vp, vse
                 tot[:, c], tot_se[:, c], frac[:, c], frac_se[:, c] = tt, tse, fr, fse_tot
