@@ -176,6 +176,7 @@ COMMANDS = {
               "what the pipeline will make of a mesh: size in mm and transport lengths, defects, curvature, "
               "resolution, where first-order theory holds"),
     **__import__("meshshade.cli_images", fromlist=["_"]).IMAGE_COMMANDS,
+    "bench": (lambda p: __import__("meshshade.cli_bench", fromlist=["_"]).add_bench_args(p), lambda a: __import__("meshshade.cli_bench", fromlist=["_"]).run_bench(a), "accuracy vs time of every model and knob against exact or Monte Carlo references"),  # noqa: E501
 }
 
 
