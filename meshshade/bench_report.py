@@ -53,6 +53,23 @@ def _knob_label(r) -> str:
     return "default" if r["knob"] == "default" else f"{r['knob']}={r['value']}"
 
 
+def _decade_limits(ax, t, e):
+    """Log axes spanning at least one decade around the data (no crowded minor-tick labels)."""
+    from matplotlib.ticker import LogLocator, NullFormatter  # noqa: PLC0415
+
+    for vals, setter, axis in ((t, ax.set_xlim, ax.xaxis), (e, ax.set_ylim, ax.yaxis)):
+        v = np.asarray(vals, float)
+        v = v[np.isfinite(v) & (v > 0)]
+        if v.size:
+            lo, hi = v.min() / 1.4, v.max() * 1.4
+            if hi / lo < 10.0:
+                mid = np.sqrt(lo * hi)
+                lo, hi = mid / np.sqrt(10.0), mid * np.sqrt(10.0)
+            setter(lo, hi)
+        axis.set_major_locator(LogLocator(base=10.0, numticks=6))
+        axis.set_minor_formatter(NullFormatter())
+
+
 def pareto_figure(rows, *, title: str = ""):
     """Log-log mean relative error vs wall time, one panel per scene, one marker per model, the front drawn."""
     import matplotlib  # noqa: PLC0415
@@ -80,15 +97,17 @@ def pareto_figure(rows, *, title: str = ""):
         f = pareto_front(t, e)
         if f.size:
             ax.step(t[f], e[f], where="post", color="k", lw=0.9, alpha=0.7, label="Pareto front")
+            ax.plot(t[f], e[f], "o", mfc="none", mec="k", ms=9, mew=0.8)
         stderr = [r["ref_stderr"] for r in sub if r.get("ref_stderr") is not None]
         if stderr:
             ax.axhline(float(np.median(stderr)), color="grey", ls=":", lw=1, label="MC ref. rel. stderr")
+        _decade_limits(ax, t, np.concatenate([e, stderr[:1]]))
         ax.set_title(sc, fontsize=9)
         ax.set_xlabel("wall time [s]", fontsize=8)
         ax.set_ylabel("mean |relative error|", fontsize=8)
         ax.grid(True, which="both", alpha=0.25)
         ax.tick_params(labelsize=7)
-    handles, labels = {}, []
+    handles = {}
     for ax in axes.ravel():
         for h, lab in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(lab, h)
@@ -113,8 +132,10 @@ def table_markdown(rows, metadata) -> str:
         f"\"max\"/\"mean\" are over vertices outside the beam's entry fan where the exact reference exceeds "
         f"{m.get('exact_floor', 1e-4):g} of its peak, or over MC patches above {m.get('mc_floor', 1e-3):g} of the "
         f"peak density with MC relative stderr <= {m.get('mc_max_rel_stderr', 0.05):g}; \"energy\" is the relative "
-        "error of the total exitant power. Time: wall seconds of the bake call (numba compilation excluded). "
-        "\"<= x\": the cheapest measured setting with mean error <= x (time in s). "
+        "error of the total exitant power. Time: wall seconds of the bake (Monte Carlo: simulate) call, numba "
+        "compilation excluded (render rows: bake + render). \"<= x\": the cheapest measured setting (any knob but render, whose errors are "
+        "over pixels) with mean error <= x (time in s); \"ref\": exact, or mc (median relative stderr of the "
+        "MC patches). "
         f"Load average {', '.join(f'{x:.2f}' for x in metadata.get('load_average_before', []))} before, "
         f"{', '.join(f'{x:.2f}' for x in metadata.get('load_average_after', []))} after, on "
         f"{metadata.get('machine', {}).get('cpu_count', '?')} cores.",
@@ -132,8 +153,9 @@ def table_markdown(rows, metadata) -> str:
                 base = min(mine, key=lambda r: r["time_s"])
             ref = base["ref_kind"] + (f" (±{base['ref_stderr']:.1g})" if base.get("ref_stderr") else "")
             cells = []
-            for lvl in ERROR_LEVELS:
-                ok = [r for r in mine if np.isfinite(r["error_mean"]) and r["error_mean"] <= lvl]
+            for lvl in ERROR_LEVELS:  # render rows measure pixels, not vertices: not comparable here
+                ok = [r for r in mine if r["knob"] != "render" and np.isfinite(r["error_mean"])
+                      and r["error_mean"] <= lvl]
                 best = min(ok, key=lambda r: r["time_s"]) if ok else None
                 cells.append(f"{_knob_label(best)} ({best['time_s']:.2g})" if best else "-")
             label = model if base["knob"] == "default" else f"{model} ({_knob_label(base)})"

@@ -14,7 +14,7 @@ def add_bench_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenes", metavar="LIST", help="comma list of scene names (default: the mode's set)")
     p.add_argument("--models", metavar="LIST", help="comma list of models (default: every model of the bake)")
     p.add_argument("--mc-photons", type=int, default=None, metavar="N",
-                   help="photons of each Monte Carlo reference (default 200000 quick, 2000000 full)")
+                   help="photons of each Monte Carlo reference (default 1000000 quick, 4000000 full)")
 
 
 def _names(text):
