@@ -207,7 +207,8 @@ class MCResult:
         the hard time limit of a ``time_budget`` run, normally 0;
     beam_exits : per channel, dict of arrays ``face``, ``bary``, ``weight`` (W), ``batch`` for photons of the
         first beam light (for radial profiles); beam_entry : (face, bary) of that beam, or None;
-    boundary_tests : ray casts (Embree queries) made by the walk.
+    boundary_tests : ray casts (Embree queries) made by the walk; seconds / cpu_seconds : wall-clock and process
+        CPU time (all threads) of the walk, without the set-up (scene, safe-distance grid, emitter).
     """
 
     material: Material
@@ -229,6 +230,7 @@ class MCResult:
     beam_entry: tuple | None = None
     beam_distance: np.ndarray | None = None
     boundary_tests: int = 0
+    cpu_seconds: float = 0.0
 
     @property
     def events_per_second(self) -> float:
@@ -314,7 +316,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     for c in range(3):
         groups.setdefault((float(sigma_s[c]), float(material.sigma_a[c])), []).append(c)
     children = np.random.SeedSequence(seed).spawn(len(groups))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     face_p = np.zeros((F.shape[0], 3)); face_se = np.zeros_like(face_p)
     vert_p = np.zeros((V.shape[0], 3)); vert_se = np.zeros_like(vert_p)
     tot = np.zeros((7, 3)); tot_se = np.zeros((7, 3))
@@ -366,7 +368,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     finally:
         if bar is not None:
             bar.close()
-    seconds = time.perf_counter() - t0
+    seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
     va = mesh.vertex_areas
     with np.errstate(divide="ignore", invalid="ignore"):
         radiance = np.where(va[:, None] > 0, vert_p / va[:, None], 0.0)
@@ -388,6 +390,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
                     radiance=radiance, radiance_stderr=radiance_se, totals=totals, lost=frac[4],
                     incident_power=tot[5], entering_power=tot[6], photons=emitted_max, events=events,
                     boundary_events=boundary, seconds=seconds, n_batches=n_batches, boundary_tests=rays,
+                    cpu_seconds=cpu_seconds,
                     beam_exits=exits if keep_beam_exits else [], beam_entry=beam_entry,
                     beam_distance=beam_distance)
 

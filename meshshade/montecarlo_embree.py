@@ -145,8 +145,7 @@ def _cast(intersect, scene, o32, d32):
     return out
 
 
-def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w, safe, origin,
-          inv_h, v0, e1, e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh,
+def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w, safe, geo, v0, e1, e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh,
           boost, max_steps, intersect, scene):
     """Every live photon walks up to ``max_steps`` events (scattering or surface) or until it dies.
 
@@ -178,7 +177,7 @@ def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit
                 u, c = K._uniform(k, c)
                 s = -math.log(1.0 - u) / sigma_t
             kind = K.SCATTER
-            if s >= K._safe(safe, origin, inv_h, x, y, z):
+            if s >= K._safe(safe, geo, x, y, z):
                 f = _trace(intersect, scene, rh, rhi, x - center[0], y - center[1], z - center[2], dx, dy, dz,
                            min(s + margin, 1e37))
                 nr += 1

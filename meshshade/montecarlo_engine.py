@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import time
 
+import numba
 import numpy as np
 
 from . import montecarlo_embree as E
@@ -56,6 +57,9 @@ DRAIN_SAFETY = 1.5
 ROUND_FRACTION = 0.05
 HARD_OVERSHOOT = 0.25
 DEFAULT_POOL = 1 << 18
+SAFE_STEPS_PER_VOXEL = 4
+#: photons per dynamically scheduled chunk of the parallel walk
+CHUNK = 1024
 
 
 def first_hit_faces32(scene, o32, d32, tfar):
@@ -92,19 +96,20 @@ class PoolWalk:
         self.beam_light = next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), None)
         self.exits = {"face": [], "bary": [], "weight": [], "batch": []}
         tri = V[F]
-        self._v0 = np.ascontiguousarray(tri[:, 0])
-        self._e1 = np.ascontiguousarray(tri[:, 1] - tri[:, 0])
-        self._e2 = np.ascontiguousarray(tri[:, 2] - tri[:, 0])
-        self._N = np.ascontiguousarray(normals, dtype=np.float64)
+        # one 96-byte record per face (v0, e1, e2, normal): a boundary test touches 1-2 cache lines, not 4
+        packed = np.ascontiguousarray(np.concatenate([tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0],
+                                                      np.asarray(normals, dtype=np.float64)], axis=1))
+        self._v0, self._e1, self._e2, self._N = (packed[:, 3 * j:3 * j + 3] for j in range(4))
         self._F = np.ascontiguousarray(F, dtype=np.int64)
         self._facing = np.ascontiguousarray(emitter.facing)
         self._base = np.uint64(K.stream_base(np.uint64(self.seed & 0xFFFFFFFFFFFFFFFF), self.group))
         self._center = np.ascontiguousarray(scene.center, dtype=np.float64)
         self._margin = E.TFAR_MARGIN_REL * scene.scale
         self.direct = direct
-        # float32 copy of the bound (half the cache footprint), rounded down so that it stays conservative
-        safe32 = grid.safe.astype(np.float32)
-        self._safe = np.where(safe32 > grid.safe, np.nextafter(safe32, np.float32(0)), safe32)
+        # the bound as uint8 in units of h/4, rounded down (conservative): 1/8 of the float64 grid's cache footprint
+        unit = grid.h / SAFE_STEPS_PER_VOXEL
+        self._safe = np.minimum(np.floor(grid.safe / unit), 255).astype(np.uint8)
+        self._geo = np.array([*grid.origin, 1.0 / grid.h, unit])
 
     # --- entries ----------------------------------------------------------------------------------------------
     def _entries(self, chunk, n_photons):
@@ -170,18 +175,19 @@ class PoolWalk:
         return emitted
 
     def _round(self, st, live, steps):
-        g = self.grid
         common = (self._v0, self._e1, self._e2, self._N, self._center, self.scene.scale, OFFSET_REL, OFFSET_ABS)
         if self.direct is not None:
             walk = E.walk_parallel if live >= PARALLEL_MIN else E.walk_serial
-            ev, bd, nr = walk(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.lost,
-                              st.exit_face, st.exit_bary, st.exit_w, self._safe, g.origin, 1.0 / g.h, *common,
-                              self._margin, self.sigma_t, self.albedo, self.g, self.eta, K_THRESH, K_BOOST,
-                              steps, self.direct.intersect, self.direct.handle)
+            # dynamic chunks: a thread preempted by another process does not hold up the round
+            with numba.parallel_chunksize(CHUNK):
+                ev, bd, nr = walk(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed,
+                                  st.lost, st.exit_face, st.exit_bary, st.exit_w, self._safe, self._geo, *common,
+                                  self._margin, self.sigma_t, self.albedo, self.g, self.eta, K_THRESH, K_BOOST,
+                                  steps, self.direct.intersect, self.direct.handle)
         else:
             adv = K.advance_parallel if live >= PARALLEL_MIN else K.advance_serial
             ev = adv(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.need,
-                     self._safe, g.origin, 1.0 / g.h, self.sigma_t, self.albedo, self.g, K_THRESH, K_BOOST, steps)
+                     self._safe, self._geo, self.sigma_t, self.albedo, self.g, K_THRESH, K_BOOST, steps)
             idx, o32, d32, tfar = K.gather_rays(st.need, st.pos, st.d, st.pend, self._center, self._margin)
             nr = bd = 0
             if idx.shape[0]:

@@ -74,14 +74,17 @@ def uniform_stream(key, n):
 
 
 @njit(inline="always", **_OPTS)
-def _safe(safe, origin, inv_h, x, y, z):
-    """Conservative distance to the surface at (x, y, z) from the SafeDistanceGrid (0 outside the grid)."""
-    a = math.floor((x - origin[0]) * inv_h)
-    b = math.floor((y - origin[1]) * inv_h)
-    c = math.floor((z - origin[2]) * inv_h)
+def _safe(safe, geo, x, y, z):
+    """Conservative distance to the surface (mm) at (x, y, z); 0 outside the grid.
+
+    safe : (nx, ny, nz) uint8 bound in units of geo[4] (rounded down); geo = (origin x, y, z, 1/h, unit).
+    """
+    a = math.floor((x - geo[0]) * geo[3])
+    b = math.floor((y - geo[1]) * geo[3])
+    c = math.floor((z - geo[2]) * geo[3])
     if a < 0 or b < 0 or c < 0 or a >= safe.shape[0] or b >= safe.shape[1] or c >= safe.shape[2]:
         return 0.0
-    return safe[int(a), int(b), int(c)]
+    return safe[int(a), int(b), int(c)] * geo[4]
 
 
 @njit(inline="always", **_OPTS)
@@ -250,8 +253,8 @@ def surface_event(i, f, pos, d, w, w0, pend, key, ctr, absorbed, lost, status, e
 
 
 @njit(inline="always", **_OPTS)
-def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origin, inv_h, sigma_t, albedo, g,
-                 thresh, boost, max_steps):
+def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, geo, sigma_t, albedo, g, thresh, boost,
+                 max_steps):
     """Photon i scatters while its free path is certified by the safe-distance bound, at most ``max_steps`` times.
 
     Returns (events, need): ``need`` is True when the pending free path (kept in ``pend``) may reach the surface.
@@ -268,7 +271,7 @@ def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origi
         if s < 0.0:
             u, c = _uniform(k, c)
             s = -math.log(1.0 - u) / sigma_t
-        if s >= _safe(safe, origin, inv_h, x, y, z):
+        if s >= _safe(safe, geo, x, y, z):
             need = True
             break
         if ev >= max_steps:
@@ -288,8 +291,8 @@ def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origi
     return ev, need
 
 
-def _advance(status, pos, d, w, w0, pend, key, ctr, absorbed, need, safe, origin, inv_h, sigma_t, albedo, g,
-             thresh, boost, max_steps):
+def _advance(status, pos, d, w, w0, pend, key, ctr, absorbed, need, safe, geo, sigma_t, albedo, g, thresh, boost,
+             max_steps):
     """:func:`interior_run` for every live photon (``need`` marks the photons waiting for a boundary test).
 
     Photons stopped by ``max_steps`` continue next round. Returns the number of scattering events.
@@ -299,8 +302,8 @@ def _advance(status, pos, d, w, w0, pend, key, ctr, absorbed, need, safe, origin
     for i in prange(n):
         need[i] = False
         if status[i] == ALIVE:
-            ev, nd = interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, origin, inv_h, sigma_t,
-                                  albedo, g, thresh, boost, max_steps)
+            ev, nd = interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, geo, sigma_t, albedo, g,
+                                  thresh, boost, max_steps)
             need[i] = nd
             events += ev
     return events
