@@ -214,27 +214,41 @@ def node_moments(pos, power, lo, hi):
 
 # --------------------------------------------------------------------------------------------------------------
 @njit(cache=True, parallel=True)
-def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near, cutoff, st, al, mu, zv, tau):
+def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near, cutoff, st, al, mu, zv, tau,
+             budget_share):
     """Clustered far-field sum for each receiver (rows of ``recv``, processed in ``order`` for locality).
 
+    A cluster wholly inside the annulus r_near < r <= cutoff is accepted when its Taylor remainder bound E is at
+    most ``(1 - budget_share) tau`` times its own lower bound P R(d + a), or, failing that, at most its share of
+    a global budget ``budget_share tau L P / P_total`` where L = (sum so far) - (bounds so far) <= M_exact is a
+    running lower bound (the traversal goes nearest child first so that L grows fast). A cluster that lies past
+    r_near but straddles the cutoff may use the budget too, with E + P R(cutoff) (the most the sources beyond the
+    cutoff can add) in place of E. Summed: error <= (1 - share) tau M_exact + share tau M_exact = tau M_exact.
+
     Returns M (n, 3) W/mm^2, the summed error bounds of the accepted clusters (n, 3) W/mm^2, and per receiver
-    counts (n, 3): exact pairs evaluated at leaves, clusters accepted (channel-wise), nodes visited.
+    counts (n, 4): exact pair evaluations at leaves, clusters accepted (channel-wise), nodes visited, clusters
+    accepted from the budget.
     """
     n = recv.shape[0]
     nc = power.shape[1]
     M = np.zeros((n, nc))
     E = np.zeros((n, nc))
-    counts = np.zeros((n, 3), np.int64)
+    counts = np.zeros((n, 4), np.int64)
     rn_in = np.empty(nc)  # a cluster wholly inside this is skipped
     rn_out = np.empty(nc)  # a cluster wholly beyond this is past the near radius
     cut_in = np.empty(nc)
     cut_out = np.empty(nc)
+    r_cut = np.empty(nc)  # R(cutoff), optical units
+    per_power = np.empty(nc)  # budget_share tau / (P_total sigma_t'^2)
     for c in range(nc):
         slack = EDGE_RTOL * cutoff[c]
         rn_in[c] = r_near[c] - EDGE_RTOL * r_near[c] - slack
         rn_out[c] = r_near[c] + EDGE_RTOL * r_near[c] + slack
         cut_in[c] = cutoff[c] - slack
         cut_out[c] = cutoff[c] + slack
+        r_cut[c] = dipole_opt(cutoff[c] * st[c], al[c], mu[c], zv[c])
+        per_power[c] = budget_share * tau / (P[0, c] * st[c] * st[c]) if P[0, c] > 0.0 else 0.0
+    tau_own = (1.0 - budget_share) * tau
     full = (1 << nc) - 1
     for t in prange(n):
         o = order[t]
@@ -243,7 +257,7 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
         stack_mask = np.empty(STACK_SIZE, np.int64)
         stack_node[0], stack_mask[0] = 0, full
         top = 1
-        n_pairs = n_clusters = n_visits = 0
+        n_pairs = n_clusters = n_visits = n_budget = 0
         m_acc = np.zeros(nc)
         e_acc = np.zeros(nc)
         while top > 0:
@@ -260,11 +274,21 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
                 a = A[node, c]
                 if d + a < rn_in[c] or d - a > cut_out[c]:
                     continue  # wholly inside the near field or wholly beyond the cutoff
-                if d - a > rn_out[c] and d + a < cut_in[c]:
+                if d - a > rn_out[c]:
                     s = st[c]
                     m3_6 = M3[node, c] * s * s * s / 6.0
                     r_lo, r_hi = (d - a) * s, (d + a) * s
-                    bound = cluster_bound(m3_6, r_lo, r_hi, al[c], mu[c], zv[c], tau)
+                    inside = d + a < cut_in[c]
+                    bound = cluster_bound(m3_6, r_lo, r_hi, al[c], mu[c], zv[c], tau_own) if inside else -1.0
+                    if bound < 0.0:
+                        budget = (m_acc[c] - e_acc[c]) * per_power[c]  # optical units, per unit power
+                        if budget > 0.0:
+                            extra = 0.0 if inside else r_cut[c]
+                            if extra < budget:
+                                e = m3_6 * third_derivative_bound_opt(r_lo, al[c], mu[c], zv[c]) + extra
+                                if e <= budget:
+                                    bound = e
+                                    n_budget += 1
                     if bound >= 0.0:
                         G, G1, G2 = dipole_taylor_opt(d * s, al[c], mu[c], zv[c])
                         q = Q[node, c]
@@ -288,14 +312,22 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
                             s = st[c]
                             m_acc[c] += power[j, c] * dipole_opt(r * s, al[c], mu[c], zv[c]) * s * s
                             n_pairs += 1
-            else:
-                stack_node[top], stack_mask[top] = 2 * node + 2, open_mask
-                stack_node[top + 1], stack_mask[top + 1] = 2 * node + 1, open_mask
+            else:  # nearer child on top of the stack (by the first open channel's centroids)
+                c0 = 0
+                while not (open_mask >> c0) & 1:
+                    c0 += 1
+                near, far = 2 * node + 1, 2 * node + 2
+                d_near = (x0 - C[near, c0, 0]) ** 2 + (x1 - C[near, c0, 1]) ** 2 + (x2 - C[near, c0, 2]) ** 2
+                d_far = (x0 - C[far, c0, 0]) ** 2 + (x1 - C[far, c0, 1]) ** 2 + (x2 - C[far, c0, 2]) ** 2
+                if d_far < d_near:
+                    near, far = far, near
+                stack_node[top], stack_mask[top] = far, open_mask
+                stack_node[top + 1], stack_mask[top + 1] = near, open_mask
                 top += 2
         for c in range(nc):
             M[o, c] = m_acc[c]
             E[o, c] = e_acc[c]
-        counts[o, 0], counts[o, 1], counts[o, 2] = n_pairs, n_clusters, n_visits
+        counts[o, 0], counts[o, 1], counts[o, 2], counts[o, 3] = n_pairs, n_clusters, n_visits, n_budget
     return M, E, counts
 
 
