@@ -262,7 +262,8 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         number of threads and photon i's path does not depend on ``pool``
     time_budget : float seconds or None, counted from the call: emission stops when the photons in flight are
         predicted to finish within the budget; photons still in flight at 1.25 x the budget are cut off and
-        their weight is reported as ``lost`` (see :mod:`meshshade.montecarlo_engine` for the bound)
+        their weight is reported as ``lost`` (see :mod:`meshshade.montecarlo_engine` for the bound; the baseline
+        wavefront, ``fast_interior=False``, finishes all photons in flight)
     n_batches : batches for the standard errors (>= 2)
     pool : photon slots advanced together (default 2**18 for the pooled engine, 2**16 for the baseline)
     beam_distances : compute per-vertex geodesic distances from the first beam's entry point

@@ -77,7 +77,7 @@ def first_hit_faces32(scene, o32, d32, tfar):
 
 
 class PoolWalk:
-    """One channel group's walk on a regenerating pool of photon slots (same tallies as montecarlo._Walk)."""
+    """One channel group's walk on a regenerating pool of photon slots (same tallies as WavefrontWalk)."""
 
     def __init__(self, V, F, normals, emitter, scene, grid, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam,
                  seed, group, direct=None):

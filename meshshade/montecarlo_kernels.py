@@ -111,12 +111,13 @@ def _hg_scatter(dx, dy, dz, g, key, c):
     sign = 1.0 if dz >= 0.0 else -1.0
     a = -1.0 / (sign + dz)
     bb = dx * dy * a
-    cp, sp = st * (p * p - q * q) / r2, st * 2.0 * p * q / r2
+    f = st / r2
+    cp, sp = (p * p - q * q) * f, 2.0 * p * q * f
     nx = cp * (1.0 + sign * dx * dx * a) + sp * bb + ct * dx
     ny = cp * (sign * bb) + sp * (sign + dy * dy * a) + ct * dy
     nz = cp * (-sign * dx) + sp * (-dy) + ct * dz
-    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
-    return nx / norm, ny / norm, nz / norm, c
+    inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    return nx * inv, ny * inv, nz * inv, c
 
 
 @njit(inline="always", **_OPTS)
