@@ -193,6 +193,25 @@ def test_far_field_exitance_error_below_bound(kind, name, rng):
     assert np.max(np.abs(M - M_d)) > 0  # clustering happened and changed the result
 
 
+@pytest.mark.parametrize("name", MATERIALS)
+def test_far_field_exitance_budget_and_cutoff_straddling_within_bound(name, rng):
+    """The global budget (running lower bound of M) accepts clusters, including clusters that straddle the
+    cutoff (their sources beyond it are excluded by the direct sum's mask): the bound still holds."""
+    m = Material.preset(name)
+    V, _ = box(1.0, subdivisions=16)
+    V = V / np.linalg.norm(V, axis=1, keepdims=True) * 10.0
+    pw = rng.uniform(0.5, 1.0, (len(V), 3)) * (V[:, 2:3] > 0)
+    r_near, cut = 2.0 / m.sigma_t_prime, np.array([9.0, 6.0, 4.0])
+    M_d, _ = far_field_exitance_direct((V, pw), V, m, r_near, cut)
+    tree = SourceTree.build(V, pw, leaf_size=4)
+    M, stats = far_field_exitance(tree, V, m, r_near, cut, rel_tol=0.1, budget_share=0.5)
+    assert stats["clusters_from_budget"] > 0
+    assert_within_bound(M, M_d, stats, 0.1)
+    M0, stats0 = far_field_exitance(tree, V, m, r_near, cut, rel_tol=0.1, budget_share=0.0)
+    assert stats0["clusters_from_budget"] == 0
+    assert_within_bound(M0, M_d, stats0, 0.1)
+
+
 def test_far_field_exitance_rel_tol_zero_is_exact(rng):
     m = Material.preset("wholemilk")
     V, _ = icosphere(10.0, subdivisions=3)
@@ -275,6 +294,8 @@ def test_far_field_exitance_bad_input():
         far_field_exitance((V, ok), V, m, 1.0, 0.0)
     with pytest.raises(MeshshadeError):
         far_field_exitance((V, ok), V, m, 1.0, 10.0, rel_tol=-0.1)
+    with pytest.raises(MeshshadeError):
+        far_field_exitance((V, ok), V, m, 1.0, 10.0, budget_share=1.0)
     with pytest.raises(MeshshadeError):
         far_field_exitance_direct("nonsense", V, m, 1.0, 10.0)
     with pytest.raises(MeshshadeError):
