@@ -145,8 +145,9 @@ def _cast(intersect, scene, o32, d32):
     return out
 
 
-def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w, safe, geo, v0, e1, e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh,
-          boost, max_steps, intersect, scene):
+def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w, safe, geo, v0, e1,
+          e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh, boost, max_steps,
+          intersect, scene):
     """Every live photon walks up to ``max_steps`` events (scattering or surface) or until it dies.
 
     Free paths certified by the safe-distance grid need no ray; the others are traced by Embree from this
@@ -216,4 +217,3 @@ def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit
 
 
 walk_parallel = njit(parallel=True, nogil=True, **K._OPTS)(_walk)
-walk_serial = njit(nogil=True, **K._OPTS)(_walk)

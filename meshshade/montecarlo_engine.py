@@ -49,8 +49,6 @@ from .raycast import OFFSET_ABS, OFFSET_REL
 ENTRY_CHUNK = 1 << 14
 MAX_STEPS = 64
 MAX_STEPS_GROWTH = 1024
-#: below this many live photons (or rays) the serial kernels run (identical results, no thread launch)
-PARALLEL_MIN = 8192
 BUDGET_START_LIVE = 4096
 BUDGET_DRAIN_FRACTION = 0.2
 DRAIN_SAFETY = 1.5
@@ -177,25 +175,23 @@ class PoolWalk:
     def _round(self, st, live, steps):
         common = (self._v0, self._e1, self._e2, self._N, self._center, self.scene.scale, OFFSET_REL, OFFSET_ABS)
         if self.direct is not None:
-            walk = E.walk_parallel if live >= PARALLEL_MIN else E.walk_serial
             # dynamic chunks: a thread preempted by another process does not hold up the round
             with numba.parallel_chunksize(CHUNK):
-                ev, bd, nr = walk(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed,
-                                  st.lost, st.exit_face, st.exit_bary, st.exit_w, self._safe, self._geo, *common,
-                                  self._margin, self.sigma_t, self.albedo, self.g, self.eta, K_THRESH, K_BOOST,
-                                  steps, self.direct.intersect, self.direct.handle)
+                ev, bd, nr = E.walk_parallel(
+                    st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.lost, st.exit_face,
+                    st.exit_bary, st.exit_w, self._safe, self._geo, *common, self._margin, self.sigma_t, self.albedo,
+                    self.g, self.eta, K_THRESH, K_BOOST, steps, self.direct.intersect, self.direct.handle)
         else:
-            adv = K.advance_parallel if live >= PARALLEL_MIN else K.advance_serial
-            ev = adv(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.need,
-                     self._safe, self._geo, self.sigma_t, self.albedo, self.g, K_THRESH, K_BOOST, steps)
+            ev = K.advance_parallel(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed,
+                                    st.need, self._safe, self._geo, self.sigma_t, self.albedo, self.g, K_THRESH,
+                                    K_BOOST, steps)
             idx, o32, d32, tfar = K.gather_rays(st.need, st.pos, st.d, st.pend, self._center, self._margin)
             nr = bd = 0
             if idx.shape[0]:
                 prim = first_hit_faces32(self.scene, o32, d32, tfar)
-                res = K.resolve_parallel if idx.shape[0] >= PARALLEL_MIN else K.resolve_serial
-                ev2, bd = res(idx, prim, st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed,
-                              st.lost, st.exit_face, st.exit_bary, st.exit_w, *common, self.eta, self.albedo, self.g,
-                              K_THRESH, K_BOOST)
+                ev2, bd = K.resolve_parallel(idx, prim, st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key,
+                                             st.ctr, st.absorbed, st.lost, st.exit_face, st.exit_bary, st.exit_w,
+                                             *common, self.eta, self.albedo, self.g, K_THRESH, K_BOOST)
                 ev += ev2
                 nr = idx.shape[0]
         self.events += int(ev)

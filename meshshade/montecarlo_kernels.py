@@ -326,9 +326,7 @@ def _resolve(idx, prim, status, pos, d, w, w0, pend, key, ctr, absorbed, lost, e
 
 
 advance_parallel = njit(parallel=True, nogil=True, **_OPTS)(_advance)
-advance_serial = njit(nogil=True, **_OPTS)(_advance)
 resolve_parallel = njit(parallel=True, nogil=True, **_OPTS)(_resolve)
-resolve_serial = njit(nogil=True, **_OPTS)(_resolve)
 
 
 @njit(nogil=True, **_OPTS)
