@@ -105,21 +105,20 @@ def vertex_adjacency(n_vertices: int, faces) -> tuple[np.ndarray, np.ndarray]:
 
 
 def dilated_max(values, indptr, indices, rings: int) -> np.ndarray:
-    """Per vertex, the max of ``values`` over the vertices within ``rings`` edges (vectorised; O(rings E))."""
+    """Per vertex, the max of ``values`` ((n,) or (n, m)) over the vertices within ``rings`` edges (vectorised;
+    O(rings E))."""
     out = np.asarray(values, dtype=np.float64).copy()
-    n = out.size
     has = np.diff(indptr) > 0
     starts = indptr[:-1][has]
+    rows = np.flatnonzero(has)
     for _ in range(int(rings)):
         if indices.size == 0:
             break
-        nb = np.maximum.reduceat(out[indices], starts)
         new = out.copy()
-        new[np.flatnonzero(has)] = np.maximum(out[has], nb)
+        new[rows] = np.maximum(out[has], np.maximum.reduceat(out[indices], starts, axis=0))
         if np.array_equal(new, out):
             break
         out = new
-    assert out.size == n
     return out
 
 
@@ -161,20 +160,51 @@ def plan_sources(k1, k2, k_near, k_far, material: Material, near_mm, cutoff_mm, 
     return AutoPlan(kernel, exact_geo, far_dipole, tol)
 
 
-def neighbourhood_curvature(samples, vertex_kmax, faces, indptr, indices, radius_mm,
-                            mean_edge_mm: float, max_rings: int = 256) -> np.ndarray:
-    """(k,) 1/mm: for each entry sample, the largest |principal curvature| of the vertices within about
-    ``radius_mm`` (scalar or (k,): graph rings of the mean edge length; a face sample takes the max over its
-    corners)."""
-    radius = np.broadcast_to(np.asarray(radius_mm, dtype=np.float64), (len(samples),))
+def neighbourhood_curvature(samples, vertex_values, vertices, faces, radii_mm, mean_edge_mm: float, *,
+                            max_rings: int = 256, ball_query_below: int = 256) -> list:
+    """Per entry sample, the max of each column of ``vertex_values`` (n, m) over the vertices within about each
+    radius of ``radii_mm`` (a list of scalars or (k,) arrays); returns a list (one per radius) of (k, m) arrays.
+
+    Few samples (beams, fewer than ``ball_query_below``): a k-d tree ball query around each sample (the
+    Euclidean ball contains the geodesic one, so the max is conservative). Many samples: one vectorised graph
+    dilation over the whole mesh (rings of the mean edge length; a face sample takes the max over its corners),
+    read off at each radius's ring count.
+    """
+    vals = np.asarray(vertex_values, dtype=np.float64)
+    vals = vals[:, None] if vals.ndim == 1 else vals
+    k = len(samples)
+    radii = [np.broadcast_to(np.asarray(r, dtype=np.float64), (k,)) for r in radii_mm]
+    out = [np.empty((k, vals.shape[1])) for _ in radii]
+    if k == 0:
+        return out
+    if k < ball_query_below:
+        from scipy.spatial import cKDTree  # noqa: PLC0415
+
+        tree = cKDTree(vertices)
+        for r, o in zip(radii, out):
+            for i, nb in enumerate(tree.query_ball_point(samples.positions, r)):
+                o[i] = vals[nb].max(axis=0) if len(nb) else vals[np.asarray(faces)[samples.face[i]]].max(axis=0)
+        return out
+    rings_of = {}
+    for r in radii:
+        for x in np.unique(r):
+            rings_of[x] = int(min(max_rings, np.ceil(x / max(mean_edge_mm, 1e-300)) + 1))
+    wanted = sorted(set(rings_of.values()))
+    indptr, indices = vertex_adjacency(len(vals), faces)
     at_v = samples.vertex >= 0
-    out = np.empty(len(samples))
-    for r in np.unique(radius):
-        rings = int(min(max_rings, np.ceil(r / max(mean_edge_mm, 1e-300)) + 1))
-        dil = dilated_max(vertex_kmax, indptr, indices, rings)
-        sel = radius == r
-        out[sel & at_v] = dil[samples.vertex[sel & at_v]]
-        tri = sel & ~at_v
-        if np.any(tri):
-            out[tri] = dil[np.asarray(faces)[samples.face[tri]]].max(axis=1)
+    F = np.asarray(faces)
+    dil, done = vals.copy(), 0
+    per_ring = {}
+    for target in wanted:
+        dil = dilated_max(dil, indptr, indices, target - done)
+        done = target
+        per_ring[target] = dil
+    for r, o in zip(radii, out):
+        for x in np.unique(r):
+            d = per_ring[rings_of[x]]
+            sel = r == x
+            o[sel & at_v] = d[samples.vertex[sel & at_v]]
+            tri = sel & ~at_v
+            if np.any(tri):
+                o[tri] = d[F[samples.face[tri]]].max(axis=1)
     return out

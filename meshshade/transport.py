@@ -364,15 +364,15 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         far_field = "off"
     plan = None
     if model == "auto":
-        from .auto import neighbourhood_curvature, plan_sources, vertex_adjacency  # noqa: PLC0415
+        from .auto import neighbourhood_curvature, plan_sources  # noqa: PLC0415
 
-        indptr, indices = vertex_adjacency(mesh.n_vertices, F)
-        kmax = np.maximum(np.abs(curv.k1), np.abs(curv.k2))
         near_radius = (np.where(area, NEAR_MARGIN * near.max(), cut.max()) if far_field != "off"
                        else np.full(k, cut.max()))
-        k_near = neighbourhood_curvature(samples, kmax, F, indptr, indices, near_radius, mesh.mean_edge_length)
-        k_far = neighbourhood_curvature(samples, kmax, F, indptr, indices, cut.max(), mesh.mean_edge_length)
-        kmin_far = -neighbourhood_curvature(samples, -curv.k2, F, indptr, indices, cut.max(), mesh.mean_edge_length)
+        # per sample: max |k| within the near radius, and max |k| and max (-k2) within the cutoff
+        vals = np.stack([np.maximum(np.abs(curv.k1), np.abs(curv.k2)), -curv.k2], axis=1)
+        kn_near, kn_far = neighbourhood_curvature(samples, vals, V, F, [near_radius, cut.max()],
+                                                  mesh.mean_edge_length)
+        k_near, k_far, kmin_far = kn_near[:, 0], kn_far[:, 0], -kn_far[:, 1]
         plan = plan_sources(frames.k1, frames.k2, k_near, k_far, material, near_radius, cut, kmin_far=kmin_far,
                             **(auto_options or {}))
         lap("auto")

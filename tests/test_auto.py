@@ -225,3 +225,21 @@ def test_auto_uses_clustered_far_field_only_where_flat(sphere40):
     flat = transport.bake(sphere40, MARBLE, light, model="auto", auto_options=dict(curvature_tol=np.inf))
     assert flat.stats.get("zone_exact_near", 0) + flat.stats.get("zone_arc_near", 0) == flat.stats["entry_samples"]
     assert "near_mm" in flat.stats and flat.stats["far_clusters_accepted"] >= 0
+
+
+def test_neighbourhood_curvature_ball_query_and_dilation_agree_on_a_sphere_patch():
+    """Both routes (k-d ball for few samples, graph dilation for many) are >= the max over the geodesic disc and
+    pick the one bump within reach: a unit bump value at one vertex is seen by samples within the radius only."""
+    V, F = icosphere(10.0, 3)
+    vals = np.zeros(len(V))
+    vals[0] = 1.0
+    d0 = np.linalg.norm(V - V[0], axis=1)
+    idx = np.argsort(d0)[::40]
+    samples = type("S", (), {"vertex": idx, "face": np.full(idx.size, -1), "positions": V[idx],
+                             "__len__": lambda self: idx.size})()
+    edge = float(np.mean(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1)))
+    (ball,) = auto.neighbourhood_curvature(samples, vals, V, F, [5.0], edge, ball_query_below=10 ** 9)
+    (dil,) = auto.neighbourhood_curvature(samples, vals, V, F, [5.0], edge, ball_query_below=0)
+    assert np.all(ball[d0[idx] <= 5.0, 0] == 1) and np.all(ball[d0[idx] > 5.0, 0] == 0)
+    assert np.all(dil[d0[idx] <= 5.0, 0] == 1)  # dilation by ceil(5/edge) + 1 rings reaches at least 5 mm
+    assert np.all(dil[d0[idx] > 12.0, 0] == 0)  # and not absurdly far
