@@ -307,9 +307,9 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
             from .montecarlo_embree import DirectEmbreeScene  # noqa: PLC0415
             try:
                 direct = DirectEmbreeScene(V, F, scene.center)
-            except (RuntimeError, OSError):
+            except (RuntimeError, OSError) as exc:
                 if engine == "direct":
-                    raise
+                    raise MeshshadeError(f"engine='direct' is not available here ({exc}); use 'batched'") from exc
     emitter = _Emitter(V, F, normals, areas, lights, scene, material.eta)
     g = material.g
     sigma_s = material.sigma_s_prime / (1.0 - g)

@@ -32,6 +32,7 @@ _INVALID = np.uint32(0xFFFFFFFF)
 _SCENE_FLAG_ROBUST = 1 << 2
 _GEOMETRY_TRIANGLE, _BUFFER_INDEX, _BUFFER_VERTEX = 0, 0, 1
 _FORMAT_UINT3, _FORMAT_FLOAT3 = 0x5003, 0x9003
+_PROPERTY_VERSION_MAJOR = 1
 _LIB = None
 _DEVICE = None
 
@@ -55,7 +56,8 @@ def _library():
                                 ("rtcSetNewGeometryBuffer", vp, [vp, i32, u32, i32, sz, sz]),
                                 ("rtcCommitGeometry", None, [vp]), ("rtcAttachGeometry", u32, [vp, vp]),
                                 ("rtcReleaseGeometry", None, [vp]), ("rtcCommitScene", None, [vp]),
-                                ("rtcReleaseScene", None, [vp]), ("rtcGetDeviceError", i32, [vp])):
+                                ("rtcReleaseScene", None, [vp]), ("rtcGetDeviceError", i32, [vp]),
+                                ("rtcGetDeviceProperty", ctypes.c_ssize_t, [vp, i32])):
             fn = getattr(lib, name)
             fn.restype, fn.argtypes = res, args
         _LIB = lib
@@ -75,6 +77,9 @@ class DirectEmbreeScene:
             raise RuntimeError("libembree4 not found next to embreex")
         if _DEVICE is None:
             _DEVICE = lib.rtcNewDevice(None)
+        major = lib.rtcGetDeviceProperty(_DEVICE, _PROPERTY_VERSION_MAJOR)
+        if major != 4:  # the RTCRayHit layout and rtcIntersect1's signature below are Embree 4's
+            raise RuntimeError(f"Embree {major} found next to embreex, the direct binding needs Embree 4")
         self._lib = lib
         V = np.ascontiguousarray(np.asarray(vertices, dtype=np.float64) - center, dtype=np.float32)
         F = np.ascontiguousarray(faces, dtype=np.uint32)

@@ -123,6 +123,20 @@ def test_batched_embreex_mode_walks_the_same_paths():
     _assert_same(a, b, exact=False)
 
 
+@pytest.mark.slow
+def test_auto_engine_falls_back_to_batched(monkeypatch):
+    from meshshade import montecarlo_embree
+    from meshshade.errors import MeshshadeError
+
+    mesh, mat, lights = _sphere_scene()
+    kw = dict(photons=3000, seed=3, beam_distances=False)
+    a = simulate(mesh, mat, lights, engine="batched", **kw)
+    monkeypatch.setattr(montecarlo_embree, "_library", lambda: None)   # no bindable Embree library
+    _assert_same(a, simulate(mesh, mat, lights, engine="auto", **kw))
+    with pytest.raises(MeshshadeError, match="direct"):
+        simulate(mesh, mat, lights, engine="direct", **kw)
+
+
 # ------------------------------------------------------------------------------------------------ energy balance
 def test_energy_balance_exact_with_point_beam_and_directional_lights():
     mesh, mat, _ = _sphere_scene()
