@@ -152,24 +152,29 @@ class _Emitter:
                 self.facing[i] = normals @ (-np.array(light.direction)) > 0.0
 
     def emit(self, k: int, n_total: int, rng):
-        """k photons: (light, face, bary (k,3), points, dirs_in, weight_in, specular, incident)."""
+        """k photons: (light, face, points, dirs_in, weight_in, specular, incident).
+
+        points are moved just inside the surface; weight_in = incident x (1 - F), specular = incident x F.
+        """
         light = np.minimum(np.searchsorted(self.light_cdf, rng.random(k), side="right"), len(self.lights) - 1)
         face = np.zeros(k, dtype=np.int64)
-        bary = np.zeros((k, 3))
-        d_out = np.zeros((k, 3))           # incident direction (outside, travelling towards the surface)
+        points = np.zeros((k, 3))
+        dirs = np.zeros((k, 3))
+        Fr = np.zeros(k)
         weight = np.full(k, self.total_power / n_total)
         for i, part in enumerate(self.parts):
             sel = np.flatnonzero(light == i)
             if sel.size == 0:
                 continue
-            if part[0] == "beam":
-                face[sel], bary[sel], d_out[sel] = part[1], part[2], part[3]
+            if part[0] == "beam":   # one entry for all its photons
+                f, b, d = part[1], part[2], part[3]
+                p1, d1, F1 = self._enter(np.array([f]), np.asarray(b, dtype=np.float64)[None], np.asarray(d)[None])
+                face[sel], points[sel], dirs[sel], Fr[sel] = f, p1[0], d1[0], F1[0]
                 continue
             _, cdf, w_face, lt = part
             f = np.minimum(np.searchsorted(cdf, rng.random(sel.size), side="right"), cdf.size - 1)
             r1, r2 = np.sqrt(rng.random(sel.size)), rng.random(sel.size)
             b = np.stack([1.0 - r1, r1 * (1.0 - r2), r1 * r2], axis=1)
-            face[sel], bary[sel] = f, b
             p = np.einsum("ij,ijk->ik", b, self.V[self.F[f]])
             if isinstance(lt, DirectionalLight):
                 d = np.broadcast_to(np.array(lt.direction), (sel.size, 3))
@@ -182,17 +187,21 @@ class _Emitter:
                 # importance weight: true irradiance at the point over the face-centroid value used for sampling
                 cos = np.clip(-np.einsum("ij,ij->i", self.N[f], d), 0.0, None)
                 weight[sel] *= lt.intensity * cos / dist ** 2 * self.A[f] / w_face[f]
-            d_out[sel] = d
             origin = self.scene.offset_origins(p, self.N[f], sign=1.0)
             shadow = self.scene.occluded(origin, to_light, t_max)
             weight[sel[shadow]] = 0.0
+            face[sel] = f
+            points[sel], dirs[sel], Fr[sel] = self._enter(f, b, d)
+        return light, face, points, dirs, weight * (1.0 - Fr), weight * Fr, weight.copy()
+
+    def _enter(self, face, bary, d_out):
+        """Entry of photons arriving along d_out (n, 3) at (face, bary): (point just inside, refracted direction,
+        Fresnel reflectance F(cos_i) from index 1 into eta)."""
         points = np.einsum("ij,ijk->ik", bary, self.V[self.F[face]])
         n = self.N[face]
         cos_i = np.clip(-np.einsum("ij,ij->i", d_out, n), 0.0, 1.0)
         Fr = fresnel_reflectance(cos_i, 1.0, self.eta)
-        dirs = refract_in(d_out, n, self.eta)
-        points = self.scene.offset_origins(points, n, sign=-1.0)
-        return light, face, points, dirs, weight * (1.0 - Fr), weight * Fr, weight.copy()
+        return self.scene.offset_origins(points, n, sign=-1.0), refract_in(d_out, n, self.eta), Fr
 
 
 # ------------------------------------------------------------------------------------------------ results
@@ -358,12 +367,15 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
             with warnings.catch_warnings():   # a budget run with fewer photons than batches: NaN, not a warning
                 warnings.simplefilter("ignore", RuntimeWarning)
                 fse_tot = np.nanstd(ratios, axis=0, ddof=1) / np.sqrt(n_batches)
+            group_exits = None
+            if keep_beam_exits and walk.exits["face"]:
+                group_exits = {k: np.concatenate(v) for k, v in walk.exits.items()}
+                group_exits["weight"] = group_exits["weight"] * scale
             for c in chans:
                 face_p[:, c], face_se[:, c], vert_p[:, c], vert_se[:, c] = fp, fse, vp, vse
                 tot[:, c], tot_se[:, c], frac[:, c], frac_se[:, c] = tt, tse, fr, fse_tot
                 if keep_beam_exits and walk.exits["face"]:
-                    exits[c] = {k: np.concatenate(v) for k, v in walk.exits.items()}
-                    exits[c]["weight"] = exits[c]["weight"] * scale
+                    exits[c] = group_exits   # channels of one group share the (read-only) arrays
             events += walk.events
             boundary += walk.boundary
     finally:

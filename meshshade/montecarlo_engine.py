@@ -124,7 +124,7 @@ class PoolWalk:
         t0 = time.perf_counter()
         P = int(min(pool or DEFAULT_POOL, n_photons))
         st = _PoolState(P)
-        queue, e, chunk = None, 0, 0
+        queue, e, chunk = None, 0, 0   # the current chunk of pre-sampled entries and its next entry
         n_chunks = -(-n_photons // ENTRY_CHUNK)
         emitted = 0
         stop = False
@@ -145,18 +145,21 @@ class PoolWalk:
                         and DRAIN_SAFETY * 2 * max_live * per_photon < BUDGET_DRAIN_FRACTION * time_budget):
                     max_live = min(P, 2 * max_live)
             if not stop:
-                while (queue is None or queue[0].shape[0] - e < max_live) and chunk < n_chunks:
-                    new = self._entries(chunk, n_photons)
-                    chunk += 1
-                    queue = new if queue is None else [np.concatenate([q[e:], x]) for q, x in zip(queue, new)]
-                    e = 0
-                e_old = e
-                e, live = K.refill(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.batch,
-                                   st.light, st.pid, *queue, e, queue[0].shape[0], max_live, self._base, self.B,
-                                   self.tot)
-                emitted += e - e_old
-                if progress is not None and e > e_old:
-                    progress.update(e - e_old)
+                slot = 0
+                while live < max_live:
+                    if queue is None or e >= queue[0].shape[0]:
+                        if chunk >= n_chunks:
+                            stop = True
+                            break
+                        queue, e = self._entries(chunk, n_photons), 0
+                        chunk += 1
+                    e_old = e
+                    e, live, slot = K.refill(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr,
+                                             st.batch, st.light, st.pid, *queue, e, queue[0].shape[0], max_live,
+                                             live, slot, self._base, self.B, self.tot)
+                    emitted += e - e_old
+                    if progress is not None:
+                        progress.update(e - e_old)
                 if e >= queue[0].shape[0] and chunk >= n_chunks:
                     stop = True
             if live == 0:

@@ -383,43 +383,38 @@ def reduce_round(batch, light, absorbed, lost, exit_face, exit_bary, exit_w, F, 
 
 @njit(nogil=True, **_OPTS)
 def refill(status, pos, d, w, w0, pend, key, ctr, batch, light, pid, e_pos, e_dir, e_w, e_spec, e_inc, e_light,
-           e_pid, start, limit, max_live, base, n_batches, tot):
-    """Fill free slots (in slot order) from entries ``start`` .. ``limit - 1`` of the pre-sampled entry list.
+           e_pid, start, limit, max_live, live, slot, base, n_batches, tot):
+    """Fill free slots from ``slot`` on (in slot order) with entries ``start`` .. ``limit - 1`` of an entry chunk.
 
     Each consumed entry books its incident, specular and entering power (tot[:, 5], 0, 6); entries with no
-    entering weight (shadowed) take no slot. At most ``max_live`` photons are live afterwards.
-    Returns (next entry, live photons).
+    entering weight (shadowed) take no slot. Stops when the entries run out or ``live`` reaches ``max_live``.
+    Returns (next entry, live photons, next slot to look at).
     """
     e = start
-    live = 0
-    for i in range(status.shape[0]):
+    i = slot
+    n = status.shape[0]
+    while i < n and e < limit and live < max_live:
         if status[i] == ALIVE:
-            live += 1
-    for i in range(status.shape[0]):
-        if status[i] == ALIVE:
+            i += 1
             continue
-        while e < limit and live < max_live:
-            b = e_pid[e] % n_batches
-            tot[b, 0] += e_spec[e]
-            tot[b, 5] += e_inc[e]
-            tot[b, 6] += e_w[e]
-            if e_w[e] > 0.0:
-                status[i] = ALIVE
-                for a in range(3):
-                    pos[i, a] = e_pos[e, a]
-                    d[i, a] = e_dir[e, a]
-                w[i] = w0[i] = e_w[e]
-                pend[i] = -1.0
-                key[i] = photon_key(base, e_pid[e])
-                ctr[i] = np.uint64(0)
-                batch[i], light[i], pid[i] = b, e_light[e], e_pid[e]
-                live += 1
-                e += 1
-                break
-            e += 1
-        if e >= limit or live >= max_live:
-            break
-    return e, live
+        b = e_pid[e] % n_batches
+        tot[b, 0] += e_spec[e]
+        tot[b, 5] += e_inc[e]
+        tot[b, 6] += e_w[e]
+        if e_w[e] > 0.0:
+            status[i] = ALIVE
+            for a in range(3):
+                pos[i, a] = e_pos[e, a]
+                d[i, a] = e_dir[e, a]
+            w[i] = w0[i] = e_w[e]
+            pend[i] = -1.0
+            key[i] = photon_key(base, e_pid[e])
+            ctr[i] = np.uint64(0)
+            batch[i], light[i], pid[i] = b, e_light[e], e_pid[e]
+            live += 1
+            i += 1
+        e += 1
+    return e, live, i
 
 
 @njit(nogil=True, **_OPTS)
