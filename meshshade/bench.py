@@ -48,7 +48,7 @@ KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "p
 #: models for which bake's rtol (series tolerance) changes nothing
 NO_SERIES = ("dipole", "curved")
 COLUMNS = ("scene", "model", "knob", "value", "error_max", "error_mean", "error_energy", "time_s", "ref_kind",
-           "ref_stderr", "n_eval", "n_vertices", "light")
+           "ref_stderr", "resolved_frac", "n_eval", "n_vertices", "light")
 
 
 def bake_defaults() -> dict:

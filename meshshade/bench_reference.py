@@ -291,7 +291,8 @@ def _stats(rel) -> tuple[float, float]:
 def vertex_errors(mesh, M, ref: Reference) -> dict:
     """Errors of per-vertex exitance ``M`` (n,) against ``ref``: max and mean |relative error| over the mask
     (vertices, or MC patches) and the relative error of the total exitant power (global where the reference
-    knows it, else over the mask, area-weighted)."""
+    knows it, else over the mask, area-weighted). For MC also ``resolved_frac``: the fraction of patches where
+    the difference exceeds twice the MC standard error (the rest is within the reference's noise)."""
     M = np.asarray(M, float)
     A = mesh.vertex_areas
     if ref.kind == "mc":
@@ -302,8 +303,9 @@ def vertex_errors(mesh, M, ref: Reference) -> dict:
         sel = ref.patch_mask
         emax, emean = _stats(model[sel] / ref.patch_power[sel] - 1.0)
         total = float(np.sum(M * A))
+        resolved = np.abs(model[sel] - ref.patch_power[sel]) > 2.0 * ref.patch_stderr[sel]
         return {"error_max": emax, "error_mean": emean, "error_energy": total / ref.energy - 1.0,
-                "n_eval": int(sel.sum())}
+                "n_eval": int(sel.sum()), "resolved_frac": float(resolved.mean()) if resolved.size else None}
     sel = ref.mask
     emax, emean = _stats(M[sel] / ref.vertex[sel] - 1.0)
     if ref.energy is not None:

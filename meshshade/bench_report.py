@@ -71,7 +71,8 @@ def _decade_limits(ax, t, e):
 
 
 def pareto_figure(rows, *, title: str = ""):
-    """Log-log mean relative error vs wall time, one panel per scene, one marker per model, the front drawn."""
+    """Log-log mean relative error vs wall time, one panel per scene, one marker per model, the Pareto front
+    drawn (circled). Render rows (errors over pixels, time bake + render) are open markers outside the front."""
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
@@ -90,11 +91,15 @@ def pareto_figure(rows, *, title: str = ""):
         sub = [r for r in rows if r["scene"] == sc]
         t = np.array([r["time_s"] for r in sub], float)
         e = np.array([r["error_mean"] for r in sub], float)
+        pix = np.array([r["knob"] == "render" for r in sub], bool)
         for m in models:
-            k = [i for i, r in enumerate(sub) if r["model"] == m and e[i] > 0 and np.isfinite(e[i])]
-            if k:
-                ax.loglog(t[k], e[k], markers[m], color=colours[m], ms=5, alpha=0.8, label=m, ls="none")
-        f = pareto_front(t, e)
+            for is_pix in (False, True):
+                k = [i for i, r in enumerate(sub) if r["model"] == m and e[i] > 0 and np.isfinite(e[i])
+                     and pix[i] == is_pix]
+                if k:
+                    ax.loglog(t[k], e[k], markers[m], color=colours[m], ms=5, alpha=0.8, ls="none",
+                              mfc="none" if is_pix else colours[m], label=None if is_pix else m)
+        f = np.flatnonzero(~pix)[pareto_front(t[~pix], e[~pix])]  # render rows measure pixels: not in the front
         if f.size:
             ax.step(t[f], e[f], where="post", color="k", lw=0.9, alpha=0.7, label="Pareto front")
             ax.plot(t[f], e[f], "o", mfc="none", mec="k", ms=9, mew=0.8)

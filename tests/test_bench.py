@@ -90,6 +90,7 @@ def test_bench_tiny_rows_finite_with_required_columns(tiny_result):
         assert r["n_eval"] > 10
     mc_rows = [r for r in rows if r["ref_kind"] == "mc"]
     assert mc_rows and all(0 < r["ref_stderr"] < br.MC_MAX_REL_STDERR for r in mc_rows)
+    assert all(0.0 <= r["resolved_frac"] <= 1.0 for r in mc_rows)
     meta = tiny_result.metadata
     assert meta["seed"] == 3 and len(meta["load_average_before"]) == 3 and meta["failures"] == []
 
