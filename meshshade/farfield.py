@@ -17,13 +17,17 @@ with remainder at most ``P m3/6 * T(d - a)``, where T(r) bounds the dipole's thi
 cluster is used whole only when it lies wholly inside the annulus r_near < r <= cutoff and this remainder is at
 most ``rel_tol * P R(d + a)``, a lower bound of the cluster's exact contribution (R decreases). Clusters wholly
 inside r_near or beyond the cutoff are skipped, the others opened; leaves are summed pair by pair with the exact
-masks. Summed over the clusters,
+masks. A share ``budget_share`` of rel_tol may instead be spent as a global budget: a cluster that fails
+that test, or one that straddles the cutoff (the sources beyond it then add at most P R(cutoff)), is still used
+whole if its bound is at most ``budget_share * rel_tol * L * P / P_total``, with L = (sum so far) - (bounds so
+far) <= M_far_exact a running lower bound (nearest clusters are visited first). Summed over the clusters,
 
     |M_far(x) - M_far_exact(x)|  <=  stats["error_bound"](x)  <=  rel_tol * M_far_exact(x)
 
-for every receiver and channel (up to float64 rounding). Measured errors are 30-1000x below the guaranteed
-bound (tools/bench_farfield.py), because the third-order terms of a cluster largely cancel. Relative to the
-total exitance the error is at most ``rel_tol`` times the far field's share of it (see :func:`far_field_radius`).
+for every receiver and channel (up to float64 rounding). Measured maximum errors are 40-100x below the
+guaranteed bound (tools/bench_farfield.py), because a cluster's third-order terms largely cancel. Relative to
+the total exitance the error is at most ``rel_tol`` times the far field's share of it (see
+:func:`far_field_radius`).
 
 Cost: the expansion is accepted when (a/d)^3 ~ rel_tol (1/r^3 regime) or (mu a)^3 ~ rel_tol (exponential
 regime), so a receiver evaluates O(log(cutoff/r_near) / rel_tol^(2/3)) clusters, plus the leaves that straddle
@@ -41,14 +45,15 @@ from .kernels.dipole import dipole_cutoff_radius
 from .kernels.optics import diffusion_params
 from .materials import Material
 
-#: default guaranteed relative tolerance on the far-field sum (measured errors are 30-1000x below it)
+#: default guaranteed relative tolerance on the far-field sum (measured maximum errors are 40-100x below it)
 DEFAULT_REL_TOL = 0.1
 #: share of rel_tol spent as a global budget (running lower bound of M times the cluster's power share)
 DEFAULT_BUDGET_SHARE = 0.25
 #: sources per leaf (16 beat 8 and 32 on 10k-40k vertex spheres: fewer node visits, more exact pairs)
 DEFAULT_LEAF_SIZE = 16
-#: default share of the dipole's energy left to the far field when choosing r_near (far_field_radius)
-DEFAULT_FAR_TOL = 0.05
+#: default share of the dipole's energy left to the far field when choosing r_near (far_field_radius):
+#: 0.3 gives r_near = 5-6 transport lengths for marble and milk, 1.4-2.6 for skin1
+DEFAULT_FAR_TOL = 0.3
 #: candidate pairs per chunk in the direct sum (memory ~ 24 bytes per pair)
 DIRECT_PAIRS_PER_CHUNK = 4_000_000
 #: receivers per block of the processing order (k-d leaves, shuffled across threads)
@@ -76,7 +81,10 @@ def _power(value, k) -> np.ndarray:
 
 
 def _radii(name, value, *, allow_zero) -> np.ndarray:
-    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)).copy()
+    try:
+        arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)).copy()
+    except (TypeError, ValueError):
+        raise MeshshadeError(f"{name} must be a number or three numbers (mm), got {value!r}") from None
     bad = ~np.isfinite(arr) | (arr < 0) | (~allow_zero & (arr == 0))
     if np.any(bad):
         raise MeshshadeError(f"{name} must be finite and {'>=' if allow_zero else '>'} 0 mm, got {arr.tolist()}")
@@ -196,8 +204,9 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
     -------
     M_far : (n, 3) float64 W/mm^2
     stats : dict with ``pairs_exact`` (pair-channel kernel evaluations at leaves), ``clusters_accepted``
-        (cluster-channel evaluations; ``clusters_from_budget`` of them by the budget), ``nodes_visited``, ``error_bound`` ((n, 3) W/mm^2, the sum of the
-        accepted clusters' bounds, <= rel_tol * M_exact), ``seconds``, ``rel_tol``.
+        (cluster-channel evaluations; ``clusters_from_budget`` of them by the budget), ``nodes_visited``,
+        ``error_bound`` ((n, 3) W/mm^2, the sum of the accepted clusters' bounds, <= rel_tol * M_exact),
+        ``seconds``, ``rel_tol``.
     """
     from . import farfield_kernels as fk  # noqa: PLC0415
 
@@ -277,8 +286,9 @@ def far_field_radius(material: Material, far_tol: float = DEFAULT_FAR_TOL) -> np
     """(3,) mm: per channel, the radius beyond which the dipole's closed-form tail holds ``far_tol`` of its total.
 
     The r_near policy for the bake: with ``r_near = far_field_radius(material, far_tol)`` the far field carries
-    at most about ``far_tol`` of a flat surface's exitance, so a relative far-field error ``rel_tol`` is at most
-    about ``rel_tol * far_tol`` of the local exitance.
+    exactly ``far_tol`` of the exitance of a uniformly lit plane (about that much on smooth lit surfaces; all of
+    it in shadowed regions), so the guaranteed far-field error ``rel_tol`` is about ``rel_tol * far_tol`` of the
+    local exitance where the surface is lit.
     """
     if not (0 < far_tol < 1):
         raise MeshshadeError(f"far_tol must lie in (0, 1), got {far_tol}")
