@@ -311,7 +311,10 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         raise MeshshadeError(f"engine must be 'auto', 'direct' or 'batched', got {engine!r}")
     if fast_interior:
         from .montecarlo_interior import SafeDistanceGrid  # noqa: PLC0415
-        grid = SafeDistanceGrid(V, F)
+        sigma_t_max = float(np.max(material.sigma_s_prime / (1.0 - material.g) + material.sigma_a))
+        # no half-space certificates under a time budget: their set-up would be spent before the first photon
+        use_planes = sigma_t_max > 0 and time_budget is None
+        grid = SafeDistanceGrid(V, F, mean_free_path=1.0 / sigma_t_max if use_planes else None)
         if engine != "batched" and getattr(scene, "backend", "") == "embree":
             from .montecarlo_embree import DirectEmbreeScene  # noqa: PLC0415
             try:

@@ -150,14 +150,14 @@ def _cast(intersect, scene, o32, d32):
     return out
 
 
-def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w, safe, geo, v0, e1,
-          e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh, boost, max_steps,
-          intersect, scene):
+def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w, safe, geo, planes,
+          pidx, v0, e1, e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh, boost,
+          max_steps, intersect, scene):
     """Every live photon walks up to ``max_steps`` events (scattering or surface) or until it dies.
 
-    Free paths certified by the safe-distance grid need no ray; the others are traced by Embree from this
-    thread. The photon's state stays in local variables for the whole round. Returns (scattering events,
-    boundary events, rays).
+    Free paths certified by the safe-distance grid (distance bound or half-space certificate) need no ray; the
+    others are traced by Embree from this thread. The photon's state stays in local variables for the whole
+    round. Returns (scattering events, boundary events, rays).
     """
     n = status.shape[0]
     events = 0
@@ -183,7 +183,7 @@ def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit
                 u, c = K._uniform(k, c)
                 s = -math.log(1.0 - u) / sigma_t
             kind = K.SCATTER
-            if s >= K._safe(safe, geo, x, y, z):
+            if not K.certified(safe, geo, planes, pidx, x, y, z, dx, dy, dz, s):
                 f = _trace(intersect, scene, rh, rhi, x - center[0], y - center[1], z - center[2], dx, dy, dz,
                            min(s + margin, 1e37))
                 nr += 1

@@ -107,7 +107,8 @@ class PoolWalk:
         # the bound as uint8 in units of h/4, rounded down (conservative): 1/8 of the float64 grid's cache footprint
         unit = grid.h / SAFE_STEPS_PER_VOXEL
         self._safe = np.minimum(np.floor(grid.safe / unit), 255).astype(np.uint8)
-        self._geo = np.array([*grid.origin, 1.0 / grid.h, unit])
+        self._geo = np.array([*grid.origin, 1.0 / grid.h, unit, grid.h, grid.plane_radius ** 2])
+
 
     # --- entries ----------------------------------------------------------------------------------------------
     def _entries(self, chunk, n_photons):
@@ -176,18 +177,20 @@ class PoolWalk:
         return emitted
 
     def _round(self, st, live, steps):
+        grid = self.grid
         common = (self._v0, self._e1, self._e2, self._N, self._center, self.scene.scale, OFFSET_REL, OFFSET_ABS)
         if self.direct is not None:
             # dynamic chunks: a thread preempted by another process does not hold up the round
             with numba.parallel_chunksize(CHUNK):
                 ev, bd, nr = E.walk_parallel(
                     st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.lost, st.exit_face,
-                    st.exit_bary, st.exit_w, self._safe, self._geo, *common, self._margin, self.sigma_t, self.albedo,
-                    self.g, self.eta, K_THRESH, K_BOOST, steps, self.direct.intersect, self.direct.handle)
+                    st.exit_bary, st.exit_w, self._safe, self._geo, grid.planes, grid.plane_index,
+                    *common, self._margin, self.sigma_t, self.albedo, self.g, self.eta, K_THRESH, K_BOOST, steps,
+                    self.direct.intersect, self.direct.handle)
         else:
             ev = K.advance_parallel(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed,
-                                    st.need, self._safe, self._geo, self.sigma_t, self.albedo, self.g, K_THRESH,
-                                    K_BOOST, steps)
+                                    st.need, self._safe, self._geo, grid.planes, grid.plane_index,
+                                    self.sigma_t, self.albedo, self.g, K_THRESH, K_BOOST, steps)
             idx, o32, d32, tfar = K.gather_rays(st.need, st.pos, st.d, st.pend, self._center, self._margin)
             nr = bd = 0
             if idx.shape[0]:

@@ -74,17 +74,34 @@ def uniform_stream(key, n):
 
 
 @njit(inline="always", **_OPTS)
-def _safe(safe, geo, x, y, z):
-    """Conservative distance to the surface (mm) at (x, y, z); 0 outside the grid.
+def certified(safe, geo, planes, pidx, x, y, z, dx, dy, dz, s):
+    """Whether the free path from (x, y, z) along (dx, dy, dz) of length ``s`` provably stays inside the mesh.
 
-    safe : (nx, ny, nz) uint8 bound in units of geo[4] (rounded down); geo = (origin x, y, z, 1/h, unit).
+    First the distance bound (safe: (nx, ny, nz) uint8 in units of geo[4], rounded down), then the voxel's
+    half-space certificate (pidx: plane index or -1; planes: (n, c); both ends in {n . y < c} and the end within
+    sqrt(geo[6]) of the voxel centre); see :mod:`meshshade.montecarlo_interior`. Whether a path is certified
+    never changes the walk, only its cost.
+    geo = (origin x, y, z, 1/h, bound unit, h, certificate radius**2).
     """
-    a = math.floor((x - geo[0]) * geo[3])
-    b = math.floor((y - geo[1]) * geo[3])
-    c = math.floor((z - geo[2]) * geo[3])
-    if a < 0 or b < 0 or c < 0 or a >= safe.shape[0] or b >= safe.shape[1] or c >= safe.shape[2]:
-        return 0.0
-    return safe[int(a), int(b), int(c)] * geo[4]
+    fa = math.floor((x - geo[0]) * geo[3])
+    fb = math.floor((y - geo[1]) * geo[3])
+    fc = math.floor((z - geo[2]) * geo[3])
+    if fa < 0 or fb < 0 or fc < 0 or fa >= safe.shape[0] or fb >= safe.shape[1] or fc >= safe.shape[2]:
+        return False
+    a, b, c = int(fa), int(fb), int(fc)
+    if s < safe[a, b, c] * geo[4]:
+        return True
+    j = pidx[a, b, c]
+    if j < 0:
+        return False
+    ex, ey, ez = x + s * dx, y + s * dy, z + s * dz
+    rx = ex - (geo[0] + (a + 0.5) * geo[5])
+    ry = ey - (geo[1] + (b + 0.5) * geo[5])
+    rz = ez - (geo[2] + (c + 0.5) * geo[5])
+    if rx * rx + ry * ry + rz * rz >= geo[6]:
+        return False
+    nx, ny, nz, cc = planes[j, 0], planes[j, 1], planes[j, 2], planes[j, 3]
+    return nx * x + ny * y + nz * z < cc and nx * ex + ny * ey + nz * ez < cc
 
 
 @njit(inline="always", **_OPTS)
@@ -254,8 +271,8 @@ def surface_event(i, f, pos, d, w, w0, pend, key, ctr, absorbed, lost, status, e
 
 
 @njit(inline="always", **_OPTS)
-def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, geo, sigma_t, albedo, g, thresh, boost,
-                 max_steps):
+def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, geo, planes, pidx, sigma_t, albedo, g,
+                 thresh, boost, max_steps):
     """Photon i scatters while its free path is certified by the safe-distance bound, at most ``max_steps`` times.
 
     Returns (events, need): ``need`` is True when the pending free path (kept in ``pend``) may reach the surface.
@@ -272,7 +289,7 @@ def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, geo, 
         if s < 0.0:
             u, c = _uniform(k, c)
             s = -math.log(1.0 - u) / sigma_t
-        if s >= _safe(safe, geo, x, y, z):
+        if not certified(safe, geo, planes, pidx, x, y, z, dx, dy, dz, s):
             need = True
             break
         if ev >= max_steps:
@@ -292,8 +309,8 @@ def interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, geo, 
     return ev, need
 
 
-def _advance(status, pos, d, w, w0, pend, key, ctr, absorbed, need, safe, geo, sigma_t, albedo, g, thresh, boost,
-             max_steps):
+def _advance(status, pos, d, w, w0, pend, key, ctr, absorbed, need, safe, geo, planes, pidx, sigma_t, albedo, g,
+             thresh, boost, max_steps):
     """:func:`interior_run` for every live photon (``need`` marks the photons waiting for a boundary test).
 
     Photons stopped by ``max_steps`` continue next round. Returns the number of scattering events.
@@ -303,8 +320,8 @@ def _advance(status, pos, d, w, w0, pend, key, ctr, absorbed, need, safe, geo, s
     for i in prange(n):
         need[i] = False
         if status[i] == ALIVE:
-            ev, nd = interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, geo, sigma_t, albedo, g,
-                                  thresh, boost, max_steps)
+            ev, nd = interior_run(i, pos, d, w, w0, pend, key, ctr, absorbed, status, safe, geo, planes, pidx,
+                                  sigma_t, albedo, g, thresh, boost, max_steps)
             need[i] = nd
             events += ev
     return events

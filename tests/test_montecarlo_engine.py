@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from meshshade.geometry.mesh import Mesh
-from meshshade.geometry.procedural import icosphere
+from meshshade.geometry.procedural import box, icosphere
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.lights import BeamLight, DirectionalLight, PointLight
 from meshshade.materials import Material
@@ -135,6 +135,22 @@ def test_auto_engine_falls_back_to_batched(monkeypatch):
     _assert_same(a, simulate(mesh, mat, lights, engine="auto", **kw))
     with pytest.raises(MeshshadeError, match="direct"):
         simulate(mesh, mat, lights, engine="direct", **kw)
+
+
+def test_half_space_certificates_change_cost_not_paths(monkeypatch):
+    """The certificates only skip rays whose answer is 'no hit within the free path': identical walks."""
+    from meshshade import montecarlo_interior
+
+    mesh = Mesh.from_arrays(*box((10.0, 10.0, 5.0)))
+    args = (mesh, Material(9.0, 1.0, eta=1.5), [BeamLight((0.123, 0.0456, 10.0), (0.0, 0.0, -1.0))])
+    kw = dict(photons=4000, seed=8, beam_distances=False)
+    with_planes = simulate(*args, **kw)
+    assert montecarlo_interior.PLANE_MAX_FACES >= 12                  # the box gets certificates ...
+    monkeypatch.setattr(montecarlo_interior, "PLANE_MAX_FACES", 0)   # ... and here none
+    without = simulate(*args, **kw)
+    assert (with_planes.events, with_planes.boundary_events) == (without.events, without.boundary_events)
+    assert with_planes.boundary_tests < 0.7 * without.boundary_tests
+    _assert_same(with_planes, without, exact=False)
 
 
 # ------------------------------------------------------------------------------------------------ energy balance
