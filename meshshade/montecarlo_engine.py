@@ -6,8 +6,9 @@ A pool of ``pool`` photon slots is advanced in rounds:
    order (entries are drawn in fixed chunks of ``ENTRY_CHUNK`` photons, chunk ``c`` from
    ``numpy.random.default_rng([seed, group, c])``, so photon ``i``'s entry does not depend on the pool);
 2. the walk (numba, threads over photons): a photon scatters without any ray while its sampled free path is
-   shorter than the conservative distance-to-surface bound of the
-   :class:`~meshshade.montecarlo_interior.SafeDistanceGrid`; otherwise Embree selects the first face hit within
+   certified by the :class:`~meshshade.montecarlo_interior.SafeDistanceGrid` (shorter than the conservative
+   distance to the surface, or both ends inside a half-space certificate); otherwise Embree selects the first face
+   hit within
    the free path (float32), the distance is recomputed in float64 on that face, and the photon scatters before
    the surface, is Fresnel-reflected or leaves (:func:`~meshshade.montecarlo_kernels.surface_event`). At most
    ``MAX_STEPS`` events per photon and round.
