@@ -7,11 +7,10 @@ A pool of ``pool`` photon slots is advanced in rounds:
    ``numpy.random.default_rng([seed, group, c])``, so photon ``i``'s entry does not depend on the pool);
 2. the walk (numba, threads over photons): a photon scatters without any ray while its sampled free path is
    certified by the :class:`~meshshade.montecarlo_interior.SafeDistanceGrid` (shorter than the conservative
-   distance to the surface, or both ends inside a half-space certificate); otherwise Embree selects the first face
-   hit within
-   the free path (float32), the distance is recomputed in float64 on that face, and the photon scatters before
-   the surface, is Fresnel-reflected or leaves (:func:`~meshshade.montecarlo_kernels.surface_event`). At most
-   ``MAX_STEPS`` events per photon and round.
+   distance to the surface, or both ends inside a half-space certificate); otherwise Embree selects the first
+   face hit within the free path (float32), the distance is recomputed in float64 on that face, and the photon
+   scatters before the surface, is Fresnel-reflected or leaves (:func:`~meshshade.montecarlo_kernels.surface_s`).
+   At most ``MAX_STEPS`` events per photon and round.
 
    * ``direct`` (default): every thread calls Embree's ``rtcIntersect1`` itself
      (:mod:`meshshade.montecarlo_embree`), so the boundary tests run on all cores;
