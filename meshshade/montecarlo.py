@@ -502,7 +502,8 @@ def summary_dict(result: MCResult) -> dict:
         out[key] = float(val[0]) if grey else [float(x) for x in val]
     out.update(lost=float(result.lost[0]) if grey else [float(x) for x in result.lost],
                photons=int(result.photons), events=int(result.events),
-               boundary_events=int(result.boundary_events), seconds=float(result.seconds),
+               boundary_events=int(result.boundary_events), boundary_tests=int(result.boundary_tests),
+               seconds=float(result.seconds), cpu_seconds=float(result.cpu_seconds),
                events_per_second=float(result.events_per_second), n_batches=int(result.n_batches),
                material=result.material.to_dict())
     return out
