@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -299,7 +299,8 @@ def describe_scale(mesh, material: Material) -> str:
 def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol: float = 1e-4,
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool = False,
          rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
-         far_field: str | None = None, far_tol: float = 1e-2, far_rel_tol: float = 1e-2) -> BakeResult:
+         far_field: str | None = None, far_tol: float = 1e-2, far_rel_tol: float = 1e-2,
+         far_geodesic: str = "cluster") -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
 
     Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
@@ -308,7 +309,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     ``geodesic``: "exact" (polyhedral window propagation, the reference; default) or "arc" (curvature-corrected
     chords over an edge-path search: 1e-4 on smooth meshes such as spheres and tori and about 5x faster, but
     1-11 % low on average on bumpy scanned meshes; see geometry/fast_neighbourhood.py). With ``model="auto"``
-    the geodesic method is chosen per entry sample (``geodesic`` is ignored) and ``auto_options`` may override
+    the geodesic method is chosen per entry sample ("arc" restricts it to arc) and ``auto_options`` may override
     the tolerances of :func:`meshshade.auto.plan_sources`.
 
     ``far_field``: "off", "clustered" or "direct" (default: "clustered" for ``auto``, "off" otherwise). When on,
@@ -319,6 +320,9 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     by a source tree with relative error <= ``far_rel_tol`` on that part (farfield.py; "direct" sums them
     exactly, for validation). Pairs whose chord is within r_near but whose geodesic distance is not (across a
     fold) are dropped, as the geodesic neighbourhood drops them without the far field.
+    ``far_geodesic`` ("cluster" or "arc"): how ``auto`` finds the far-zone geodesics of curved vertex samples:
+    one exact query per cluster of nearby samples, each member's distance from the centre's by the law of
+    cosines in the tangent plane (source_clusters.py), or the arc method.
     """
     from .geometry.curvature import principal_curvatures  # noqa: PLC0415
     from .lights import BeamLight, entry_samples  # noqa: PLC0415
@@ -375,9 +379,13 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         k_near, k_far, kmin_far = kn_near[:, 0], kn_far[:, 0], -kn_far[:, 1]
         plan = plan_sources(frames.k1, frames.k2, k_near, k_far, material, near_radius, cut, kmin_far=kmin_far,
                             **(auto_options or {}))
+        if geodesic != "exact":
+            plan = replace(plan, exact_geodesic=np.zeros(k, dtype=bool))
         lap("auto")
-    zone = _zones(k, area, far_field, geodesic, plan)
-    clustered = zone >= ZONE_EXACT_NEAR  # sources whose pairs beyond r_near go to the far-field sum
+    if plan is not None and far_geodesic == "cluster" and not _clusters_pay(mesh, near, cut):
+        far_geodesic = "none"  # small mesh or short cutoff: shared far-zone geodesics would not save work
+    zone = _zones(k, area, far_field, geodesic, plan, far_geodesic)
+    clustered = np.array([zz[3] for zz in ZONES])[zone]  # sources whose pairs beyond r_near go to the far sum
     groups = [(z, np.flatnonzero(zone == z)) for z in range(len(ZONES))]
     groups = [(z, idx) for z, idx in groups if idx.size]
     # per source and channel: the radius of the geodesic gather; clustered sources keep the near pairs by
@@ -387,7 +395,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     src_cut = np.where(clustered[:, None], NEAR_MARGIN * near[None, :], cut[None, :])
     chord_cut = np.where(clustered[:, None], near[None, :], np.inf)
     kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan)
-    methods = {m for z, _ in groups for m in ZONES[z][1:] if m}
+    methods = {m.replace("-cluster", "") for z, _ in groups for m in ZONES[z][1:3] if m}
     solvers = {m: _neighbourhood_solver(m, mesh) for m in methods}
     lap("neighbourhoods")
     stats = {"entry_samples": k, "cutoff_mm": cut.tolist(), **samples.stats,
@@ -407,7 +415,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
             from tqdm import tqdm  # noqa: PLC0415
             # no bar when stderr is not a terminal (pipes, logs): errors stay one clean line there
             bar = tqdm(total=k, desc="gather", unit="src", leave=False, disable=None)
-        n_pairs = 0
+        n_pairs = n_geo = 0  # pairs gathered; pairs whose geodesic distance a solver computed
 
         def query(method, sel, radius):
             nb = solvers[method].query(samples.positions[sel], samples.face[sel], samples.bary[sel],
@@ -415,10 +423,44 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
                                        d2=frames.d2[sel], k1=frames.k1[sel], k2=frames.k2[sel])
             return sel[nb.source_index()], nb.vertex.astype(np.int64), nb.distance, nb.chord, nb.phi
 
+        def cluster_pairs(idx):
+            """Zone exact_near_cluster_far: exact near pairs per sample, far pairs from cluster centres."""
+            from .source_clusters import cluster_sources, expand_far_pairs  # noqa: PLC0415
+
+            nonlocal n_pairs, n_geo
+            size, near_c = _cluster_geometry(mesh, near)
+            order, ptr = cluster_sources(samples.positions[idx], frames.normals[idx], size)
+            order = idx[order]
+            centre_rows = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
+            centre_of = order[ptr[:-1]][centre_rows]  # the centre sample of each entry of ``order``
+            n = np.int64(mesh.n_vertices)
+            a_max = float(np.max(np.linalg.norm(samples.positions[order] - samples.positions[centre_of], axis=1)))
+            c_chunk = max(1, int(chunk * (ptr.size - 1) / max(order.size, 1)))
+            for c0 in range(0, ptr.size - 1, c_chunk):
+                c1 = min(ptr.size - 1, c0 + c_chunk)
+                mem = order[ptr[c0]:ptr[c1]]
+                cen = order[ptr[c0:c1]]
+                pn = query("exact", mem, near_c)
+                pc = query("exact", cen, cut.max() + a_max)
+                keys = np.sort(pn[0] * n + pn[1])
+                pf = expand_far_pairs(pc, (mem, centre_of[ptr[c0]:ptr[c1]]), samples.positions, V, frames,
+                                      exclude_keys=keys, max_distance=cut.max())
+                p = tuple(np.concatenate([x, y]) for x, y in zip(pn, pf))
+                n_pairs += p[0].size
+                n_geo += pn[0].size + pc[0].size
+                lap("neighbourhoods")
+                yield p
+                lap("gather")
+                if bar is not None:
+                    bar.update(mem.size)
+
         def pairs():
-            nonlocal n_pairs
+            nonlocal n_pairs, n_geo
             for z, idx in groups:
-                _, inner, outer = ZONES[z]
+                _, inner, outer, _ = ZONES[z]
+                if outer == "exact-cluster":
+                    yield from cluster_pairs(idx)
+                    continue
                 for a in range(0, idx.size, chunk):
                     sel = idx[a:a + chunk]
                     if outer is None:  # one method over the source's whole gather radius
@@ -429,6 +471,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
                         fresh = ~np.isin(po[0] * n + po[1], pi[0] * n + pi[1])
                         p = tuple(np.concatenate([x, y[fresh]]) for x, y in zip(pi, po))
                     n_pairs += p[0].size
+                    n_geo += p[0].size if outer is None else pi[0].size + po[0].size
                     lap("neighbourhoods")
                     yield p
                     lap("gather")
@@ -444,7 +487,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
             if bar is not None:
                 bar.close()
-        stats.update(gstats, pairs_found=n_pairs)
+        stats.update(gstats, pairs_found=n_pairs, geodesic_pairs_computed=n_geo)
         if np.any(clustered):
             from .farfield import far_field_exitance, far_field_exitance_direct  # noqa: PLC0415
             fn = far_field_exitance if far_field == "clustered" else far_field_exitance_direct
@@ -471,33 +514,61 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
                       timings, stats, plan)
 
 
-#: how a source's pairs are found: (name, method within the gather radius, method beyond r_near or None).
-#: Zones from ZONE_EXACT_NEAR on gather only to r_near; their farther pairs go to the clustered far field.
-ZONES = (("exact", "exact", None), ("arc", "arc", None), ("exact_near_arc_far", "exact", "arc"),
-         ("exact_near", "exact", None), ("arc_near", "arc", None))
-ZONE_EXACT_NEAR = 3
+#: how a source's pairs are found: (name, method within the gather radius, method beyond r_near or None,
+#: far field summed by clusters of the dipole). "exact-cluster": one exact far query per cluster of samples
+#: (source_clusters.py). Zones with the far-field sum gather only to r_near.
+ZONES = (("exact", "exact", None, False), ("arc", "arc", None, False),
+         ("exact_near_arc_far", "exact", "arc", False), ("exact_near", "exact", None, True),
+         ("arc_near", "arc", None, True), ("exact_near_cluster_far", "exact", "exact-cluster", False))
 #: geodesic search radius of the near zone, in units of r_near (pairs are kept by chord <= r_near)
 NEAR_MARGIN = 1.1
+#: cluster size of the exact-cluster far zone, in mean edge lengths (capped at r_near / 4)
+CLUSTER_EDGES = 4.0
+#: exact per-sample geodesics within this many cluster sizes (the law of cosines is used only beyond)
+CLUSTER_NEAR = 3.0
 
 
-def _zones(k: int, area, far_field: str, geodesic: str, plan) -> np.ndarray:
+def _zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic: str = "cluster") -> np.ndarray:
     """(k,) zone index per entry sample (see ZONES).
 
     Without a plan: every source uses ``geodesic``; with a far field, vertex samples gather only to r_near.
-    With the auto plan: exact or arc per sample; vertex samples whose surroundings are flat to the cutoff
+    With the auto plan: exact or arc per sample (only arc when ``geodesic`` is "arc"); vertex samples whose surroundings are flat to the cutoff
     (``plan.far_dipole``) gather to r_near and leave the rest to the clustered dipole; the other vertex samples
-    keep their curved kernel over the whole neighbourhood, with exact geodesics only in the near zone.
+    keep their kernel over the whole neighbourhood, with exact geodesics in the near zone and, beyond it,
+    geodesics shared by clusters of samples (``far_geodesic="cluster"``) or arc geodesics ("arc").
     """
     far = area & (far_field != "off")
     if plan is None:
         zone = np.full(k, 0 if geodesic == "exact" else 1, dtype=np.int64)
-        zone[far] += ZONE_EXACT_NEAR
+        zone[far] += 3
         return zone
-    ex = plan.exact_geodesic
+    ex = plan.exact_geodesic & (geodesic == "exact")  # geodesic="arc" caps auto at arc geodesics
+    if geodesic != "exact":
+        far_geodesic = "arc"
     zone = np.where(ex, 0, 1).astype(np.int64)
-    zone[far & ex & ~plan.far_dipole] = 2
+    if far_geodesic != "none":
+        zone[far & ex & ~plan.far_dipole] = 5 if far_geodesic == "cluster" else 2
     zone[far & plan.far_dipole] = np.where(ex[far & plan.far_dipole], 3, 4)
     return zone
+
+
+def _cluster_geometry(mesh, near):
+    """(cluster size, exact near radius) of the exact_near_cluster_far zone, mm."""
+    size = min(CLUSTER_EDGES * mesh.mean_edge_length, 0.25 * float(np.max(near)))
+    return size, min(NEAR_MARGIN * float(np.max(near)), CLUSTER_NEAR * size)
+
+
+def _clusters_pay(mesh, near, cut) -> bool:
+    """Whether sharing far-zone geodesics within clusters saves at least 30 % of the geodesic pairs (estimated
+    from disc areas capped by the mesh's area: members x A(near) + centres x A(cutoff) vs members x A(cutoff))."""
+    size, near_c = _cluster_geometry(mesh, near)
+    per_vertex = mesh.total_area / max(mesh.n_vertices, 1)
+    members = max(1.0, size * size / per_vertex)  # samples per cubic cell of a surface (order of magnitude)
+
+    def disc(r):
+        return min(np.pi * r * r, mesh.total_area)
+    rc = float(np.max(cut))
+    return disc(near_c) / disc(rc) + disc(rc + size) / (members * disc(rc)) < 0.7
 
 
 def _neighbourhood_solver(method: str, mesh):

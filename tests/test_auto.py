@@ -127,15 +127,24 @@ def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     got = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_field="off")
     assert got.stats["auto_kernel_curved"] == got.stats["entry_samples"]
     np.testing.assert_allclose(got.radiance, ref.radiance, rtol=1e-12, atol=0)
-    # with the far zone on arc geodesics (exact within r_near): arcs follow the smooth sphere's great circles,
-    # the polyhedral geodesics of this coarse sphere (1.3 mm edges) are shorter by O(h^2), ~0.3 % (test_neighbourhood);
-    # at s ~ 20 mm the red kernel falls by d ln R/ds ~ -(sigma_tr + 2/s) ~ -0.37/mm, so the dim far side may move
-    # by up to 0.3 % * 20 mm * 0.37/mm ~ 2.2 %; the lit side, dominated by the exact near zone, much less
-    split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts)
-    assert split.stats["zone_exact_near_arc_far"] == split.stats["entry_samples"]
+    # far zone on geodesics shared by clusters of samples (default) or on arc geodesics, exact within r_near.
+    # Clusters: the law of cosines on the centre's constant-curvature triangle (test_source_clusters: ~1e-3 mm
+    # mean). Arcs follow the smooth sphere's great circles, while the polyhedral geodesics of this coarse sphere
+    # (1.3 mm edges) are shorter by O(h^2), ~0.3 % (test_neighbourhood); at s ~ 20 mm the red kernel falls by
+    # d ln R/ds ~ -(sigma_tr + 2/s) ~ -0.37/mm, so the dim far side may move by up to 0.3 % * 20 mm * 0.37/mm ~ 2.2 %
     lit = ref.radiance > 1e-3 * ref.radiance.max(axis=0)
-    rel = np.abs(split.radiance - ref.radiance)[lit] / ref.radiance[lit]
-    assert rel.max() < 0.025 and np.median(rel) < 2e-3, (rel.max(), np.median(rel))
+    assert transport._clusters_pay(sphere10, transport.cutoff_radii(SKIN, 1e-2), transport.cutoff_radii(SKIN, 1e-4))
+    for far_geodesic, zone, max_tol, median_tol in (("cluster", "zone_exact_near_cluster_far", 0.01, 2e-4),
+                                                   ("arc", "zone_exact_near_arc_far", 0.025, 2e-3)):
+        split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic)
+        assert split.stats[zone] == split.stats["entry_samples"]
+        if far_geodesic == "cluster":  # one exact far query per cluster instead of per sample
+            assert split.stats["geodesic_pairs_computed"] < 0.6 * ref.stats["geodesic_pairs_computed"]
+        rel = np.abs(split.radiance - ref.radiance)[lit] / ref.radiance[lit]
+        assert rel.max() < max_tol and np.median(rel) < median_tol, (far_geodesic, rel.max(), np.median(rel))
+    # geodesic="arc" caps auto at arc geodesics everywhere
+    arc = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, geodesic="arc")
+    assert arc.stats["zone_arc"] == arc.stats["entry_samples"] and arc.stats["auto_geodesic_exact"] == 0
 
 
 def test_auto_on_small_sphere_picks_the_exact_sphere(sphere10):
@@ -163,6 +172,15 @@ def test_auto_flat_forced_dipole_equals_geodesic_dipole(sphere10):
         want = F_t * dipole_profile(d[ok] * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"]) * st * st
         keep = d[ok] <= got.cutoff_mm[c]
         np.testing.assert_allclose(got.radiance[ok, c][keep], want[keep], rtol=1e-10)
+
+
+def test_clusters_pay_on_a_fine_large_mesh():
+    """The cost estimate: a 60 mm sphere with 0.6 mm edges in skin (cutoff 28 mm, near zone 3 clusters of 2.4 mm)
+    saves most geodesic pairs; a 4 mm sphere with 1.3 mm edges (near zone = the whole sphere) saves nothing."""
+    near, cut = transport.cutoff_radii(SKIN, 1e-2), transport.cutoff_radii(SKIN, 1e-4)
+    big = Mesh.from_arrays(*icosphere(60.0, 6))
+    small = Mesh.from_arrays(*icosphere(4.0, 2))
+    assert transport._clusters_pay(big, near, cut) and not transport._clusters_pay(small, near, cut)
 
 
 # ------------------------------------------------------------------------------------------- CLI
