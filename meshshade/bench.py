@@ -154,7 +154,8 @@ SCENES = {s.name: s for s in (
     _s("spot_50mm_beam", "mesh", 50.0, "beam", "mc", mesh_file="spot.obj", patch_mm=1.5),
     _s("head_200mm_beam", "mesh", 200.0, "beam", "mc", mesh_file="lee_perry_smith_head.obj", patch_mm=2.0),
     _s("head_200mm_directional", "mesh", 200.0, "directional", "mc", mesh_file="lee_perry_smith_head.obj",
-       geodesic="arc", patch_mm=6.0),
+       patch_mm=6.0),
+    _s("spot_50mm_directional", "mesh", 50.0, "directional", "mc", mesh_file="spot.obj", patch_mm=2.0),
 )}
 
 
@@ -217,7 +218,8 @@ FULL = BenchConfig(
     resolution={"sphere_r5_beam": (3, 4, 6), "sphere_r20_beam": (3, 4, 6), "sphere_r20_directional": (2, 3),
                 "sphere_r100_directional": (3,), "cylinder_r10_beam": (3, 5), "torus_beam": (3, 5)},
     geodesic_scenes=("sphere_r5_beam", "sphere_r20_beam", "sphere_r100_beam", "cylinder_r10_beam", "torus_beam",
-                     "spot_50mm_beam", "head_200mm_beam", "sphere_r5_directional"),
+                     "spot_50mm_beam", "head_200mm_beam", "sphere_r5_directional", "head_200mm_directional",
+                     "spot_50mm_directional"),
     render_scenes=("sphere_r5_beam", "sphere_r20_beam", "sphere_r100_beam", "cylinder_r10_beam"),
     render_width=192,
     photons=(10_000, 100_000, 1_000_000), photon_scenes=("sphere_r5_beam", "sphere_r20_beam",

@@ -128,9 +128,17 @@ def add_bake_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--geodesic", default="exact", choices=["exact", "arc"],
                    help="geodesic distances: exact polyhedral (default) or arc (curvature-corrected chords: "
                         "~5x faster, 1e-4 on smooth meshes, 1-11 %% low on bumpy scans)")
+    add_far_field_arg(p)
     p.add_argument("--out", required=True, metavar="OUT.ply",
                    help="PLY with radiance_r/g/b (W/mm^2) and tone-mapped red/green/blue vertex colours")
     p.add_argument("--npz", metavar="OUT.npz", help="also save radiance, k1, k2, d1, d2, beam distance")
+
+
+def add_far_field_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--far-field", default=None, choices=["off", "clustered"],
+                   help="directional/point lights: sum pairs beyond r_near (1 %% of the dipole's energy) by clusters "
+                        "of the planar dipole (default: off; auto uses it where the surface is flat on the scale "
+                        "of the cutoff)")
 
 
 def mesh_and_material(args):
@@ -153,7 +161,7 @@ def run_bake(args) -> int:
     light_list = [lights.parse_light_spec(s, mm_per_unit=mesh.mm_per_unit) for s in args.light]
     result = transport.bake(mesh, material, light_list, model=args.model, cutoff_tol=args.cutoff_tol,
                             curvature_radius_mm=args.curvature_radius, progress=not args.quiet,
-                            geodesic=args.geodesic)
+                            geodesic=args.geodesic, far_field=args.far_field)
     transport.write_bake(result, mesh, args.out, npz=args.npz)
     if not args.quiet:
         print(transport.describe_result(result))

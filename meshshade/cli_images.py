@@ -24,6 +24,8 @@ def _add_image_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bias", type=float, default=0.85, help="Drago bias (default 0.85)")
     p.add_argument("--geodesic", default="exact", choices=["exact", "arc"],
                    help="geodesic distances of the bake: exact polyhedral (default) or arc (faster, smooth meshes)")
+    from .cli import add_far_field_arg  # noqa: PLC0415
+    add_far_field_arg(p)
     p.add_argument("--per-pixel", action="store_true",
                    help="gather the kernel at every pixel sample (exact peaks; slower) instead of interpolating")
 
@@ -58,7 +60,7 @@ def run_render(args) -> int:
     io, mesh, material, light_list, camera, bg, meta = _setup(args)
     io.check_output_path(exr, [args.mesh]), io.check_output_path(png, [args.mesh])
     res = transport.bake(mesh, material, light_list, model=args.model, cutoff_tol=args.cutoff_tol,
-                         geodesic=args.geodesic)
+                         geodesic=args.geodesic, far_field=args.far_field)
     ex = render.PixelGather(mesh, res) if args.per_pixel else None
     rgb, alpha = render.render_radiance(mesh, res.radiance, camera, args.width, args.height, args.spp,
                                         eta=material.eta, exitance_at=ex)
@@ -97,7 +99,7 @@ def run_compare(args) -> int:
     cmp = compare.run_comparison(mesh, material, light_list, models, camera=camera, width=args.width,
                                  height=args.height, spp=args.spp, per_pixel=args.per_pixel,
                                  cutoff_tol=args.cutoff_tol, floor=args.floor, mc_photons=args.photons,
-                                 geodesic=args.geodesic)
+                                 geodesic=args.geodesic, far_field=args.far_field)
     for p in compare.save_comparison(cmp, out, models=models, metadata=meta, operator=args.tonemap,
                                      bias=args.bias, background=bg):
         print(f"wrote {p}")

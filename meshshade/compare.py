@@ -86,7 +86,7 @@ def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
 
 def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camera=None, width=256, height=256,
                    spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
-                   seed: int = 0, geodesic: str = "exact") -> dict:
+                   seed: int = 0, geodesic: str = "exact", far_field: str | None = None) -> dict:
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
     ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
@@ -112,7 +112,7 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
             mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed)
             res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
         else:
-            res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic)
+            res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field)
             ex = render.PixelGather(mesh, res) if per_pixel else None
         images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
                                              exitance_at=ex, scene=scene))

@@ -261,3 +261,21 @@ def test_neighbourhood_curvature_ball_query_and_dilation_agree_on_a_sphere_patch
     assert np.all(ball[d0[idx] <= 5.0, 0] == 1) and np.all(ball[d0[idx] > 5.0, 0] == 0)
     assert np.all(dil[d0[idx] <= 5.0, 0] == 1)  # dilation by ceil(5/edge) + 1 rings reaches at least 5 mm
     assert np.all(dil[d0[idx] > 12.0, 0] == 0)  # and not absurdly far
+
+
+def test_cli_far_field_flag(tmp_path):
+    V, F = icosphere(40.0, 3)
+    src = tmp_path / "s.ply"
+    write_ply(src, V, F)
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    common = ["bake", str(src), "--material", "marble", "--light", "directional:0,0,-1:1", "--model", "dipole",
+              "--geodesic", "arc", "-q"]
+    assert main(common + ["--out", str(tmp_path / "a.ply"), "--npz", str(a)]) == 0
+    assert main(common + ["--far-field", "clustered", "--out", str(tmp_path / "b.ply"), "--npz", str(b)]) == 0
+    ra, rb = np.load(a)["radiance"], np.load(b)["radiance"]
+    lit = ra > 5e-2 * ra.max(axis=0)
+    assert not np.array_equal(ra, rb)  # the far field did something ...
+    assert np.max(np.abs(rb - ra)[lit] / ra[lit]) < 1e-2  # ... within 1 % where light is (see the test above)
+    with pytest.raises(SystemExit) as exc:  # argparse's own one-line error, exit status 2
+        main(common + ["--far-field", "bogus", "--out", str(tmp_path / "c.ply")])
+    assert exc.value.code == 2

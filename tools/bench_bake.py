@@ -3,9 +3,11 @@
 Scenes: icospheres of ~10k/40k/160k vertices (R = 60 mm), spot scaled to 100 mm and the Lee Perry-Smith head
 scan scaled to 200 mm (from ../shared/meshes when present), skin1, one directional light. Each scene is baked
 with the dipole (the baseline), the curved model, and the curved model with the fast "arc" geodesics in the same
-run, so the ratios hold on a noisy machine. Prints JSON (one object per scene and model) to stdout.
+run, so the ratios hold on a noisy machine; each row also gives the relative difference of its radiance from the
+first run's (red channel). Prints JSON (one object per scene and model) to stdout.
 
     python tools/bench_bake.py [--quick] [--runs dipole:exact,curved:exact,curved:arc]
+    python tools/bench_bake.py --quick --runs curved:exact,auto:exact,curved:arc   # what auto saves
 """
 from __future__ import annotations
 
@@ -67,9 +69,17 @@ def main(argv=None):
                                                max(res.timings.get("gather", 1e-9), 1e-9)),
                    "shadow_rays_cast": res.stats.get("shadow_rays_cast"),
                    "shadow_rays_skipped": res.stats.get("shadow_rays_skipped")}
+            row["geodesic_pairs_computed"] = res.stats.get("geodesic_pairs_computed")
+            row.update({k: v for k, v in res.stats.items() if k.startswith(("zone_", "auto_"))})
             if base is None:
-                base = wall
+                base, base_M = wall, res.radiance
             row["wall_ratio_to_first_model"] = round(wall / base, 3)
+            # difference from the first run's radiance (red channel, vertices above 1e-3 of its peak)
+            lit = base_M[:, 0] > 1e-3 * base_M[:, 0].max()
+            rel = np.abs(res.radiance[lit, 0] - base_M[lit, 0]) / base_M[lit, 0]
+            row["rel_diff_to_first_model"] = {"mean": float(f"{rel.mean():.3g}"),
+                                              "p99": float(f"{np.quantile(rel, 0.99):.3g}"),
+                                              "max": float(f"{rel.max():.3g}")}
             rows.append(row)
             print(json.dumps(row), flush=True)
     return rows
