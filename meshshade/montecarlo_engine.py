@@ -63,13 +63,11 @@ CHUNK = 1024
 def first_hit_faces32(scene, o32, d32, tfar):
     """(k,) int32 face of the first hit within ``tfar`` (-1: none) of float32 rays relative to ``scene.center``.
 
-    One batched embreex call on the scene's Embree object (no float64 round trip; ``tfar`` is overwritten); the
-    numpy backend goes through ``first_hit``. A public ``EmbreeScene.first_hit_faces_local(o32, d32, tfar)`` in
-    raycast.py would replace the private access.
+    One batched embreex call (``EmbreeScene.first_hit_faces_local``: no float64 round trip; ``tfar`` is
+    overwritten); the numpy backend goes through ``first_hit``.
     """
-    embree = getattr(scene, "_scene", None)
-    if embree is not None:
-        return embree.run(o32, d32, dists=tfar)
+    if hasattr(scene, "first_hit_faces_local"):
+        return scene.first_hit_faces_local(o32, d32, tfar)
     hits = scene.first_hit(o32.astype(np.float64) + scene.center, d32.astype(np.float64))
     return np.where(hits.t <= tfar, hits.face, -1).astype(np.int32)
 

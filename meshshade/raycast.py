@@ -355,6 +355,11 @@ class EmbreeScene(_SceneBase):
         return (keep, np.ascontiguousarray(local[keep], dtype=np.float32),
                 np.ascontiguousarray(d[keep], dtype=np.float32), t0)
 
+    def first_hit_faces_local(self, o32, d32, tfar):
+        """(k,) int32 face of the first hit within ``tfar`` (-1: none) of float32 rays given relative to
+        ``self.center`` (one batched call, no float64 round trip; ``tfar`` (k,) float32 is overwritten)."""
+        return self._scene.run(o32, d32, dists=tfar)
+
     def _first_hit_faces(self, o, d):
         face = np.full(o.shape[0], -1, dtype=np.int64)
         keep, o32, d32, _ = self._local_rays(o, d)
