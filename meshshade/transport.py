@@ -299,7 +299,7 @@ def describe_scale(mesh, material: Material) -> str:
 def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol: float = 1e-4,
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool = False,
          rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
-         far_field: str | None = None, far_tol: float = 1e-2, far_rel_tol: float = 1e-2,
+         far_field: str | None = None, far_tol: float = 0.1, far_rel_tol: float = 1e-2,
          far_geodesic: str = "cluster") -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
 
@@ -382,7 +382,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         if geodesic != "exact":
             plan = replace(plan, exact_geodesic=np.zeros(k, dtype=bool))
         lap("auto")
-    if plan is not None and far_geodesic == "cluster" and not _clusters_pay(mesh, near, cut):
+    if plan is not None and far_geodesic == "cluster" and not _clusters_pay(mesh, cut):
         far_geodesic = "none"  # small mesh or short cutoff: shared far-zone geodesics would not save work
     zone = _zones(k, area, far_field, geodesic, plan, far_geodesic)
     clustered = np.array([zz[3] for zz in ZONES])[zone]  # sources whose pairs beyond r_near go to the far sum
@@ -428,7 +428,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
             from .source_clusters import cluster_sources, expand_far_pairs  # noqa: PLC0415
 
             nonlocal n_pairs, n_geo
-            size, near_c = _cluster_geometry(mesh, near)
+            size, near_c = _cluster_geometry(mesh, cut)
             order, ptr = cluster_sources(samples.positions[idx], frames.normals[idx], size)
             order = idx[order]
             centre_rows = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
@@ -552,16 +552,17 @@ def _zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic: str 
     return zone
 
 
-def _cluster_geometry(mesh, near):
-    """(cluster size, exact near radius) of the exact_near_cluster_far zone, mm."""
-    size = min(CLUSTER_EDGES * mesh.mean_edge_length, 0.25 * float(np.max(near)))
-    return size, min(NEAR_MARGIN * float(np.max(near)), CLUSTER_NEAR * size)
+def _cluster_geometry(mesh, cut):
+    """(cluster size, exact near radius) of the exact_near_cluster_far zone, mm: clusters of CLUSTER_EDGES mean
+    edges (at most 1/12 of the cutoff), exact per-sample geodesics within CLUSTER_NEAR cluster sizes."""
+    size = min(CLUSTER_EDGES * mesh.mean_edge_length, float(np.max(cut)) / 12.0)
+    return size, CLUSTER_NEAR * size
 
 
-def _clusters_pay(mesh, near, cut) -> bool:
+def _clusters_pay(mesh, cut) -> bool:
     """Whether sharing far-zone geodesics within clusters saves at least 30 % of the geodesic pairs (estimated
     from disc areas capped by the mesh's area: members x A(near) + centres x A(cutoff) vs members x A(cutoff))."""
-    size, near_c = _cluster_geometry(mesh, near)
+    size, near_c = _cluster_geometry(mesh, cut)
     per_vertex = mesh.total_area / max(mesh.n_vertices, 1)
     members = max(1.0, size * size / per_vertex)  # samples per cubic cell of a surface (order of magnitude)
 

@@ -133,7 +133,7 @@ def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     # (1.3 mm edges) are shorter by O(h^2), ~0.3 % (test_neighbourhood); at s ~ 20 mm the red kernel falls by
     # d ln R/ds ~ -(sigma_tr + 2/s) ~ -0.37/mm, so the dim far side may move by up to 0.3 % * 20 mm * 0.37/mm ~ 2.2 %
     lit = ref.radiance > 1e-3 * ref.radiance.max(axis=0)
-    assert transport._clusters_pay(sphere10, transport.cutoff_radii(SKIN, 1e-2), transport.cutoff_radii(SKIN, 1e-4))
+    assert transport._clusters_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
     for far_geodesic, zone, max_tol, median_tol in (("cluster", "zone_exact_near_cluster_far", 0.01, 2e-4),
                                                    ("arc", "zone_exact_near_arc_far", 0.025, 2e-3)):
         split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic)
@@ -175,12 +175,12 @@ def test_auto_flat_forced_dipole_equals_geodesic_dipole(sphere10):
 
 
 def test_clusters_pay_on_a_fine_large_mesh():
-    """The cost estimate: a 60 mm sphere with 0.6 mm edges in skin (cutoff 28 mm, near zone 3 clusters of 2.4 mm)
+    """The cost estimate: a 60 mm sphere with 0.6 mm edges in skin (cutoff 28 mm, clusters of 2.4 mm)
     saves most geodesic pairs; a 4 mm sphere with 1.3 mm edges (near zone = the whole sphere) saves nothing."""
-    near, cut = transport.cutoff_radii(SKIN, 1e-2), transport.cutoff_radii(SKIN, 1e-4)
+    cut = transport.cutoff_radii(SKIN, 1e-4)
     big = Mesh.from_arrays(*icosphere(60.0, 6))
     small = Mesh.from_arrays(*icosphere(4.0, 2))
-    assert transport._clusters_pay(big, near, cut) and not transport._clusters_pay(small, near, cut)
+    assert transport._clusters_pay(big, cut) and not transport._clusters_pay(small, cut)
 
 
 # ------------------------------------------------------------------------------------------- CLI
