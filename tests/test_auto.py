@@ -5,7 +5,7 @@ import trimesh
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from meshshade import auto, transport
+from meshshade import auto, transport, zones
 from meshshade.cli import main
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere, torus
@@ -133,7 +133,7 @@ def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     # (1.3 mm edges) are shorter by O(h^2), ~0.3 % (test_neighbourhood); at s ~ 20 mm the red kernel falls by
     # d ln R/ds ~ -(sigma_tr + 2/s) ~ -0.37/mm, so the dim far side may move by up to 0.3 % * 20 mm * 0.37/mm ~ 2.2 %
     lit = ref.radiance > 1e-3 * ref.radiance.max(axis=0)
-    assert transport._clusters_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
+    assert zones.clusters_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
     for far_geodesic, zone, max_tol, median_tol in (("cluster", "zone_exact_near_cluster_far", 0.01, 2e-4),
                                                    ("arc", "zone_exact_near_arc_far", 0.025, 2e-3)):
         split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic)
@@ -180,7 +180,7 @@ def test_clusters_pay_on_a_fine_large_mesh():
     cut = transport.cutoff_radii(SKIN, 1e-4)
     big = Mesh.from_arrays(*icosphere(60.0, 6))
     small = Mesh.from_arrays(*icosphere(4.0, 2))
-    assert transport._clusters_pay(big, cut) and not transport._clusters_pay(small, cut)
+    assert zones.clusters_pay(big, cut) and not zones.clusters_pay(small, cut)
 
 
 # ------------------------------------------------------------------------------------------- CLI
