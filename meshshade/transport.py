@@ -521,6 +521,10 @@ def describe_result(result: BakeResult) -> str:
     ex = s["exitant_power"]
     far = (f" (area lights: geodesic near field within {max(s['near_mm']):.3g} mm, {s['far_field']} far field "
            f"beyond)" if "near_mm" in s else "")
+    if s.get("geodesic_pairs_computed", s.get("pairs_found")) != s.get("pairs_found"):
+        far += f", {s['geodesic_pairs_computed']} geodesic distances computed"
+    zones = ", ".join(f"{k[5:]} {v}" for k, v in s.items() if k.startswith("zone_"))
+    far += f" [zones: {zones}]" if zones and result.model == "auto" else ""
     return (f"{result.model}: {s['entry_samples']} entry samples, {s.get('pairs_found', 0)} pairs within "
             f"{max(s['cutoff_mm']):.3g} mm{far}; entering {s['entering_power']:.4g} W, exitant "
             f"{ex[0]:.4g}/{ex[1]:.4g}/{ex[2]:.4g} W (r/g/b); {t}")
