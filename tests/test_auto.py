@@ -1,4 +1,6 @@
 """``--model auto``: the per-sample decisions (meshshade/auto.py) and their use in the bake and the CLI."""
+import contextlib
+
 import numpy as np
 import pytest
 import trimesh
@@ -44,7 +46,7 @@ def test_vertex_adjacency_is_symmetric_and_has_no_self_loops():
 @pytest.mark.parametrize("name", ["skin1", "marble", "ketchup"])
 def test_curvature_bound_bounds_delta_of_every_pair(name, rng):
     """|delta| = |k_n(phi) a + k_n(phi + pi/2) b| <= kmax W for random curvatures, azimuths and rho <= radius."""
-    with pytest.warns(Warning) if name == "ketchup" else _nullcontext():
+    with pytest.warns(Warning) if name == "ketchup" else contextlib.nullcontext():
         mat = material_from_options(name)
     radius = np.array([12.0, 7.0, 3.0])
     W = auto.curvature_bound_mm(mat, radius)
@@ -63,14 +65,6 @@ def test_curvature_bound_bounds_delta_of_every_pair(name, rng):
         # and the bound is attained (to the grid) on a sphere at the radius: W = C(radius) there
         a_r, b_r = curvature_ratios(radius[c] * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"])
         assert W[c] == pytest.approx((abs(a_r) + abs(b_r)) / st, rel=0.02)
-
-
-class _nullcontext:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
 
 
 # ------------------------------------------------------------------------------------------- decisions
