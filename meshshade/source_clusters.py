@@ -22,7 +22,10 @@ Pure array functions; no mesh objects, no I/O.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit, prange
 
 from .geometry.neighbourhood import tangent_azimuth
 
@@ -88,8 +91,8 @@ def _law_of_cosines(sc, d, t_dot_dx, dx_len, K):
     return out
 
 
-def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
-                     max_distance: float = np.inf):
+def expand_far_pairs_numpy(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
+                           max_distance: float = np.inf):
     """Member pairs from their cluster centre's geodesic pairs (module docstring).
 
     centre_pairs : (src_c, vertex, s_c, chord_c, phi_c) arrays of the centres' far query (src_c are sample ids
@@ -98,7 +101,7 @@ def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *
     exclude_keys : sorted int64 array of ``sample * n + vertex`` keys already found (the members' near pairs);
     max_distance : pairs with s_i beyond it are dropped.
     Returns ``(src, vertex, s, chord, phi)`` of the members (centres included: their own pairs come out unchanged
-    up to rounding).
+    up to rounding). The pure-numpy twin of :func:`expand_far_pairs` (same pairs, same order), kept to check it.
     """
     src_c, vtx, s_c, _, phi_c = centre_pairs
     members, centres = member_of_row
@@ -140,3 +143,108 @@ def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *
     tan = np.divide(tan, ln, out=np.zeros_like(tan), where=ln > 0)
     phi = tangent_azimuth(tan, f.d1[m_rep], f.d2[m_rep], rho=s, k1=f.k1[m_rep], k2=f.k2[m_rep])
     return m_rep, o, s, chord, phi
+
+
+def _centre_rows(src_c, centres):
+    """Centre pairs grouped by centre: (order of the rows, start, stop per member's centre, member ok mask)."""
+    by_c = np.argsort(src_c, kind="stable")
+    cs = src_c[by_c]
+    uc, start = np.unique(cs, return_index=True)
+    stop = np.r_[start[1:], cs.size]
+    pos_of = np.full(int(max(uc.max(), centres.max())) + 1, -1, dtype=np.int64)
+    pos_of[uc] = np.arange(uc.size)
+    j = pos_of[centres]
+    ok = j >= 0
+    jj = np.where(ok, j, 0)
+    return by_c, np.where(ok, start[jj], 0), np.where(ok, stop[jj], 0)
+
+
+def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
+                     max_distance: float = np.inf):
+    """Member pairs from their cluster centre's geodesic pairs (module docstring): the numba version of
+    :func:`expand_far_pairs_numpy` (same arguments, same pairs in the same order), parallel over members, with
+    no intermediate arrays of all member x centre-pair candidates."""
+    src_c, vtx, s_c, _, phi_c = centre_pairs
+    members, centres = (np.asarray(a, dtype=np.int64) for a in member_of_row)
+    if src_c.size == 0 or members.size == 0:
+        e = np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
+    by_c, lo, hi = _centre_rows(np.asarray(src_c, dtype=np.int64), centres)
+    keys = np.zeros(0, np.int64) if exclude_keys is None else np.ascontiguousarray(exclude_keys, dtype=np.int64)
+    f = frames
+    args = (members, centres, lo, hi, by_c, np.asarray(vtx, dtype=np.int64), np.asarray(s_c, dtype=np.float64),
+            np.asarray(phi_c, dtype=np.float64), np.ascontiguousarray(positions, dtype=np.float64),
+            np.ascontiguousarray(vertices, dtype=np.float64), f.normals, f.d1, f.d2, f.k1, f.k2, keys,
+            np.int64(len(vertices)), float(max_distance))
+    counts = np.zeros(members.size, dtype=np.int64)
+    _expand(*args, counts, True, counts, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0),
+            np.zeros(0))
+    offsets = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    m = int(offsets[-1])
+    out = (np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m), np.empty(m), np.empty(m))
+    _expand(*args, counts, False, offsets, *out)
+    return out
+
+
+@njit(cache=True)
+def _law_of_cosines_1(sc, d, t_dot_dx, dx_len, K):
+    """Scalar :func:`_law_of_cosines`."""
+    cosg = t_dot_dx / dx_len if dx_len > 0.0 else 0.0
+    k = math.sqrt(abs(K))
+    x, y = k * sc, k * d
+    if K > 0.0 and K * (sc + d) ** 2 >= 1e-6 and x + y <= 2.5:
+        c = math.cos(x) * math.cos(y) + math.sin(x) * math.sin(y) * cosg
+        return math.acos(min(1.0, max(-1.0, c))) / k
+    if K < 0.0 and -K * (sc + d) ** 2 >= 1e-6 and x + y <= 30.0:
+        c = math.cosh(x) * math.cosh(y) - math.sinh(x) * math.sinh(y) * cosg
+        return math.acosh(max(c, 1.0)) / k
+    return math.sqrt(max(sc * sc - 2.0 * sc * d * cosg + d * d, 0.0))
+
+
+@njit(parallel=True, cache=True)
+def _expand(members, centres, lo, hi, by_c, vtx, s_c, phi_c, P, V, N, D1, D2, K1, K2, keys, n, max_d, counts,
+            count_only, offsets, o_src, o_v, o_s, o_ch, o_phi):
+    for a in prange(members.size):
+        i, c = members[a], centres[a]
+        dx0, dx1, dx2 = P[i, 0] - P[c, 0], P[i, 1] - P[c, 1], P[i, 2] - P[c, 2]
+        d = math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
+        dn = dx0 * N[c, 0] + dx1 * N[c, 1] + dx2 * N[c, 2]
+        t0, t1, t2 = dx0 - dn * N[c, 0], dx1 - dn * N[c, 1], dx2 - dn * N[c, 2]
+        dxl = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        K = K1[c] * K2[c]
+        w = offsets[a]
+        cnt = 0
+        for q in range(lo[a], hi[a]):
+            r = by_c[q]
+            cp, sp = math.cos(phi_c[r]), math.sin(phi_c[r])
+            tdx = ((cp * D1[c, 0] + sp * D2[c, 0]) * t0 + (cp * D1[c, 1] + sp * D2[c, 1]) * t1
+                   + (cp * D1[c, 2] + sp * D2[c, 2]) * t2)
+            s = _law_of_cosines_1(s_c[r], d, tdx, dxl, K)
+            if s > max_d:
+                continue
+            o = vtx[r]
+            if keys.size:
+                key = i * n + o
+                p = np.searchsorted(keys, key)
+                if p < keys.size and keys[p] == key:
+                    continue
+            cnt += 1
+            if count_only:
+                continue
+            v0, v1, v2 = V[o, 0] - P[i, 0], V[o, 1] - P[i, 1], V[o, 2] - P[i, 2]
+            vn = v0 * N[i, 0] + v1 * N[i, 1] + v2 * N[i, 2]
+            u0, u1, u2 = v0 - vn * N[i, 0], v1 - vn * N[i, 1], v2 - vn * N[i, 2]
+            ul = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+            if ul > 0.0:
+                u0, u1, u2 = u0 / ul, u1 / ul, u2 / ul
+            phi = math.atan2(u0 * D2[i, 0] + u1 * D2[i, 1] + u2 * D2[i, 2], u0 * D1[i, 0] + u1 * D1[i, 1] + u2 * D1[i, 2])
+            cs, sn = math.cos(phi), math.sin(phi)
+            kn = K1[i] * cs * cs + K2[i] * sn * sn
+            phi = phi - (s * s / 6.0) * kn * (K1[i] - K2[i]) * sn * cs  # tangent_azimuth's geodesic correction
+            phi = math.atan2(math.sin(phi), math.cos(phi))
+            o_src[w], o_v[w], o_s[w] = i, o, s
+            o_ch[w] = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+            o_phi[w] = phi
+            w += 1
+        if count_only:
+            counts[a] = cnt

@@ -124,3 +124,27 @@ def test_law_of_cosines_finite_and_within_the_triangle_inequality(sc, d, cosg, K
     s = _law_of_cosines(np.array([sc]), np.array([d]), np.array([d * cosg]), np.array([d]), np.array([K]))[0]
     assert np.isfinite(s) and s >= 0.0
     assert abs(sc - d) - 1e-9 * (sc + d + 1) <= s <= sc + d + 1e-9 * (sc + d + 1)
+
+
+def test_numba_expansion_equals_the_numpy_twin():
+    """Same pairs in the same order, values to rounding, with exclusions and a distance limit."""
+    from meshshade.source_clusters import expand_far_pairs_numpy
+    mesh = Mesh.from_arrays(*icosphere(20.0, 3))
+    frames, query = _setup(mesh)
+    V, n = mesh.vertices, mesh.n_vertices
+    order, ptr = cluster_sources(V, frames.normals, 4.0)
+    rows = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
+    centre_of = order[ptr[:-1]][rows]
+    mem, cen_of = order[:200], centre_of[:200]
+    pc = query(np.unique(cen_of), 30.0)
+    pn = query(mem, 6.0)
+    keys = np.sort(pn[0] * n + pn[1])
+    a = expand_far_pairs(pc, (mem, cen_of), V, V, frames, exclude_keys=keys, max_distance=25.0)
+    b = expand_far_pairs_numpy(pc, (mem, cen_of), V, V, frames, exclude_keys=keys, max_distance=25.0)
+    assert a[0].size == b[0].size > 1000
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    for x, y in zip(a[2:4], b[2:4]):
+        np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-12)
+    # azimuths as angles: -pi and +pi are the same direction (the two wrap differently by rounding)
+    assert np.max(np.abs(np.angle(np.exp(1j * (a[4] - b[4]))))) < 1e-12
