@@ -2,10 +2,9 @@
 
 Public API (importing has no side effects).
 """
-from .errors import (DiffusionValidityWarning, LightError, MaterialError, MeshshadeError,
-                     MeshValidationError, OutputError, UnitsError)
-from .materials import JENSEN_2001_PRESETS, Material, material_from_options
-from .units import mm_per_unit
+from meshshade.errors import DiffusionValidityWarning, LightError, MaterialError, MeshshadeError, MeshValidationError, OutputError, UnitsError
+from meshshade.materials import JENSEN_2001_PRESETS, Material, material_from_options
+from meshshade.units import mm_per_unit
 
 __version__ = "0.1.0"
 

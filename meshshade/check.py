@@ -39,8 +39,8 @@ import math
 
 import numpy as np
 
-from .kernels.curvature import _VALIDITY_TOL, curvature_ratios, curvature_validity
-from .materials import CHANNELS, Material
+from meshshade.kernels.curvature import _VALIDITY_TOL, curvature_ratios, curvature_validity
+from meshshade.materials import CHANNELS, Material
 
 __all__ = ["check_mesh", "format_check", "report_to_json", "VALIDITY_RHO_TOL", "PERCENTILES"]
 
@@ -75,8 +75,8 @@ def check_mesh(mesh, material: Material | None = None, *, curvature_radius_mm: f
     ``material`` and ``channels`` (one dict per r, g, b); see the module docstring. Plain Python types only
     (floats, ints, str, lists, dicts), so ``json.dumps`` works after :func:`report_to_json`.
     """
-    from .geometry.curvature import principal_curvatures  # noqa: PLC0415
-    from .transport import cutoff_radii  # noqa: PLC0415
+    from meshshade.geometry.curvature import principal_curvatures  # noqa: PLC0415
+    from meshshade.transport.bake import cutoff_radii  # noqa: PLC0415
 
     d = mesh.defects
     size = mesh.bbox_size_mm

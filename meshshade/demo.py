@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .kernels.dipole import dipole_profile
-from .kernels.fresnel import fresnel_transmittance_entry
-from .kernels.sphere import sphere_series_profile
-from .materials import Material
+from meshshade.kernels.dipole import dipole_profile
+from meshshade.kernels.fresnel import fresnel_transmittance_entry
+from meshshade.kernels.sphere import sphere_series_profile
+from meshshade.materials import Material
 
 
 def figure1_radiance(material: Material, *, R0_mm=10.0, width=384, spp=4, seed=0, half_width_mm=None):
@@ -32,7 +32,7 @@ def figure1_radiance(material: Material, *, R0_mm=10.0, width=384, spp=4, seed=0
 
     Returns (exact_rgb, dipole_rgb, alpha): (H, W, 3) W/(mm^2 sr) premultiplied radiance, (H, W) coverage.
     """
-    from .render import _sample_offsets, exit_radiance  # noqa: PLC0415
+    from meshshade.output.render import _sample_offsets, exit_radiance  # noqa: PLC0415
 
     hw = half_width_mm or 1.1 * R0_mm
     off = _sample_offsets(spp, np.random.default_rng(seed))
@@ -64,10 +64,13 @@ def figure1_radiance(material: Material, *, R0_mm=10.0, width=384, spp=4, seed=0
 
 def run_demo(out_dir="meshshade-demo", *, small=False, log=print) -> dict:
     """Write the three demo parts into ``out_dir``; returns {name: path} and prints where each file is."""
-    from . import compare, io, profiles, render, report  # noqa: PLC0415
-    from .geometry import procedural  # noqa: PLC0415
-    from .geometry.mesh import Mesh  # noqa: PLC0415
-    from .lights import DirectionalLight  # noqa: PLC0415
+    from meshshade import io, profiles  # noqa: PLC0415
+    from meshshade.output import compare  # noqa: PLC0415
+    from meshshade.output import render  # noqa: PLC0415
+    from meshshade.output import report  # noqa: PLC0415
+    from meshshade.geometry import procedural  # noqa: PLC0415
+    from meshshade.geometry.mesh import Mesh  # noqa: PLC0415
+    from meshshade.light.samples import DirectionalLight  # noqa: PLC0415
 
     t_start = time.perf_counter()
     out = Path(out_dir)
@@ -79,7 +82,7 @@ def run_demo(out_dir="meshshade-demo", *, small=False, log=print) -> dict:
     for name in ("potato", "marble"):
         mat = Material.preset(name)
         ex, dp, a = figure1_radiance(mat, width=w, spp=2 if small else 4)
-        from .compare import split_image  # noqa: PLC0415
+        from meshshade.output.compare import split_image  # noqa: PLC0415
         rgb = split_image(ex, dp)
         meta = {"model": "left exact sphere series, right planar dipole (chord)", "material": mat.describe(),
                 "lights": "beam 1 W at normal incidence at the image centre", "units": "W/(mm^2 sr) per W",

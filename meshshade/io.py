@@ -42,9 +42,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MeshValidationError, OutputError
-from .geometry.mesh import Mesh, MeshDefectWarning
-from .units import mm_per_unit
+from meshshade.errors import MeshValidationError, OutputError
+from meshshade.geometry.mesh import Mesh, MeshDefectWarning
+from meshshade.units import mm_per_unit
 
 __all__ = ["SUPPORTED_MESH_FORMATS", "load_mesh", "read_mesh_arrays", "atomic_write", "check_output_path",
            "write_ply", "write_mesh_ply", "write_npz", "write_text", "write_json", "write_figure", "PLY_RESERVED_NAMES",

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import DiffusionValidityWarning, MaterialError
-from .kernels.optics import diffusion_params
+from meshshade.errors import DiffusionValidityWarning, MaterialError
+from meshshade.kernels.optics import diffusion_params
 
 CHANNELS = ("r", "g", "b")
 

@@ -1,7 +1,7 @@
 """Length units. The only place where unit factors live; meshshade works in millimetres inside."""
 from __future__ import annotations
 
-from .errors import UnitsError
+from meshshade.errors import UnitsError
 
 #: millimetres per unit, exact by definition
 MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from meshshade.check import check_mesh, format_check, report_to_json
-from meshshade.cli import main
+from meshshade.cli.main import main
 from meshshade.geometry.mesh import Mesh, MeshDefectWarning
 from meshshade.geometry.procedural import icosphere, saddle_patch
 from meshshade.io import write_ply

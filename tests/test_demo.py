@@ -2,7 +2,7 @@
 import numpy as np
 
 from meshshade import Material, io
-from meshshade.cli import main
+from meshshade.cli.main import main
 from meshshade.demo import figure1_radiance
 
 

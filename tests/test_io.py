@@ -13,8 +13,7 @@ import trimesh
 from meshshade.errors import MeshValidationError, OutputError, UnitsError
 from meshshade.geometry import procedural
 from meshshade.geometry.mesh import MeshDefectWarning
-from meshshade.io import (atomic_write, check_output_path, load_mesh, read_mesh_arrays, write_figure,
-                          write_mesh_ply, write_npz, write_ply, write_text)
+from meshshade.io import atomic_write, check_output_path, load_mesh, read_mesh_arrays, write_figure, write_mesh_ply, write_npz, write_ply, write_text
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,7 @@
 
     python tools/bench_accuracy_vs_time.py [--quick] [--out DIR] [--doc docs/accuracy_vs_time.md]
 
-A thin wrapper: the measurement is `meshshade bench` (meshshade/bench.py); this adds the command, date, wall
+A thin wrapper: the measurement is `meshshade bench` (meshshade/bench/); this adds the command, date, wall
 time and load average above the generated table so the committed page says how it was made.
 """
 from __future__ import annotations
@@ -15,8 +15,8 @@ import time
 from pathlib import Path
 
 from meshshade import io
-from meshshade.bench_report import table_markdown
-from meshshade.cli import main as meshshade_main
+from meshshade.bench.report import table_markdown
+from meshshade.cli.main import main as meshshade_main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,8 +55,8 @@ def main(argv=None) -> int:
             f"{meta['load_average_before'][0]:.2f} before, {meta['load_average_after'][0]:.2f} after (other jobs "
             "ran on the machine, so absolute times are pessimistic; compare rows of one run). Every row, knob "
             "and the Pareto plot are in the output folder (`accuracy_vs_time.csv`, `pareto.png`, "
-            "`metadata.json`; not committed). Definitions: `meshshade/bench.py` and "
-            "`meshshade/bench_reference.py`.\n\n")
+            "`metadata.json`; not committed). Definitions: `meshshade/bench/` and "
+            "`meshshade/bench/references.py`.\n\n")
     io.write_text(args.doc, head + table)
     print(f"wrote {args.doc}", file=sys.stderr)
     return 0

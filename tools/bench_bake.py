@@ -22,9 +22,9 @@ import numpy as np
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.io import read_mesh_arrays
-from meshshade.lights import DirectionalLight
+from meshshade.light.samples import DirectionalLight
 from meshshade.materials import Material
-from meshshade.transport import bake
+from meshshade.transport.bake import bake
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 

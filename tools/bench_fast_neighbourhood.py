@@ -20,8 +20,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from meshshade.geometry.fast_neighbourhood import FastGeodesicNeighbourhoods  # noqa: E402
-from meshshade.geometry.neighbourhood import GeodesicNeighbourhoods  # noqa: E402
+from meshshade.geometry.geodesics.arc import FastGeodesicNeighbourhoods  # noqa: E402
+from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods  # noqa: E402
 from meshshade.geometry.procedural import icosphere  # noqa: E402
 
 

@@ -1,4 +1,4 @@
-"""Benchmark and accuracy report for meshshade.geometry.neighbourhood; prints one JSON document.
+"""Benchmark and accuracy report for meshshade.geometry.geodesics.neighbourhoods; prints one JSON document.
 
 Speed: icospheres (R = 10 mm) of about 10k / 40k / 160k vertices, vertex sources, the cutoff chosen so that each
 source has about ``--neighbours`` vertices; for each method (window = exact, fmm, dijkstra = baseline) the time per
@@ -26,7 +26,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from meshshade.geometry.neighbourhood import METHODS, GeodesicNeighbourhoods  # noqa: E402
+from meshshade.geometry.geodesics.neighbourhoods import METHODS, GeodesicNeighbourhoods  # noqa: E402
 from meshshade.geometry.procedural import capped_cylinder, icosphere, torus  # noqa: E402
 
 SHARED = Path(os.environ.get("MESHSHADE_SHARED", ROOT.parent / "shared")) / "meshes"

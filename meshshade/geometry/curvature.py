@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from .mesh import MeshDefectWarning, face_geometry
+from meshshade.geometry.mesh import MeshDefectWarning, face_geometry
 
 __all__ = ["PrincipalCurvatures", "principal_curvatures", "DEFAULT_RADIUS_EDGES", "FALLBACK_RINGS", "OUTLIER_KH"]
 

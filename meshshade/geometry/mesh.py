@@ -27,9 +27,9 @@ from functools import cached_property
 
 import numpy as np
 
-from ..errors import MeshValidationError
-from ..units import mm_per_unit as _mm_per_unit
-from . import topology
+from meshshade.errors import MeshValidationError
+from meshshade.units import mm_per_unit as _mm_per_unit
+from meshshade.geometry import topology
 
 __all__ = ["Mesh", "MeshReport", "MeshDefectWarning", "validate_mesh", "face_geometry", "DEGENERATE_REL_TOL"]
 

@@ -100,7 +100,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .optics import diffusion_params
+from meshshade.kernels.optics import diffusion_params
 
 __all__ = [
     "POLICIES",
@@ -653,6 +653,8 @@ class CurvatureTable:
         Largest distance (times sigma_t') served from the table; larger distances are computed by direct
         quadrature (about 5 us each) or, where ``mu rho >= 1500``, need no coefficients (the kernel is 0).
 
+    Notes
+    -----
     The table holds ``ceil(16 sqrt(rho_max_opt)) + 1`` intervals of degree-7 polynomials in ``u = sqrt(rho)``
     (256 bytes per interval for a and b together) at fixed positions ``u in [i/16, (i+1)/16]``, built from
     Chebyshev nodes by direct quadrature (about 8 evaluations per interval: 4 ms for rho_max_opt = 50).

@@ -63,8 +63,8 @@ import numba
 import numpy as np
 from scipy import special
 
-from ..errors import MeshshadeError
-from .optics import diffusion_params, g_func
+from meshshade.errors import MeshshadeError
+from meshshade.kernels.optics import diffusion_params, g_func
 
 __all__ = ["cylinder_exact_profile", "cylinder_exact_profile_geodesic"]
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .optics import diffusion_params, g_func
+from meshshade.kernels.optics import diffusion_params, g_func
 
 
 def dipole_profile(r_opt, *, albedo_prime, eta):

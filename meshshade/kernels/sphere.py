@@ -82,9 +82,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ..errors import MaterialError
-from .dipole import dipole_profile
-from .optics import diffusion_params, g_func
+from meshshade.errors import MaterialError
+from meshshade.kernels.dipole import dipole_profile
+from meshshade.kernels.optics import diffusion_params, g_func
 
 _BLOCK = 512  # m-block for the streamed ratio tables and the theta loop
 _RUN = 3  # successive passing tail tests before stopping

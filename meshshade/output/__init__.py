@@ -1,0 +1,1 @@
+"""Outputs: per-pixel rendering of baked radiance, tone mapping, model comparison, profile reports."""

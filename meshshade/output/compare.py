@@ -1,0 +1,152 @@
+"""Comparing two models' radiance: statistics, the split image (paper's Figure 1 layout) and a heat map.
+
+Pure functions returning dicts, arrays and matplotlib figures; nothing is written here (io.py does that).
+Relative differences are signed, ``(A - B) / B``, on luminance (Rec. 709), and only where B's luminance is
+above ``floor`` times B's maximum (default 1e-3): far below the peak the ratio is noise of no visual weight.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from meshshade.output.tonemap import luminance
+
+#: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
+DEFAULT_FLOOR = 1e-3
+
+
+def relative_difference(a, b, *, floor: float = DEFAULT_FLOOR, mask=None):
+    """Signed (A - B)/B of luminance for (..., 3) radiance arrays; NaN where B is below the floor or ~mask."""
+    La, Lb = luminance(a), luminance(b)
+    valid = Lb > floor * (Lb[mask].max() if mask is not None and np.any(mask) else Lb.max(initial=0.0))
+    if mask is not None:
+        valid &= mask
+    out = np.full(La.shape, np.nan)
+    out[valid] = (La[valid] - Lb[valid]) / Lb[valid]
+    return out
+
+
+def _summary(rel) -> dict:
+    r = np.abs(rel[np.isfinite(rel)])
+    if r.size == 0:
+        return {"max_rel_diff": None, "mean_rel_diff": None, "p95_rel_diff": None, "count": 0}
+    s = rel[np.isfinite(rel)]
+    return {"max_rel_diff": float(r.max()), "mean_rel_diff": float(r.mean()),
+            "p95_rel_diff": float(np.percentile(r, 95)), "mean_signed_rel_diff": float(s.mean()),
+            "count": int(r.size)}
+
+
+def compare_stats(vertex_a, vertex_b, *, pixel_a=None, pixel_b=None, pixel_mask=None, vertex_areas=None,
+                  names=("A", "B"), floor: float = DEFAULT_FLOOR) -> dict:
+    """Statistics of |A - B|/B over vertices (and pixels if given), plus each model's total exitance.
+
+    Returns ``{"models", "floor", "vertices": {max_rel_diff, mean_rel_diff, p95_rel_diff, ...}, "pixels": {...},
+    "max_rel_diff", "mean_rel_diff", "p95_rel_diff" (the vertex values), "total_exitance_W": {A: [r, g, b], ...}}``.
+    Total exitance is sum M * vertex area (W, per unit light) when ``vertex_areas`` is given, else sum M.
+    """
+    va, vb = np.asarray(vertex_a, float), np.asarray(vertex_b, float)
+    w = np.ones(len(va)) if vertex_areas is None else np.asarray(vertex_areas, float)
+    out = {"models": list(names), "floor": floor, "definition": "(A - B)/B of luminance where B > floor * max B"}
+    out["vertices"] = _summary(relative_difference(va, vb, floor=floor))
+    out.update({k: out["vertices"][k] for k in ("max_rel_diff", "mean_rel_diff", "p95_rel_diff")})
+    if pixel_a is not None:
+        out["pixels"] = _summary(relative_difference(pixel_a, pixel_b, floor=floor, mask=pixel_mask))
+    out["total_exitance_W"] = {names[0]: (va * w[:, None]).sum(0).tolist(), names[1]: (vb * w[:, None]).sum(0).tolist()}
+    return out
+
+
+def split_image(a, b):
+    """Left half of ``a``, right half of ``b`` (same shape (H, W, ...)), like the paper's Figure 1."""
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape:
+        raise ValueError(f"images differ in shape: {a.shape} vs {b.shape}")
+    out = a.copy()
+    half = a.shape[1] // 2
+    out[:, half:] = b[:, half:]
+    return out
+
+
+def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
+    """Matplotlib figure of the signed relative difference image (NaN = background/below floor) with a colour bar."""
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    finite = np.abs(rel[np.isfinite(rel)])
+    lim = limit or (float(np.percentile(finite, 99)) if finite.size else 1.0) or 1.0
+    fig, ax = plt.subplots(figsize=(6.4, 5.2))
+    cmap = matplotlib.colormaps["RdBu_r"].copy()
+    cmap.set_bad((0.85, 0.85, 0.85, 0.0))
+    im = ax.imshow(np.ma.masked_invalid(rel), cmap=cmap, vmin=-lim, vmax=lim, interpolation="nearest")
+    ax.set_axis_off()
+    ax.set_title(title or f"({names[0]} - {names[1]}) / {names[1]}")
+    fig.colorbar(im, ax=ax, label="signed relative difference of luminance")
+    return fig
+
+
+def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camera=None, width=256, height=256,
+                   spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
+                   seed: int = 0, geodesic: str = "exact", far_field: str | None = None) -> dict:
+    """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
+
+    ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
+    rendered by interpolation. Returns ``{"camera", "bakes": [BakeResult, BakeResult],
+    "images": [(rgb, alpha), (rgb, alpha)],
+    "split": (rgb, alpha), "rel": (H, W) signed relative difference, "stats": dict}`` (arrays only, no files).
+    """
+    from meshshade.output import render  # noqa: PLC0415
+    from meshshade.raycast.scene import make_scene  # noqa: PLC0415
+    from meshshade.transport.bake import bake  # noqa: PLC0415
+
+    if len(models) != 2:
+        raise ValueError("compare needs exactly two models")
+    camera = camera or render.auto_camera(mesh)
+    scene = make_scene(mesh.vertices, mesh.faces)
+    bakes, images = [], []
+    for m in models:
+        if m == "mc":  # Monte Carlo reference: per-vertex exitance (per-pixel gathering does not apply)
+            from types import SimpleNamespace  # noqa: PLC0415
+
+            from meshshade.montecarlo.simulate import simulate  # noqa: PLC0415
+
+            mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed)
+            res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
+        else:
+            res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field)
+            ex = render.PixelGather(mesh, res) if per_pixel else None
+        images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
+                                             exitance_at=ex, scene=scene))
+        bakes.append(res)
+    (ra, aa), (rb, _) = images
+    cov = aa > 0
+    stats = compare_stats(bakes[0].radiance, bakes[1].radiance, pixel_a=ra, pixel_b=rb, pixel_mask=cov,
+                          vertex_areas=mesh.vertex_areas, names=tuple(models), floor=floor)
+    stats["camera"] = camera.describe()
+    stats["timings_s"] = {m: b.timings for m, b in zip(models, bakes)}
+    for m, b in zip(models, bakes):  # what --model auto chose (counts per decision)
+        if getattr(b, "plan", None) is not None:
+            stats[f"{m}_decisions"] = b.plan.counts()
+    return {"camera": camera, "bakes": bakes, "images": images, "split": (split_image(ra, rb), aa),
+            "rel": relative_difference(ra, rb, floor=floor, mask=cov), "stats": stats}
+
+
+def save_comparison(cmp: dict, out_dir, *, models, metadata: dict, operator="drago", bias=0.85,
+                    background=None) -> list:
+    """Write split.exr/png, <model>.exr/png, heatmap.png and stats.json into ``out_dir`` (via io); returns paths."""
+    from pathlib import Path  # noqa: PLC0415
+
+    from meshshade import io  # noqa: PLC0415
+    from meshshade.output import render  # noqa: PLC0415
+
+    out = Path(out_dir)
+    written = []
+    rgb, alpha = cmp["split"]
+    meta = {**metadata, "model": f"left {models[0]}, right {models[1]}", "camera": cmp["camera"].describe()}
+    written.append(io.write_exr(out / "split.exr", render.image_rgba(rgb, alpha), meta))
+    written.append(io.write_png(out / "split.png", render.display_rgba(rgb, alpha, operator=operator, bias=bias,
+                                                                      background=background)))
+    for m, (r, a) in zip(models, cmp["images"]):
+        written.append(io.write_exr(out / f"{m}.exr", render.image_rgba(r, a), {**meta, "model": m}))
+    written.append(io.write_figure(out / "heatmap.png", heatmap_figure(cmp["rel"], names=models)))
+    written.append(io.write_json(out / "stats.json", cmp["stats"]))
+    return written
