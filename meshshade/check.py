@@ -19,7 +19,7 @@
     ``h <= 1/sigma_tr``: only its tail is (the bake's patch average keeps the energy right, the peak is smeared
     over one vertex area); otherwise ``unresolved``: light does not spread past one vertex, the result is
     essentially the incident light's shape.
-  - *first-order validity*: the fraction of vertices where ``curvature_validity`` (kernels/curvature.py,
+  - *first-order validity*: the fraction of vertices where ``curvature_validity`` (kernels/curvature/coefficients.py,
     ``max(|k1|, |k2|) (|a(rho)| + |b(rho)| + z_r) <= tol``) holds. **Choice of rho:** the radius that holds
     99 % of the diffuse reflectance, ``cutoff_radii(material, 1e-2)``, clipped to the mesh's size as the bake
     clips its cutoff. At the bake's own cutoff (1e-4 of the reflectance, several times farther out) ``a(rho)``
@@ -39,8 +39,10 @@ import math
 
 import numpy as np
 
-from meshshade.kernels.curvature import _VALIDITY_TOL, curvature_ratios, curvature_validity
+from meshshade.geometry.curvature import principal_curvatures
+from meshshade.kernels.curvature import VALIDITY_TOL, curvature_ratios, curvature_validity
 from meshshade.materials import CHANNELS, Material
+from meshshade.transport import cutoff_radii
 
 __all__ = ["check_mesh", "format_check", "report_to_json", "VALIDITY_RHO_TOL", "PERCENTILES"]
 
@@ -66,7 +68,7 @@ def _resolution(h: float, z_r: float, diffusion_length: float) -> str:
 
 
 def check_mesh(mesh, material: Material | None = None, *, curvature_radius_mm: float | None = None,
-               tol: float = _VALIDITY_TOL) -> dict:
+               tol: float = VALIDITY_TOL) -> dict:
     """Report what the pipeline will make of ``mesh`` (a validated Mesh, mm) with ``material`` (optional).
 
     Returns
@@ -75,9 +77,6 @@ def check_mesh(mesh, material: Material | None = None, *, curvature_radius_mm: f
     ``material`` and ``channels`` (one dict per r, g, b); see the module docstring. Plain Python types only
     (floats, ints, str, lists, dicts), so ``json.dumps`` works after :func:`report_to_json`.
     """
-    from meshshade.geometry.curvature import principal_curvatures  # noqa: PLC0415
-    from meshshade.transport.bake import cutoff_radii  # noqa: PLC0415
-
     d = mesh.defects
     size = mesh.bbox_size_mm
     h = float(mesh.mean_edge_length)

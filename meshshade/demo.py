@@ -17,14 +17,20 @@
 from __future__ import annotations
 
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
+from meshshade import io, profiles
+from meshshade.geometry import procedural
+from meshshade.geometry.mesh import Mesh
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.kernels.sphere import sphere_series_profile
+from meshshade.light import DirectionalLight
 from meshshade.materials import Material
+from meshshade.output import compare, render, report
 
 
 def figure1_radiance(material: Material, *, R0_mm=10.0, width=384, spp=4, seed=0, half_width_mm=None):
@@ -32,10 +38,8 @@ def figure1_radiance(material: Material, *, R0_mm=10.0, width=384, spp=4, seed=0
 
     Returns (exact_rgb, dipole_rgb, alpha): (H, W, 3) W/(mm^2 sr) premultiplied radiance, (H, W) coverage.
     """
-    from meshshade.output.render import _sample_offsets, exit_radiance  # noqa: PLC0415
-
     hw = half_width_mm or 1.1 * R0_mm
-    off = _sample_offsets(spp, np.random.default_rng(seed))
+    off = render.sample_offsets(spp, np.random.default_rng(seed))
     jj, ii = np.meshgrid(np.arange(width), np.arange(width), indexing="xy")
     theta_grid = np.linspace(0.0, np.pi / 2, 4097)
     ft0 = float(fresnel_transmittance_entry(1.0, material.eta))
@@ -57,24 +61,15 @@ def figure1_radiance(material: Material, *, R0_mm=10.0, width=384, spp=4, seed=0
         th = np.arcsin(np.clip(r[inside] / R0_mm, 0, 1))
         for k in range(2):
             M = np.stack([ft0 * np.exp(np.interp(th, theta_grid, tables[c][k])) for c in range(3)], axis=-1)
-            out[k][inside] += exit_radiance(M, np.cos(th), material.eta)
+            out[k][inside] += render.exit_radiance(M, np.cos(th), material.eta)
         alpha[inside] += 1
     return out[0] / spp, out[1] / spp, alpha / spp
 
 
 def run_demo(out_dir="meshshade-demo", *, small=False, log=print) -> dict:
     """Write the three demo parts into ``out_dir``; returns {name: path} and prints where each file is."""
-    from meshshade import io, profiles  # noqa: PLC0415
-    from meshshade.output import compare  # noqa: PLC0415
-    from meshshade.output import render  # noqa: PLC0415
-    from meshshade.output import report  # noqa: PLC0415
-    from meshshade.geometry import procedural  # noqa: PLC0415
-    from meshshade.geometry.mesh import Mesh  # noqa: PLC0415
-    from meshshade.light.samples import DirectionalLight  # noqa: PLC0415
-
     t_start = time.perf_counter()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = io.output_dir(out_dir)
     files = {}
     # (1) Figure 1, corrected
     w = 96 if small else 384
@@ -82,8 +77,7 @@ def run_demo(out_dir="meshshade-demo", *, small=False, log=print) -> dict:
     for name in ("potato", "marble"):
         mat = Material.preset(name)
         ex, dp, a = figure1_radiance(mat, width=w, spp=2 if small else 4)
-        from meshshade.output.compare import split_image  # noqa: PLC0415
-        rgb = split_image(ex, dp)
+        rgb = compare.split_image(ex, dp)
         meta = {"model": "left exact sphere series, right planar dipole (chord)", "material": mat.describe(),
                 "lights": "beam 1 W at normal incidence at the image centre", "units": "W/(mm^2 sr) per W",
                 "camera": "orthographic along the beam, 22 mm wide"}
@@ -97,7 +91,6 @@ def run_demo(out_dir="meshshade-demo", *, small=False, log=print) -> dict:
     # (2) profiles
     mat = Material(1.0, 0.01, eta=1.3)
     shapes = [profiles.Shape.make("sphere", r) for r in (2.0, 5.0, 10.0, 50.0)]
-    import warnings  # noqa: PLC0415
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # distances beyond half the small spheres' girth are dropped, as intended
         rows = profiles.profile_rows(mat, np.linspace(0.0, 20.0, 21 if small else 81),
@@ -114,7 +107,7 @@ def run_demo(out_dir="meshshade-demo", *, small=False, log=print) -> dict:
     size = 96 if small else 384
     cmp = compare.run_comparison(mesh, mat, lights, models, camera=cam, width=size, height=size,
                                  spp=2 if small else 4, geodesic="arc")
-    (out / "pebble").mkdir(exist_ok=True)
+    io.output_dir(out / "pebble")
     meta = {"material": mat.describe(), "lights": "directional -1,-0.3,-0.35 (1 W/mm^2)",
             "units": "W/(mm^2 sr) per W/mm^2", "model": "left curved, right dipole"}
     for p in compare.save_comparison(cmp, out / "pebble", models=models, metadata=meta, background=(0, 0, 0)):

@@ -307,6 +307,26 @@ def check_output_path(out, inputs=()) -> Path:
     return out
 
 
+def output_dir(path, option: str = "--out") -> Path:
+    """Create the output directory ``path`` (parents too; an existing directory is used as it is); return it.
+
+    ``option`` names the command-line option the path came from, for the error message.
+
+    Raises
+    ------
+    OutputError
+        ``path`` exists and is not a directory, or it cannot be created (one line).
+    """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{option} {out} exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create output folder {out}: {exc.strerror}") from None
+    return out
+
+
 @contextlib.contextmanager
 def atomic_write(path):
     """Context manager yielding a temporary path next to ``path``; on success it replaces ``path``.

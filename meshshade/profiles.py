@@ -24,8 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshshade.errors import MeshshadeError
+from meshshade.kernels.curvature import curvature_profile
+from meshshade.kernels.cylinder import cylinder_exact_profile
 from meshshade.kernels.dipole import dipole_profile
+from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import CHANNELS, Material
+from meshshade.montecarlo import mc_profile
 
 SHAPES = ("plane", "sphere", "cylinder", "saddle", "point")
 MODELS = ("dipole", "exact", "curved", "mc")
@@ -88,7 +92,6 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     if model not in MODELS:
         raise MeshshadeError(f"unknown model {model!r}; choose among {', '.join(MODELS)}")
     if model == "mc":
-        from meshshade.montecarlo.simulate import mc_profile  # noqa: PLC0415  (heavy; only when asked)
         return mc_profile(material, s, shape=shape)
     phi = np.deg2rad(float(azimuth_deg))
     out = np.empty((3, s.size))
@@ -109,7 +112,6 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
     if shape.kind == "plane" or (model == "dipole" and shape.kind in ("saddle", "point")):
         return dipole_profile(r, **par)
     if model == "curved":
-        from meshshade.kernels.curvature import curvature_profile  # noqa: PLC0415
         return curvature_profile(r, phi, k1_opt=shape.k1 / st, k2_opt=shape.k2 / st, **par)
     R0 = shape.radius_mm * st
     if shape.kind == "sphere":
@@ -119,14 +121,12 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
                                  "do not exist on this sphere")
         if model == "dipole":
             return dipole_profile(2.0 * R0 * np.sin(0.5 * theta), **par)
-        from meshshade.kernels.sphere import sphere_series_profile  # noqa: PLC0415
         return sphere_series_profile(theta, R0_opt=R0, rtol=rtol, **par)
     if shape.kind == "cylinder":
         around, along = r * np.cos(phi), r * np.sin(phi)
         if model == "dipole":
             chord = np.hypot(2.0 * R0 * np.sin(0.5 * around / R0), along)
             return dipole_profile(chord, **par)
-        from meshshade.kernels.cylinder import cylinder_exact_profile  # noqa: PLC0415
         theta = np.mod(around / R0 + np.pi, 2 * np.pi) - np.pi
         # far out (mu s > ~30) the series' absolute error (~1e-14 R(0)) exceeds the value: clamp that noise at 0
         return np.maximum(cylinder_exact_profile(np.abs(theta), np.abs(along), R0_opt=R0, rtol=max(rtol, 1e-13),

@@ -1,7 +1,11 @@
-"""Shared fixtures: seeded RNG, the ../shared folder (skip with a reason where absent), hypothesis profiles."""
+"""Shared fixtures: seeded RNG, the ../shared folder (skip with a reason where absent), hypothesis profiles,
+and the one loader of the reference CSVs in tests/data (``reference_csv``)."""
 from __future__ import annotations
 
+import csv
+import hashlib
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -40,3 +44,79 @@ def shared_meshes() -> Path:
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
     return DATA
+
+
+#: header lines of the reference CSVs (tools/_refheader.py): "# key: value", continued on "#   more"
+_HEADER_LINE = re.compile(r"^# ([a-z][a-z0-9 _-]*): (.*)$")
+_REQUIRED = ("title", "generator", "sha256", "dependencies", "mpmath", "dps", "date")
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def parse_reference_header(lines: list[str]) -> dict[str, str]:
+    """The ``# key: value`` header of a reference CSV (continuation lines ``#   ...`` joined with a newline)."""
+    header: dict[str, str] = {}
+    key = None
+    for line in lines:
+        match = _HEADER_LINE.match(line)
+        if match:
+            key = match.group(1)
+            if key in header:
+                raise ValueError(f"header key {key!r} twice")
+            header[key] = match.group(2)
+        elif line.startswith("#   ") and key is not None:
+            header[key] += "\n" + line[4:]
+        else:
+            raise ValueError(f"not a header line: {line!r}")
+    return header
+
+
+def stale_generators(header: dict[str, str], root: Path = ROOT) -> list[str]:
+    """Generator scripts (and their dependencies) whose sha256 differs from the one recorded in ``header``."""
+    recorded = [(header["generator"], header["sha256"])]
+    if header["dependencies"] != "none":
+        for item in header["dependencies"].split("; "):
+            path, _, digest = item.partition(" sha256 ")
+            recorded.append((path, digest))
+    stale = []
+    for rel, digest in recorded:
+        script = root / rel
+        if not (rel.startswith("tools/") and script.is_file()) or _sha256(script) != digest:
+            stale.append(rel)
+    return stale
+
+
+def load_reference(name: str, data: Path = DATA, root: Path = ROOT) -> tuple[dict[str, str], list[dict[str, str]]]:
+    """``(header, rows)`` of ``tests/data/<name>``, after checking it is current.
+
+    ``header`` maps the ``# key: value`` lines written by tools/_refheader.py (title, dps, generator, sha256,
+    dependencies, mpmath, date, ...); ``rows`` are the CSV rows as dicts of strings (column -> text; the tests
+    convert). Fails if the header lacks an entry, if the sha256 of the generator in tools/ (or of a script it
+    imports) differs from the recorded one ("rerun tools/<script>"), or if the file has no rows.
+    """
+    path = data / name
+    lines = path.read_text().splitlines()
+    n_head = next((i for i, line in enumerate(lines) if not line.startswith("#")), len(lines))
+    try:
+        header = parse_reference_header(lines[:n_head])
+    except ValueError as exc:
+        pytest.fail(f"tests/data/{name}: malformed header ({exc}); regenerate it with its tools/ script")
+    missing = [key for key in _REQUIRED if key not in header]
+    if missing:
+        pytest.fail(f"tests/data/{name}: header lacks {missing}; regenerate it with its tools/ script")
+    stale = stale_generators(header, root)
+    if stale:
+        pytest.fail(f"tests/data/{name} is out of date: {', '.join(stale)} changed since it was written; "
+                    f"rerun {header['generator']}")
+    rows = list(csv.DictReader(lines[n_head:]))
+    if not rows:
+        pytest.fail(f"tests/data/{name} has no data rows")
+    return header, rows
+
+
+@pytest.fixture(scope="session")
+def reference_csv():
+    """The reference loader :func:`load_reference`: ``header, rows = reference_csv("dipole_reference.csv")``."""
+    return load_reference

@@ -25,11 +25,18 @@ def test_check_mesh_sphere_sizes_and_curvature():
     rep = check_mesh(mesh, mat)
     assert rep["mesh"]["n_vertices"] == 642 and rep["mesh"]["n_faces"] == 1280
     np.testing.assert_allclose(rep["mesh"]["size_mm"], 20.0, rtol=1e-12)
+    k1_min = rep["curvature"]["k1_per_mm"]["min"]  # ~0.1017/mm: every vertex is at least this curved
     for ch, st in zip(rep["channels"], mat.sigma_t_prime):
         assert ch["largest_extent_in_transport_lengths"] == pytest.approx(20.0 * st)
-        assert 0.0 <= ch["fraction_first_order_valid"] <= 1.0
+        # first order needs radii of curvature >= 27-63 mm here (skin1 r, g, b): no vertex of a 10 mm sphere
+        assert 1.0 / k1_min < ch["min_valid_radius_of_curvature_mm"]
+        assert ch["fraction_first_order_valid"] == 0.0 and ch["fraction_first_order_valid_at_bake_cutoff"] == 0.0
         assert ch["resolution"] in ("resolved", "tail only", "unresolved")
-        assert ch["first_order_distance_mm"]["min"] >= 0
+        # it still holds near the entry point, out to the same distance at every vertex (uniform curvature, to
+        # one step of the 64-interval grid up to the bake cutoff) and short of the 99 % radius where it fails
+        dist = ch["first_order_distance_mm"]
+        assert 0 < dist["min"] <= dist["max"] < ch["validity_rho_mm"]
+        assert dist["max"] - dist["min"] <= ch["bake_cutoff_mm"] / 64 * (1 + 1e-12)
     c = rep["curvature"]
     assert c["k1_per_mm"]["percentiles"]["50"] == pytest.approx(0.1, rel=0.05)
     assert c["fraction_convex"] == 1.0 and c["fraction_saddle"] == 0.0

@@ -24,9 +24,9 @@ from meshshade.kernels.curvature import curvature_profile, curvature_validity
 from meshshade.kernels.cylinder import cylinder_exact_profile_geodesic
 from meshshade.kernels.dipole import dipole_profile, dipole_total_reflectance
 from meshshade.kernels.sphere import sphere_chord_dipole_profile, sphere_series_profile, sphere_total_reflectance
-from meshshade.light.samples import BeamLight, DirectionalLight
+from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
-from meshshade.transport.bake import bake, cutoff_radii, describe_scale
+from meshshade.transport import bake, cutoff_radii, describe_scale
 
 RHO = np.array([0.0, 1e-12, 1e-6, 1e-3, 0.1, 0.5, 1.0, 3.0, 10.0, 100.0, 1e4])
 THETA = np.array([0.0, 1e-12, 1e-6, 1e-3, 0.1, 0.5, 1.0, np.pi / 2, 2.5, np.pi - 1e-9, np.pi])
@@ -163,7 +163,9 @@ def _check_result(res, mesh):
     assert finite_nonneg(M)
     ex = np.array(res.stats["exitant_power"])
     assert np.all(np.isfinite(ex)) and np.all(ex >= 0)
-    assert np.all(ex <= res.stats["entering_power"] * 1.02 + 1e-300)  # never more light out than in
+    # never more light out than in: no allowance (measured at most 0.971 of the entering power, for
+    # sigma_a = 1e-9 on the 10 mm sphere, where the exact answer is ~1: nearly all light leaves again)
+    assert np.all(ex <= res.stats["entering_power"] * (1 + 1e-12))
     return M
 
 
@@ -390,7 +392,7 @@ def test_kernels_property_thorough(alb, eta, rho, k1, k2, phi, R0, theta):
 @pytest.mark.parametrize("distance", [1e4, 1e8, 1e12])
 def test_beam_from_far_away_enters_at_the_same_point(sphere10, distance):
     """A beam from 10 m .. 1e9 m away (float32 ray casting) enters where the same beam from 40 mm does."""
-    from meshshade.light.samples import entry_samples
+    from meshshade.light import entry_samples
 
     m = sphere10
     d = np.array([0.3, 0.2, -40.0])

@@ -22,7 +22,7 @@ import numpy as np
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.io import read_mesh_arrays
-from meshshade.light.samples import DirectionalLight
+from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.bake import bake
 

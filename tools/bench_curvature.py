@@ -31,7 +31,7 @@ import numba
 import numpy as np
 
 from meshshade.kernels.curvature import CurvatureTable, curvature_profile
-from meshshade.kernels.dipole import dipole_profile
+from meshshade.kernels.dipole import dipole_diffuse_reflectance, dipole_profile
 from meshshade.kernels.optics import diffusion_params
 
 SIGMA_S, SIGMA_A, ETA = 1.0, 0.01, 1.3
@@ -43,13 +43,8 @@ K_MAX_MM = 0.1
 
 @numba.njit(cache=True, error_model="numpy")
 def _dipole_loop(rho, alb, mu, z_r, z_v, out):
-    pre = alb / (4.0 * math.pi)
     for k in range(rho.size):
-        r2 = rho[k] * rho[k]
-        d_r = math.sqrt(r2 + z_r * z_r)
-        d_v = math.sqrt(r2 + z_v * z_v)
-        out[k] = pre * (z_r * ((mu * d_r + 1.0) * math.exp(-mu * d_r) / (d_r * d_r * d_r))
-                        + z_v * ((mu * d_v + 1.0) * math.exp(-mu * d_v) / (d_v * d_v * d_v)))
+        out[k] = dipole_diffuse_reflectance(rho[k], alb, mu, z_r, z_v)
 
 
 def main(argv=None) -> int:

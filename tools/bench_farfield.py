@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 from meshshade.transport.farfield import SourceTree, far_field_exitance, far_field_exitance_direct
 from meshshade.geometry.procedural import box
 from meshshade.materials import Material
-from meshshade.transport.bake import cutoff_radii
+from meshshade.transport.gather import cutoff_radii
 
 
 def vertex_areas(V, F):

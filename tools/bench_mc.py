@@ -24,9 +24,9 @@ import numpy as np
 
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import box, icosphere
-from meshshade.light.samples import BeamLight
+from meshshade.light import BeamLight
 from meshshade.materials import Material
-from meshshade.montecarlo.simulate import simulate
+from meshshade.montecarlo import simulate
 
 
 def cases():

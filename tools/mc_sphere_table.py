@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 
 from meshshade.materials import Material
-from meshshade.montecarlo.simulate import mc_profile
+from meshshade.montecarlo import mc_profile
 from meshshade.profiles import Shape, reflectance_profile
 
 DISTANCES = np.array([0.25, 0.5, 1.0, 2.0, 5.0, 10.0])

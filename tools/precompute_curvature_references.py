@@ -37,17 +37,15 @@ Usage:  python tools/precompute_curvature_references.py [--jobs 2]
 from __future__ import annotations
 
 import argparse
-import csv
-import datetime
-import hashlib
-import io
 import sys
 import time
 from multiprocessing import Pool
 from pathlib import Path
 
-import mpmath
 from mpmath import mp, mpf
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _refheader import write_reference_csv  # noqa: E402  (tools/ is not a package)
 
 DPS = 40
 ROOT = Path(__file__).resolve().parents[1]
@@ -226,12 +224,6 @@ def main(argv=None) -> int:
     ap.add_argument("--out-aux", type=Path, default=OUT_AUX)
     ap.add_argument("--out-coef", type=Path, default=OUT_COEF)
     args = ap.parse_args(argv)
-    sha = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
-    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-    prov = [f"# dps: {DPS} (value), checked against {DPS + 10} digits with a finer split (rel_err_est)",
-            f"# mpmath version: {mpmath.__version__}; python {sys.version.split()[0]}",
-            f"# generator: tools/precompute_curvature_references.py sha256 {sha}",
-            f"# date: {date}"]
     t0 = time.time()
     grid, hs = aux_grid()
     coef_grid = [(c, v, r) for c, v in COEF_CASES.items() for r in COEF_RHO]
@@ -239,38 +231,38 @@ def main(argv=None) -> int:
         aux_rows = pool.map(aux_row, grid, chunksize=1)
         coef_rows = pool.map(coef_row, coef_grid, chunksize=1)
     runtime = time.time() - t0
+    dps = f"{DPS} (value), checked against {DPS + 10} digits with a finer split (rel_err_est)"
 
-    buf = io.StringIO()
-    buf.write("\n".join([
-        "# Auxiliary integral of the curvature kernel (physics.md e.2), optical units",
-        "# function: I = int_h^inf exp(-mu s)/s dt, J = (1/rho) dI/drho = -int_h^inf (mu s+1) exp(-mu s)/s^3 dt,"
-        " s = sqrt(rho^2+t^2)",
-        "# method: mpmath tanh-sinh quadrature of the t-integrals (normalised integrands, split points in"
-        " mu (s - d)); closed forms K0, K1, E1, E2, E3 only as checks (column closed_form_checked, to 1e-30)",
-        f"# parameters: rho {list(AUX_RHO)} (+ {list(AUX_RHO_FAR)} for mu >= 1, h in {{0, z_v(1.3)}});"
-        f" h {hs} (z_v for eta 1.0, 1.3, 2.0); mu {list(AUX_MU)}",
-        "# inputs: rho, h, mu are exact doubles (repr) converted exactly to mpmath; values to 30 digits",
-        *prov, f"# runtime: {runtime:.0f} s on {args.jobs} processes (both files)"]) + "\n")
-    w = csv.DictWriter(buf, fieldnames=list(aux_rows[0]), lineterminator="\n")
-    w.writeheader()
-    w.writerows(aux_rows)
-    args.out_aux.write_text(buf.getvalue())
-
-    buf = io.StringIO()
-    buf.write("\n".join([
-        "# First-order curvature coefficients (physics.md e.3 (ii)), optical units (lengths x sigma_t')",
-        "# function: A, B (unit source) with R = R_d + alpha' [k_n(phi) A + k_n(phi+pi/2) B]; a_ratio = alpha' A/R_d,"
-        " b_ratio = alpha' B/R_d; R_d = alpha'/(4 pi)[z_r g(d_r) + z_v g(d_v)] (see the generator docstring)",
-        "# method: formulas of physics.md e.3 (ii) in mpmath with I(rho, z_v), J(rho, z_v) from the quadrature of"
-        " curvature_aux_reference.csv; mu^2 I = 0 at mu = 0",
-        "# parameters: cases " + ", ".join(f"{k}=(sigma_s_prime={v[0]}, sigma_a={v[1]}, eta={v[2]})"
-                                          for k, v in COEF_CASES.items()) + f"; rho_opt {list(COEF_RHO)}",
-        "# inputs: albedo_prime = sigma_s'/(sigma_s'+sigma_a) as float64, eta, rho_opt: exact doubles (repr)",
-        *prov]) + "\n")
-    w = csv.DictWriter(buf, fieldnames=list(coef_rows[0]), lineterminator="\n")
-    w.writeheader()
-    w.writerows(coef_rows)
-    args.out_coef.write_text(buf.getvalue())
+    write_reference_csv(
+        args.out_aux, list(aux_rows[0]), aux_rows, script=Path(__file__),
+        title="Auxiliary integral of the curvature kernel (physics.md e.2), optical units",
+        params={
+            "function": "I = int_h^inf exp(-mu s)/s dt, J = (1/rho) dI/drho = -int_h^inf (mu s+1) exp(-mu s)/s^3 dt,"
+                        " s = sqrt(rho^2+t^2)",
+            "method": "mpmath tanh-sinh quadrature of the t-integrals (normalised integrands, split points in"
+                      " mu (s - d)); closed forms K0, K1, E1, E2, E3 only as checks (column closed_form_checked,"
+                      " to 1e-30)",
+            "parameters": f"rho {list(AUX_RHO)} (+ {list(AUX_RHO_FAR)} for mu >= 1, h in {{0, z_v(1.3)}});"
+                          f" h {hs} (z_v for eta 1.0, 1.3, 2.0); mu {list(AUX_MU)}",
+            "inputs": "rho, h, mu are exact doubles (repr) converted exactly to mpmath; values to 30 digits",
+            "dps": dps,
+            "runtime": f"{runtime:.0f} s on {args.jobs} processes (both files)",
+        })
+    write_reference_csv(
+        args.out_coef, list(coef_rows[0]), coef_rows, script=Path(__file__),
+        title="First-order curvature coefficients (physics.md e.3 (ii)), optical units (lengths x sigma_t')",
+        params={
+            "function": "A, B (unit source) with R = R_d + alpha' [k_n(phi) A + k_n(phi+pi/2) B];"
+                        " a_ratio = alpha' A/R_d, b_ratio = alpha' B/R_d; R_d = alpha'/(4 pi)[z_r g(d_r) + z_v g(d_v)]"
+                        " (see the generator docstring)",
+            "method": "formulas of physics.md e.3 (ii) in mpmath with I(rho, z_v), J(rho, z_v) from the quadrature"
+                      " of curvature_aux_reference.csv; mu^2 I = 0 at mu = 0",
+            "parameters": "cases " + ", ".join(f"{k}=(sigma_s_prime={v[0]}, sigma_a={v[1]}, eta={v[2]})"
+                                               for k, v in COEF_CASES.items()) + f"; rho_opt {list(COEF_RHO)}",
+            "inputs": "albedo_prime = sigma_s'/(sigma_s'+sigma_a) as float64, eta, rho_opt: exact doubles (repr)",
+            "dps": dps,
+            "runtime": f"{runtime:.0f} s on {args.jobs} processes (both files)",
+        })
     print(f"wrote {len(aux_rows)} rows to {args.out_aux} and {len(coef_rows)} rows to {args.out_coef} "
           f"in {runtime:.0f} s")
     return 0

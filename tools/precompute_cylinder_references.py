@@ -16,13 +16,14 @@ Run: ``python tools/precompute_cylinder_references.py`` (about 7 minutes on one 
 """
 from __future__ import annotations
 
-import datetime
-import hashlib
 import sys
 import time
 from pathlib import Path
 
 import mpmath as mp
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _refheader import write_reference_csv  # noqa: E402  (tools/ is not a package)
 
 DPS = 34
 TAIL = mp.mpf(10) ** -24      # n-series: stop when the last term and the geometric tail bound are below this (relative)
@@ -131,7 +132,6 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     out = Path(argv[0]) if argv else Path(__file__).resolve().parents[1] / "tests" / "data" / "cylinder_reference.csv"
     mp.mp.dps = DPS
-    sha = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
     rows = []
     t0 = time.time()
     for alb_s, eta_s, R0_s, pts in CASES:
@@ -145,23 +145,22 @@ def main(argv=None):
             rows.append((alb, eta_s, R0, theta, z, val, err))
             print(f"alb={alb_s} eta={eta_s} R0={R0_s} theta={th_s} z={z_s}: {mp.nstr(val, 25)} "
                   f"(quad err {mp.nstr(err, 3)}, {time.time() - t0:.0f} s)", flush=True)
-    header = [
-        "# Exact infinite-cylinder diffusion reflectance R/sigma_t'^2 (Jensen normalisation, includes alpha'),",
-        "# optical units (sigma_t' = 1, z_r = 1, D = 1/3); meshshade.kernels.cylinder.cylinder_exact_profile.",
-        "# function: alpha'(-D dPsi/dr) at r = R0, Psi = 0 on r = R0 + z_b, source at r' = R0 - z_r (physics.md c, d).",
-        f"# method: mp.besseli all orders, mp.besselk orders 0,1 + upward recurrence; mp.quad gauss-legendre in q "
-        f"up to q z_v = {QTAIL}; n-series tail < 1e-24 relative",
-        f"# dps: {DPS}; mpmath {mp.__version__}; script tools/precompute_cylinder_references.py sha256 {sha}",
-        f"# date: {datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')}; "
-        f"runtime {time.time() - t0:.0f} s",
-        "# columns: albedo_prime, eta, R0_opt, theta, z, R (25 digits), quad_error_estimate",
-    ]
-    with open(out, "w") as fh:
-        fh.write("\n".join(header) + "\n")
-        fh.write("albedo_prime,eta,R0_opt,theta,z,R,quad_error\n")
-        for alb, eta_s, R0, theta, z, val, err in rows:
-            fh.write(",".join([mp.nstr(alb, 20), eta_s, mp.nstr(R0, 20), mp.nstr(theta, 20), mp.nstr(z, 20),
-                               mp.nstr(val, 25), mp.nstr(err, 3)]) + "\n")
+    write_reference_csv(
+        out, ["albedo_prime", "eta", "R0_opt", "theta", "z", "R", "quad_error"],
+        [(mp.nstr(alb, 20), eta_s, mp.nstr(R0, 20), mp.nstr(theta, 20), mp.nstr(z, 20), mp.nstr(val, 25),
+          mp.nstr(err, 3)) for alb, eta_s, R0, theta, z, val, err in rows],
+        script=Path(__file__),
+        title="Exact infinite-cylinder diffusion reflectance R/sigma_t'^2 (Jensen normalisation, includes alpha'),"
+              " optical units (sigma_t' = 1, z_r = 1, D = 1/3); meshshade.kernels.cylinder.cylinder_exact_profile",
+        params={
+            "function": "alpha'(-D dPsi/dr) at r = R0, Psi = 0 on r = R0 + z_b, source at r' = R0 - z_r"
+                        " (physics.md c, d)",
+            "method": f"mp.besseli all orders, mp.besselk orders 0,1 + upward recurrence; mp.quad gauss-legendre in"
+                      f" q up to q z_v = {QTAIL}; n-series tail < 1e-24 relative",
+            "columns": "albedo_prime, eta, R0_opt, theta, z, R (25 digits), quad_error (mp.quad's error estimate)",
+            "dps": f"{DPS}",
+            "runtime": f"{time.time() - t0:.0f} s",
+        })
     print(f"wrote {out} ({len(rows)} rows, {time.time() - t0:.0f} s)")
     return 0
 

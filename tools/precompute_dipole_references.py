@@ -25,15 +25,13 @@ Usage:  python tools/precompute_dipole_references.py [--out tests/data/dipole_re
 from __future__ import annotations
 
 import argparse
-import csv
-import datetime
-import hashlib
-import io
 import sys
 from pathlib import Path
 
-import mpmath
 from mpmath import mp, mpf
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _refheader import write_reference_csv  # noqa: E402  (tools/ is not a package)
 
 DPS = 50
 ROOT = Path(__file__).resolve().parents[1]
@@ -118,31 +116,23 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = ap.parse_args(argv)
-    script_sha = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
     rows = build_rows()
-    buf = io.StringIO()
-    header = [
-        "# Planar dipole references (physics.md b), optical units: R_d / sigma_t'^2 at r_opt = r sigma_t'",
-        "# function: R_d(r) = alpha'/(4 pi) [z_r g(d_r) + z_v g(d_v)], g(d) = (mu d + 1) exp(-mu d)/d^3,",
-        "#   z_r = 1, z_b = 2A/3, z_v = 1 + 4A/3, A = (1+F_dr)/(1-F_dr), F_dr Groenhuis fit, mu = sqrt(3(1-alpha'))",
-        "# quantity R_d: the profile at r_opt; quantity total_quad: int_0^inf R_d 2 pi r dr by mpmath tanh-sinh"
-        " quadrature (checked against the closed form to 1e-30)",
-        "# inputs: albedo_prime = sigma_s'/(sigma_s'+sigma_a) rounded to float64; albedo_prime, eta, r_opt are"
-        " exact doubles (repr) converted exactly to mpmath",
-        f"# parameters: cases {', '.join(f'{k}=(sigma_s_prime={v[0]}, sigma_a={v[1]}, eta={v[2]})' for k, v in CASES.items())}",
-        f"# r_opt: {' '.join(R_OPT)}",
-        f"# dps: {DPS} (mp.workdps); values printed to 30 significant digits",
-        f"# mpmath version: {mpmath.__version__}; python {sys.version.split()[0]}",
-        f"# generator: tools/precompute_dipole_references.py sha256 {script_sha}",
-        f"# date: {datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')}",
-    ]
-    buf.write("\n".join(header) + "\n")
-    fields = ["case", "sigma_s_prime", "sigma_a", "albedo_prime", "eta", "quantity", "r_opt", "value"]
-    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(buf.getvalue())
+    write_reference_csv(
+        args.out, ["case", "sigma_s_prime", "sigma_a", "albedo_prime", "eta", "quantity", "r_opt", "value"], rows,
+        script=Path(__file__),
+        title="Planar dipole references (physics.md b), optical units: R_d / sigma_t'^2 at r_opt = r sigma_t'",
+        params={
+            "function": "R_d(r) = alpha'/(4 pi) [z_r g(d_r) + z_v g(d_v)], g(d) = (mu d + 1) exp(-mu d)/d^3,\n"
+                        "z_r = 1, z_b = 2A/3, z_v = 1 + 4A/3, A = (1+F_dr)/(1-F_dr), F_dr Groenhuis fit,"
+                        " mu = sqrt(3(1-alpha'))",
+            "quantities": "R_d: the profile at r_opt; total_quad: int_0^inf R_d 2 pi r dr by mpmath tanh-sinh"
+                          " quadrature (checked against the closed form to 1e-30)",
+            "inputs": "albedo_prime = sigma_s'/(sigma_s'+sigma_a) rounded to float64; albedo_prime, eta, r_opt are"
+                      " exact doubles (repr) converted exactly to mpmath",
+            "parameters": "cases " + ", ".join(f"{k}=(sigma_s_prime={v[0]}, sigma_a={v[1]}, eta={v[2]})"
+                                               for k, v in CASES.items()) + f"; r_opt {' '.join(R_OPT)}",
+            "dps": f"{DPS} (mp.workdps); values printed to 30 significant digits",
+        })
     print(f"wrote {len(rows)} rows to {args.out}")
     return 0
 

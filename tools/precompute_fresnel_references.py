@@ -20,15 +20,14 @@ Usage:  python tools/precompute_fresnel_references.py [--out tests/data/fresnel_
 from __future__ import annotations
 
 import argparse
-import csv
-import datetime
-import hashlib
-import io
 import sys
 from pathlib import Path
 
 import mpmath
 from mpmath import mp, mpf
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _refheader import write_reference_csv  # noqa: E402  (tools/ is not a package)
 
 DPS = 50
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,22 +64,16 @@ def main(argv=None) -> int:
                 cos_list.append(float(mpf(eta_i) / mpmath.sqrt(mpf(eta_i) ** 2 + mpf(eta_t) ** 2)))
             for c in cos_list:
                 rows.append((repr(c), repr(eta_i), repr(eta_t), mpmath.nstr(reference(c, eta_i, eta_t), 30)))
-    script_hash = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
-    buf = io.StringIO()
-    buf.write("# Unpolarised Fresnel reflectance references (meshshade.kernels.fresnel.fresnel_reflectance)\n")
-    buf.write("# function: F = (R_s + R_p)/2 by Fresnel's sine/tangent laws in the angles (Born & Wolf 1.5.2);"
-              " normal incidence ((n1-n2)/(n1+n2))^2; total internal reflection 1\n")
-    buf.write("# inputs: cos_i, eta_i, eta_t are exact doubles (repr) converted exactly to mpmath\n")
-    buf.write(f"# parameters: pairs {PAIRS}; cos_i {COS_I} plus the Brewster cosine where eta_t > eta_i\n")
-    buf.write(f"# dps: {DPS} (mp.workdps); values printed to 30 significant digits\n")
-    buf.write(f"# mpmath version: {mpmath.__version__}; python {sys.version.split()[0]}\n")
-    buf.write(f"# generator: tools/precompute_fresnel_references.py sha256 {script_hash}\n")
-    buf.write(f"# date: {datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')}\n")
-    writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(["cos_i", "eta_i", "eta_t", "F"])
-    writer.writerows(rows)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(buf.getvalue())
+    write_reference_csv(
+        args.out, ["cos_i", "eta_i", "eta_t", "F"], rows, script=Path(__file__),
+        title="Unpolarised Fresnel reflectance references (meshshade.kernels.fresnel.fresnel_reflectance)",
+        params={
+            "function": "F = (R_s + R_p)/2 by Fresnel's sine/tangent laws in the angles (Born & Wolf 1.5.2);"
+                        " normal incidence ((n1-n2)/(n1+n2))^2; total internal reflection 1",
+            "inputs": "cos_i, eta_i, eta_t are exact doubles (repr) converted exactly to mpmath",
+            "parameters": f"pairs {PAIRS}; cos_i {COS_I} plus the Brewster cosine where eta_t > eta_i",
+            "dps": f"{DPS} (mp.workdps); values printed to 30 significant digits",
+        })
     print(f"wrote {len(rows)} rows to {args.out}")
     return 0
 

@@ -34,21 +34,19 @@ Usage:  python tools/precompute_references.py [--out tests/data/sphere_reference
 from __future__ import annotations
 
 import argparse
-import csv
-import datetime
-import hashlib
-import io
 import math
 import sys
 import time
 from multiprocessing import Pool
 from pathlib import Path
 
-import mpmath
 from mpmath import mp, mpf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _refheader import write_reference_csv  # noqa: E402  (tools/ is not a package)
 from precompute_dipole_references import params  # noqa: E402  (alpha', eta -> z_r, z_b, z_v, mu in mpmath)
+
+DIPOLE_SCRIPT = Path(__file__).resolve().parent / "precompute_dipole_references.py"  # hashed as a dependency
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "tests" / "data" / "sphere_reference.csv"
@@ -240,7 +238,6 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args(argv)
-    script_sha = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
     jobs = [(case, s, a, eta, R0_mm, grp) for case, s, a, eta, radii in CASES for R0_mm, grp in radii]
     longest_first = sorted(range(len(jobs)), key=lambda i: -jobs[i][4])
     t0 = time.time()
@@ -250,31 +247,25 @@ def main(argv=None) -> int:
     elapsed = time.time() - t0
     cases_txt = "; ".join(f"{c}=(sigma_s_prime={s}, sigma_a={a}, eta={e}, R0_mm={[r for r, _ in rr]})"
                           for c, s, a, e, rr in CASES)
-    header = [
-        "# Exact-sphere references (physics.md c), optical units: R_sph(theta) / sigma_t'^2, Jensen normalisation",
-        "# function: alpha'/(4 pi) [g(d)(R0 - r' cos theta) + sum_m c_m P_m(cos theta)], original c_m form with"
-        " I_nu, K_nu in mpmath (see tools/precompute_references.py docstring); r' = R0 - min(z_r, R0), R = R0 + z_b",
-        "# inputs: albedo_prime = sigma_s'/(sigma_s'+sigma_a) as float64, R0_opt = R0_mm*(sigma_s'+sigma_a) as"
-        " float64, eta, theta: exact doubles (repr) converted exactly to mpmath",
-        f"# parameters: {cases_txt}",
-        f"# theta groups: full={list(THETA_FULL)}; near = s/R0 for s in (0, 0.1, 1, 2, 5, 10, 20, 50) mm;"
-        " far = (0, 0.3, 1, 2, pi)",
-        f"# dps: per group (column dps), each group recomputed at dps+15; tail bound < {mp.nstr(TAIL, 2)} x smallest"
-        f" value; rel_err_est = (tail + |diff|)/|value| <= {mp.nstr(MAX_REL_ERR, 2)}; values to 25 digits",
-        f"# mpmath version: {mpmath.__version__} (backend {mpmath.libmp.BACKEND}); python {sys.version.split()[0]};"
-        f" runtime {elapsed:.0f} s on {args.jobs} processes",
-        f"# generator: tools/precompute_references.py sha256 {script_sha}",
-        f"# date: {datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')}",
-    ]
-    buf = io.StringIO()
-    buf.write("\n".join(header) + "\n")
     fields = ["case", "sigma_s_prime", "sigma_a", "albedo_prime", "eta", "R0_mm", "R0_opt", "theta", "value",
               "rel_err_est", "n_terms", "dps", "method"]
-    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(buf.getvalue())
+    write_reference_csv(
+        args.out, fields, rows, script=Path(__file__), depends=[DIPOLE_SCRIPT],
+        title="Exact-sphere references (physics.md c), optical units: R_sph(theta) / sigma_t'^2, Jensen normalisation",
+        params={
+            "function": "alpha'/(4 pi) [g(d)(R0 - r' cos theta) + sum_m c_m P_m(cos theta)], original c_m form with"
+                        " I_nu, K_nu in mpmath (see tools/precompute_references.py docstring); r' = R0 - min(z_r, R0),"
+                        " R = R0 + z_b",
+            "inputs": "albedo_prime = sigma_s'/(sigma_s'+sigma_a) as float64, R0_opt = R0_mm*(sigma_s'+sigma_a) as"
+                      " float64, eta, theta: exact doubles (repr) converted exactly to mpmath",
+            "parameters": cases_txt,
+            "theta groups": f"full={list(THETA_FULL)}; near = s/R0 for s in (0, 0.1, 1, 2, 5, 10, 20, 50) mm;"
+                            " far = (0, 0.3, 1, 2, pi)",
+            "dps": f"per group (column dps), each group recomputed at dps+15; tail bound < {mp.nstr(TAIL, 2)} x"
+                   f" smallest value; rel_err_est = (tail + |diff|)/|value| <= {mp.nstr(MAX_REL_ERR, 2)};"
+                   " values to 25 digits",
+            "runtime": f"{elapsed:.0f} s on {args.jobs} processes",
+        })
     print(f"wrote {len(rows)} rows to {args.out} in {elapsed:.0f} s")
     return 0
 

@@ -6,7 +6,7 @@ Three kinds, all per unit light (beam power 1 W, directional irradiance 1 W/mm^2
   (kernels/sphere.py) at the great-circle angle ``theta`` between x and the beam's entry point on the *exact*
   sphere (ray-sphere intersection, exact normal for the Fresnel factor).
 * ``exact`` on a sphere under a directional light: the exact solution integrates the sphere series over the lit
-  hemisphere with the power that enters there, as lights.py defines it (``E cos F_t(cos)`` per unit area):
+  hemisphere with the power that enters there, as light/samples.py defines it (``E cos F_t(cos)`` per unit area):
 
       M(beta) = E int_0^pi R_sph(gamma) R0^2 sin(gamma) [ int_0^2pi w(cos t) dpsi ] dgamma,
       cos t = cos(beta) cos(gamma) + sin(beta) sin(gamma) cos(psi),     w(c) = max(c, 0) F_t(c),
@@ -18,7 +18,7 @@ Three kinds, all per unit light (beam power 1 W, directional irradiance 1 W/mm^2
   tabulated on 289 angles beta (denser near the terminator) and interpolated with a cubic spline (measured
   within 4e-6 of the direct quadrature with 512 psi nodes). Check: its integral over the sphere equals the
   entering power times the closed-form total reflectance ``alpha' T`` (sphere_total_reflectance): measured
-  within 1e-8 for R0 = 5, 20 and 100 mm; tests/test_bench.py asserts 1e-6.
+  within 1e-8 for R0 = 5, 20 and 100 mm; tests/bench/test_bench.py asserts 1e-6.
 * ``exact`` on a long capped cylinder under a beam: the exact infinite-cylinder kernel (kernels/cylinder.py) at
   the vertex's angle and axial offset from the entry point, on side vertices only (caps and rims excluded; the
   cylinder is long enough that the default cutoff never reaches a cap).
@@ -39,7 +39,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshshade.kernels.cylinder import cylinder_exact_profile
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
+from meshshade.kernels.sphere import sphere_series_profile, sphere_total_reflectance
+from meshshade.light import BeamLight
+from meshshade.raycast import make_scene
 
 EXACT_FLOOR = 1e-4
 MC_FLOOR = 1e-3
@@ -68,8 +72,6 @@ def _gl_panels(s_max: float, n: int = 24):
 
 def sphere_beam_exitance(theta, *, R_mm: float, material, cos_i: float = 1.0, power: float = 1.0):
     """Exitance [W/mm^2] at angle ``theta`` from a beam's entry point on the exact sphere: P F_t(cos_i) R_sph."""
-    from meshshade.kernels.sphere import sphere_series_profile  # noqa: PLC0415
-
     st, par = _channel(material)
     th = np.clip(np.asarray(theta, dtype=np.float64), 0.0, np.pi)
     ft = float(fresnel_transmittance_entry(cos_i, par["eta"]))
@@ -83,8 +85,6 @@ def sphere_directional_exitance(beta, *, R_mm: float, material, irradiance: floa
     the trapezoid rule runs over [0, pi] with ``n_psi + 1`` nodes (equivalent to 2 n_psi over the period).
     Gamma nodes where the kernel is below 1e-15 of its peak are dropped. ``beta`` (k,) rad.
     """
-    from meshshade.kernels.sphere import sphere_series_profile  # noqa: PLC0415
-
     st, par = _channel(material)
     s, ws = _gl_panels(np.pi * R_mm)
     gam = s / R_mm
@@ -111,7 +111,7 @@ def sphere_directional_exitance(beta, *, R_mm: float, material, irradiance: floa
 def sphere_directional_table(*, R_mm: float, material):
     """A cubic spline beta -> exitance of :func:`sphere_directional_exitance`: 193 angles over [0, pi] plus 97
     within 0.15 rad of the terminator (where M falls over a few transport lengths / R0)."""
-    from scipy.interpolate import CubicSpline  # noqa: PLC0415
+    from scipy.interpolate import CubicSpline  # lazy: ~0.1-0.3 s on every CLI start; only this table needs it
 
     beta = np.unique(np.concatenate([np.linspace(0.0, np.pi, 193), np.pi / 2 + np.linspace(-0.15, 0.15, 97)]))
     return CubicSpline(beta, sphere_directional_exitance(beta, R_mm=R_mm, material=material))
@@ -121,8 +121,6 @@ def sphere_directional_energy(*, R_mm: float, material, irradiance: float = 1.0)
     """Total exitant power [W] of the exact sphere under a directional light: entering power x alpha' T.
 
     Entering power = E 2 pi R0^2 int_0^1 c F_t(c) dc (Gauss-Legendre, 64 nodes); alpha' T in closed form."""
-    from meshshade.kernels.sphere import sphere_total_reflectance  # noqa: PLC0415
-
     st, par = _channel(material)
     x, w = np.polynomial.legendre.leggauss(64)
     c = 0.5 * (x + 1.0)
@@ -161,9 +159,6 @@ class Reference:
 
 def entry_fan(mesh, light) -> np.ndarray | None:
     """(n,) bool: vertices of the faces touching the corners of the face a beam enters (None for other lights)."""
-    from meshshade.light.samples import BeamLight  # noqa: PLC0415
-    from meshshade.raycast.scene import make_scene  # noqa: PLC0415
-
     if not isinstance(light, BeamLight):
         return None
     hits = make_scene(mesh.vertices, mesh.faces).first_hit(np.array([light.origin]), np.array([light.direction]))
@@ -183,8 +178,7 @@ def _ray_sphere(origin, direction, R):
 
 
 def exact_sphere_reference(mesh, light, *, R_mm: float, material) -> Reference:
-    from meshshade.light.samples import BeamLight  # noqa: PLC0415
-
+    """Exact reference of a sphere of radius ``R_mm`` centred at the origin under a beam or directional light."""
     if isinstance(light, BeamLight):
         e, cos_i = _ray_sphere(light.origin, light.direction, R_mm)
 
@@ -193,7 +187,6 @@ def exact_sphere_reference(mesh, light, *, R_mm: float, material) -> Reference:
             th = 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(u - e, axis=1), 0.0, 1.0))  # no acos rounding at 0
             return sphere_beam_exitance(th, R_mm=R_mm, material=material, cos_i=cos_i, power=light.power)
 
-        from meshshade.kernels.sphere import sphere_total_reflectance  # noqa: PLC0415
         st, par = _channel(material)
         peak = float(point(e[None, :] * R_mm)[0])
         energy = light.power * float(fresnel_transmittance_entry(cos_i, par["eta"])) * float(
@@ -218,8 +211,6 @@ def exact_sphere_reference(mesh, light, *, R_mm: float, material) -> Reference:
 
 def exact_cylinder_reference(mesh, light, *, R_mm: float, length_mm: float, material) -> Reference:
     """Infinite-cylinder reference on the side vertices of a capped cylinder along z (beam lights only)."""
-    from meshshade.kernels.cylinder import cylinder_exact_profile  # noqa: PLC0415
-
     st, par = _channel(material)
     o, d = np.asarray(light.origin, float), np.asarray(light.direction, float)
     # entry: ray against the infinite cylinder x^2 + y^2 = R^2

@@ -8,10 +8,12 @@ from __future__ import annotations
 import csv
 import io as _stringio
 import math
+from pathlib import Path
 
 import numpy as np
 
 from meshshade.bench.runner import COLUMNS
+from meshshade.io import write_figure, write_json, write_text
 
 #: error levels of the "cheapest setting reaching" columns (mean relative error)
 ERROR_LEVELS = (0.1, 0.01, 0.001)
@@ -55,7 +57,7 @@ def _knob_label(r) -> str:
 
 def _decade_limits(ax, t, e):
     """Log axes spanning at least one decade around the data (no crowded minor-tick labels)."""
-    from matplotlib.ticker import LogLocator, NullFormatter  # noqa: PLC0415
+    from matplotlib.ticker import LogLocator, NullFormatter  # lazy: slow import (~1 s), plots only
 
     for vals, setter, axis in ((t, ax.set_xlim, ax.xaxis), (e, ax.set_ylim, ax.yaxis)):
         v = np.asarray(vals, float)
@@ -73,10 +75,10 @@ def _decade_limits(ax, t, e):
 def pareto_figure(rows, *, title: str = ""):
     """Log-log mean relative error vs wall time, one panel per scene, one marker per model, the Pareto front
     drawn (circled). Render rows (errors over pixels, time bake + render) are open markers outside the front."""
-    import matplotlib  # noqa: PLC0415
+    import matplotlib  # lazy: slow import (~1 s), plots only
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    import matplotlib.pyplot as plt  # lazy: as above
 
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     models = list(dict.fromkeys(r["model"] for r in rows))
@@ -170,15 +172,12 @@ def table_markdown(rows, metadata) -> str:
 
 
 def write_bench(result, out_dir) -> dict:
-    """Write the four outputs into ``out_dir`` (which must exist); returns {kind: path}."""
-    from pathlib import Path  # noqa: PLC0415
-
-    from meshshade import io  # noqa: PLC0415
-
+    """Write the four outputs into ``out_dir`` (which must exist) through :mod:`meshshade.io`; returns
+    {kind: path}."""
     out = Path(out_dir)
     paths = {k: out / v for k, v in FILES.items()}
-    io.write_text(paths["csv"], csv_text(result.rows))
-    io.write_text(paths["table"], table_markdown(result.rows, result.metadata))
-    io.write_figure(paths["plot"], pareto_figure(result.rows, title=result.metadata.get("command", "")))
-    io.write_json(paths["metadata"], result.metadata)
+    write_text(paths["csv"], csv_text(result.rows))
+    write_text(paths["table"], table_markdown(result.rows, result.metadata))
+    write_figure(paths["plot"], pareto_figure(result.rows, title=result.metadata.get("command", "")))
+    write_json(paths["metadata"], result.metadata)
     return paths

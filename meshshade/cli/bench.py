@@ -1,8 +1,17 @@
-"""`meshshade bench`: accuracy against time for every model and knob (thin layer over meshshade.bench.runner)."""
+"""``meshshade bench``: accuracy against time for every model and knob (thin layer over :mod:`meshshade.bench`)."""
 from __future__ import annotations
 
 import argparse
 import sys
+
+from meshshade.bench.plan import bench_plan
+from meshshade.bench.report import write_bench
+from meshshade.bench.runner import run_bench as run_benchmark
+from meshshade.cli.options import parse_names
+from meshshade.io import output_dir
+from meshshade.errors import MeshshadeError
+
+HELP = "accuracy vs time of every model and knob against exact or Monte Carlo references"
 
 
 def add_bench_args(p: argparse.ArgumentParser) -> None:
@@ -17,32 +26,20 @@ def add_bench_args(p: argparse.ArgumentParser) -> None:
                    help="photons of each Monte Carlo reference (default 1000000 quick, 4000000 full)")
 
 
-def _names(text):
-    return None if text is None else [x.strip() for x in text.split(",") if x.strip()]
+def _progress(line: str) -> None:
+    print(f"bench: {line}", file=sys.stderr, flush=True)
 
 
 def run_bench(args) -> int:
-    from pathlib import Path  # noqa: PLC0415
-
-    from meshshade.bench import runner as bench  # noqa: PLC0415
-    from meshshade.bench import report as bench_report  # noqa: PLC0415
-    from meshshade.errors import MeshshadeError, OutputError  # noqa: PLC0415
-
     if args.mc_photons is not None and args.mc_photons < 16:
         raise MeshshadeError("--mc-photons must be at least 16")
     if args.seed < 0:
         raise MeshshadeError(f"--seed must be >= 0, got {args.seed}")
-    plan = bench.bench_plan(quick=args.quick, scenes=_names(args.scenes), models=_names(args.models))
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"--out {out} exists and is not a directory")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create output folder {out}: {exc.strerror}") from None
-    progress = None if args.quiet else (lambda line: print(f"bench: {line}", file=sys.stderr, flush=True))
-    result = bench.run_bench(plan, seed=args.seed, mc_photons=args.mc_photons, quick=args.quick, progress=progress)
-    paths = bench_report.write_bench(result, out)
+    plan = bench_plan(quick=args.quick, scenes=parse_names(args.scenes), models=parse_names(args.models))
+    out = output_dir(args.out)
+    result = run_benchmark(plan, seed=args.seed, mc_photons=args.mc_photons, quick=args.quick,
+                           progress=None if args.quiet else _progress)
+    paths = write_bench(result, out)
     if not args.quiet:
         print(f"{len(result.rows)} measurements in {result.metadata['wall_time_s']:.0f} s; wrote "
               + ", ".join(str(p) for p in paths.values()))

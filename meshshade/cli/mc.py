@@ -1,17 +1,23 @@
-"""`meshshade mc`: Monte Carlo reference random walk inside a mesh (thin layer over meshshade.montecarlo.simulate)."""
+"""``meshshade mc``: Monte Carlo reference random walk inside a mesh (thin layer over
+:func:`meshshade.montecarlo.simulate.simulate` and :func:`meshshade.output.mc_file.write_mc`)."""
 from __future__ import annotations
 
 import argparse
 
+from meshshade.cli.options import (add_light_arg, add_material_args, add_mesh_args, lights_from_args,
+                                   mesh_and_material)
 from meshshade.errors import MeshshadeError
+from meshshade.io import check_output_path
+from meshshade.montecarlo import describe_mc, simulate
+from meshshade.output.mc_file import write_mc
+
+HELP = "Monte Carlo reference: random walk inside the mesh, exitance with standard errors"
 
 
 def add_mc_args(p: argparse.ArgumentParser) -> None:
-    from meshshade.cli.main import LIGHT_HELP, add_material_args, add_mesh_args  # noqa: PLC0415
-
     add_mesh_args(p)
     add_material_args(p, with_g=True)
-    p.add_argument("--light", action="append", required=True, metavar="SPEC", help=LIGHT_HELP)
+    add_light_arg(p)
     p.add_argument("--photons", type=int, default=None, metavar="N", help="photons per channel (default 100000)")
     p.add_argument("--time-budget", type=float, default=None, metavar="SECONDS",
                    help="wall-clock budget (with --photons: whichever comes first): emission stops when the photons "
@@ -27,14 +33,9 @@ def add_mc_args(p: argparse.ArgumentParser) -> None:
 
 
 def run_mc(args) -> int:
-    from meshshade import io  # noqa: PLC0415
-    from meshshade.light import samples as lights  # noqa: PLC0415
-    from meshshade.montecarlo import simulate as montecarlo  # noqa: PLC0415
-    from meshshade.cli.main import mesh_and_material  # noqa: PLC0415
-
     outs = [o for o in (args.out, args.npz, args.summary) if o]
     for i, o in enumerate(outs):
-        io.check_output_path(o, [args.mesh, *outs[:i]])
+        check_output_path(o, [args.mesh, *outs[:i]])
     photons = args.photons if args.photons is not None else (None if args.time_budget else 100_000)
     if (photons is not None and photons < 16) or (args.time_budget is not None and args.time_budget <= 0):
         raise MeshshadeError("--photons must be >= 16 and --time-budget > 0")
@@ -43,11 +44,10 @@ def run_mc(args) -> int:
     if args.seed < 0:
         raise MeshshadeError(f"--seed must be >= 0, got {args.seed}")
     mesh, material = mesh_and_material(args)
-    light_list = [lights.parse_light_spec(s, mm_per_unit=mesh.mm_per_unit) for s in args.light]
-    result = montecarlo.simulate(mesh, material, light_list, photons=photons, seed=args.seed,
-                                 time_budget=args.time_budget, pool=args.pool, progress=not args.quiet)
-    montecarlo.write_mc(result, mesh, args.out, npz=args.npz, summary=args.summary)
+    result = simulate(mesh, material, lights_from_args(args, mesh), photons=photons, seed=args.seed,
+                      time_budget=args.time_budget, pool=args.pool, progress=not args.quiet)
+    write_mc(result, mesh, args.out, npz=args.npz, summary=args.summary)
     if not args.quiet:
-        print(montecarlo.describe_mc(result))
+        print(describe_mc(result))
         print("wrote " + ", ".join(outs))
     return 0

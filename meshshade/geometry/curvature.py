@@ -52,6 +52,7 @@ import numpy as np
 from scipy import sparse
 
 from meshshade.geometry.mesh import MeshDefectWarning, face_geometry
+from meshshade.geometry.topology import vertex_adjacency
 
 __all__ = ["PrincipalCurvatures", "principal_curvatures", "DEFAULT_RADIUS_EDGES", "FALLBACK_RINGS", "OUTLIER_KH"]
 
@@ -136,7 +137,7 @@ def _tangent_frames(d1, d2, normals):
 
 def _cotan_mean_curvature(V, F, normals):
     """Umbilic fallback: H = -(Delta x . n) / 2 with the cotangent Laplacian and barycentric areas."""
-    import igl
+    import igl  # lazy: libigl takes ~0.5 s to import; only the curvature fit needs it
 
     L = igl.cotmatrix(V, F)
     M = igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_BARYCENTRIC)
@@ -162,7 +163,7 @@ def principal_curvatures(vertices, faces, *, radius_mm: float | None = None) -> 
     -------
     PrincipalCurvatures (unpacks to ``k1, k2, d1, d2``). All values are finite.
     """
-    import igl
+    import igl  # lazy: libigl takes ~0.5 s to import; only the curvature fit needs it
 
     V = np.ascontiguousarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
@@ -250,10 +251,8 @@ def principal_curvatures(vertices, faces, *, radius_mm: float | None = None) -> 
 def _fill_from_neighbours(F, k1, k2, d1, failed):
     """Median k1, k2 (and the first valid neighbour's d1) of valid vertices within FALLBACK_RINGS rings."""
     nv = k1.size
-    rows = np.concatenate([F[:, 0], F[:, 1], F[:, 2], F[:, 1], F[:, 2], F[:, 0]])
-    cols = np.concatenate([F[:, 1], F[:, 2], F[:, 0], F[:, 0], F[:, 1], F[:, 2]])
-    adj = sparse.csr_matrix((np.ones(rows.size, bool), (rows, cols)), shape=(nv, nv))
-    adj.sum_duplicates()
+    indptr, indices = vertex_adjacency(nv, F)
+    adj = sparse.csr_matrix((np.ones(indices.size, bool), indices, indptr), shape=(nv, nv))
     valid = ~failed
     todo = np.flatnonzero(failed)
     reach = sparse.csr_matrix((np.ones(todo.size, bool), (np.arange(todo.size), todo)), shape=(todo.size, nv))

@@ -31,7 +31,8 @@ from meshshade.errors import MeshValidationError
 from meshshade.units import mm_per_unit as _mm_per_unit
 from meshshade.geometry import topology
 
-__all__ = ["Mesh", "MeshReport", "MeshDefectWarning", "validate_mesh", "face_geometry", "DEGENERATE_REL_TOL"]
+__all__ = ["Mesh", "MeshReport", "MeshDefectWarning", "validate_mesh", "face_geometry", "face_normals",
+           "DEGENERATE_REL_TOL"]
 
 #: a face is degenerate when |cross(e1, e2)| <= DEGENERATE_REL_TOL * (longest edge)**2 (scale-free)
 DEGENERATE_REL_TOL = 1e-12
@@ -112,6 +113,32 @@ def face_geometry(vertices, faces):
     degenerate = np.linalg.norm(cross, axis=1) <= DEGENERATE_REL_TOL * longest2
     degenerate |= (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
     return cross, degenerate
+
+
+def _unit_rows(vectors: np.ndarray) -> np.ndarray:
+    """(k, 3) rows scaled to unit length; rows of zero length stay 0."""
+    norm = np.linalg.norm(vectors, axis=1, keepdims=True)
+    return np.divide(vectors, norm, out=np.zeros_like(vectors), where=norm > 0)
+
+
+def face_normals(vertices, faces, *, unit: bool = True) -> np.ndarray:
+    """Face normals by the right-hand rule (outward for ``Mesh.faces``), from ``face_geometry``.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array_like of float, mm
+    faces : (m, 3) array_like of int
+    unit : bool
+        True: unit normals, 0 for faces whose cross product is exactly zero (a repeated index, coincident
+        corners). False: the area-weighted normal ``(v1 - v0) x (v2 - v0)``, whose norm is twice the face
+        area (mm^2).
+
+    Returns
+    -------
+    (m, 3) float64. Near-degenerate faces (``DEGENERATE_REL_TOL``) are not zeroed here; ``Mesh.face_normals`` is.
+    """
+    cross, _ = face_geometry(vertices, faces)
+    return _unit_rows(cross) if unit else cross
 
 
 def _as_vertices(vertices) -> np.ndarray:
@@ -316,9 +343,7 @@ class Mesh:
     @cached_property
     def face_normals(self) -> np.ndarray:
         """(m, 3) float64 unit normals by the right-hand rule (outward after validation); 0 for degenerate faces."""
-        cross = self._face_cross[0]
-        norm = np.linalg.norm(cross, axis=1, keepdims=True)
-        return _readonly(np.divide(cross, norm, out=np.zeros_like(cross), where=norm > 0))
+        return _readonly(_unit_rows(self._face_cross[0]))
 
     @cached_property
     def vertex_normals(self) -> np.ndarray:
@@ -326,8 +351,7 @@ class Mesh:
         idx = self.faces.reshape(-1)
         cross = np.repeat(self._face_cross[0], 3, axis=0)  # |cross| = 2 * area: area weighting
         acc = np.stack([np.bincount(idx, weights=cross[:, j], minlength=self.n_vertices) for j in range(3)], 1)
-        norm = np.linalg.norm(acc, axis=1, keepdims=True)
-        return _readonly(np.divide(acc, norm, out=np.zeros_like(acc), where=norm > 0))
+        return _readonly(_unit_rows(acc))
 
     @cached_property
     def vertex_areas(self) -> np.ndarray:

@@ -24,8 +24,8 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-__all__ = ["EdgeTopology", "edge_topology", "vertex_components", "consistent_winding", "orient_outward",
-           "winding_number", "signed_volumes"]
+__all__ = ["EdgeTopology", "edge_topology", "vertex_adjacency", "vertex_components", "consistent_winding",
+           "orient_outward", "winding_number", "signed_volumes"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,6 +72,35 @@ def edge_topology(faces) -> EdgeTopology:
     return EdgeTopology(edges=edges.astype(np.int64), face_count=counts.astype(np.int64),
                         halfedge_edge=inverse.reshape(-1, 3).astype(np.int64),
                         halfedge_forward=(a < b).reshape(-1, 3), topo_faces=topo)
+
+
+def vertex_adjacency(n_vertices: int, faces) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex graph of ``faces`` as CSR: the unique neighbours of every vertex, sorted.
+
+    Two vertices are neighbours when they are distinct corners of a common face (so a face with a repeated index
+    still contributes its one edge; self-loops never appear). Every undirected edge is listed in both rows.
+
+    Parameters
+    ----------
+    n_vertices : int, number of vertices n (rows of the result; indices in ``faces`` must be below it)
+    faces : (m, 3) int array
+
+    Returns
+    -------
+    indptr : (n + 1,) int64, row v is ``indices[indptr[v]:indptr[v + 1]]``
+    indices : (2 e,) int64, neighbour vertex indices, ascending within each row
+    """
+    F = np.asarray(faces, dtype=np.int64)
+    a = np.concatenate([F[:, 0], F[:, 1], F[:, 2]])
+    b = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
+    keep = a != b
+    a, b = a[keep], b[keep]
+    base = np.int64(n_vertices)
+    keys = np.unique(np.concatenate([a * base + b, b * base + a]))  # 1-D keys: sorted by row, then column
+    rows = keys // base
+    indptr = np.zeros(n_vertices + 1, dtype=np.int64)
+    indptr[1:] = np.cumsum(np.bincount(rows, minlength=n_vertices))
+    return indptr, keys % base
 
 
 def vertex_components(n_vertices: int, faces) -> tuple[int, np.ndarray]:

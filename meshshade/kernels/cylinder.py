@@ -63,8 +63,8 @@ import numba
 import numpy as np
 from scipy import special
 
-from meshshade.errors import MeshshadeError
-from meshshade.kernels.optics import diffusion_params, g_func
+from meshshade.errors import MaterialError, MeshshadeError
+from meshshade.kernels.optics import check_material, diffusion_params, g_func
 
 __all__ = ["cylinder_exact_profile", "cylinder_exact_profile_geodesic"]
 
@@ -266,22 +266,24 @@ def _truncation_eps(rtol):
     return float(np.clip(rtol * 1e-4, 1e-16, 1e-3))
 
 
-def _check_scalar(name, value, lo=None):
+def _check_scalar(name, value, lo=None, err=MeshshadeError):
+    """``value`` as a float; raises ``err`` unless it is a finite scalar (and > lo)."""
     v = np.asarray(value, dtype=np.float64)
     if v.ndim != 0 or not np.isfinite(v):
-        raise MeshshadeError(f"{name} must be a finite scalar, got {value!r}")
+        raise err(f"{name} must be a finite scalar, got {value!r}")
     v = float(v)
     if lo is not None and not v > lo:
-        raise MeshshadeError(f"{name} must be > {lo}, got {v}")
+        raise err(f"{name} must be > {lo}, got {v}")
     return v
 
 
 def _geometry(R0_opt, albedo_prime, eta):
     R0 = _check_scalar("R0_opt", R0_opt, 0.5)  # z_r/2: for R0 <= z_r/2 the source is not inside the medium
-    alb = _check_scalar("albedo_prime", albedo_prime)
+    check_material(albedo_prime, eta)  # the kernels' common material check, then this kernel's own limits
+    alb = _check_scalar("albedo_prime", albedo_prime, err=MaterialError)
     if not 0.0 < alb <= 1.0:
-        raise MeshshadeError(f"albedo_prime must lie in (0, 1], got {alb}")
-    eta = _check_scalar("eta", eta, 0.0)
+        raise MaterialError(f"albedo_prime must lie in (0, 1], got {alb}")
+    eta = _check_scalar("eta", eta, 0.0, err=MaterialError)
     p = diffusion_params(alb, eta)
     z_r, z_b, mu = float(p.z_r), float(p.z_b), float(p.mu)
     return R0, alb, mu, z_r, z_b

@@ -5,9 +5,12 @@ to get millimetres. The only material inputs the kernels need are the reduced al
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
+
+from meshshade.errors import MaterialError
 
 
 def fresnel_diffuse_reflectance(eta):
@@ -18,6 +21,32 @@ def fresnel_diffuse_reflectance(eta):
     """
     eta = np.asarray(eta, dtype=np.float64)
     return -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
+
+
+def check_material(albedo_prime, eta):
+    """Validate the material inputs of every kernel; return them as float64 arrays ``(albedo_prime, eta)``.
+
+    Raises :class:`~meshshade.errors.MaterialError` unless every ``albedo_prime`` is finite and in [0, 1] and every
+    ``eta`` is finite and > 0 (array_like, any shapes; the arrays are returned unbroadcast).
+    """
+    try:
+        a = np.asarray(albedo_prime, dtype=np.float64)
+        e = np.asarray(eta, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise MaterialError(f"albedo_prime and eta must be real numbers, got {albedo_prime!r}, {eta!r}") from None
+    if a.ndim == 0 and e.ndim == 0:  # the common case, without numpy reductions (NaN fails every comparison)
+        ok_a = 0.0 <= float(a) <= 1.0
+        ok_e = 0.0 < float(e) < math.inf
+    else:
+        ok_a = bool(np.all((a >= 0.0) & (a <= 1.0)))
+        ok_e = bool(np.all((e > 0.0) & (e < np.inf)))
+    if not ok_a:
+        bad = a[~((a >= 0.0) & (a <= 1.0))].flat[0] if a.ndim else a
+        raise MaterialError(f"albedo_prime must be finite and lie in [0, 1], got {float(bad)!r}")
+    if not ok_e:
+        bad = e[~((e > 0.0) & (e < np.inf))].flat[0] if e.ndim else e
+        raise MaterialError(f"eta must be finite and > 0, got {float(bad)!r}")
+    return a, e
 
 
 class DiffusionParams(NamedTuple):
@@ -46,6 +75,7 @@ def diffusion_params(albedo_prime, eta) -> DiffusionParams:
     """Return :class:`DiffusionParams` (broadcast arrays) for reduced albedo ``albedo_prime`` in [0, 1] and ``eta``.
 
     ``mu = sqrt(3 (1 - alpha'))`` is formed from ``1 - alpha'`` directly so it stays accurate as alpha' -> 1.
+    The inputs are not validated here: the public kernels call :func:`check_material` first.
     """
     a = np.asarray(albedo_prime, dtype=np.float64)
     eta = np.asarray(eta, dtype=np.float64)
@@ -64,9 +94,3 @@ def g_func(d, mu):
     d = np.asarray(d, dtype=np.float64)
     return (mu * d + 1.0) * np.exp(-mu * d) / d**3
 
-
-def p_func(d, mu):
-    """p(d) = (mu^2 d^2 + 3 mu d + 3) exp(-mu d) / d**5 (physics.md notation); d > 0."""
-    d = np.asarray(d, dtype=np.float64)
-    md = mu * d
-    return (md * md + 3.0 * md + 3.0) * np.exp(-md) / d**5

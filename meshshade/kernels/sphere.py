@@ -84,7 +84,7 @@ from numba import njit
 
 from meshshade.errors import MaterialError
 from meshshade.kernels.dipole import dipole_profile
-from meshshade.kernels.optics import diffusion_params, g_func
+from meshshade.kernels.optics import check_material, diffusion_params, g_func
 
 _BLOCK = 512  # m-block for the streamed ratio tables and the theta loop
 _RUN = 3  # successive passing tail tests before stopping
@@ -401,9 +401,7 @@ def sphere_total_reflectance(*, R0_opt, albedo_prime, eta):
     ``(alpha'/2)(e^{-mu z_r} + e^{-mu z_v})`` as R0 -> inf and to alpha' as mu -> 0; always <= alpha'.
     Broadcasts like a ufunc over its (array_like) arguments; dimensionless.
     """
-    a, e = np.asarray(albedo_prime, dtype=np.float64), np.asarray(eta, dtype=np.float64)
-    if not (np.all((a >= 0) & (a <= 1)) and np.all(np.isfinite(e) & (e > 0))):
-        raise MaterialError("albedo_prime must lie in [0, 1] and eta be finite and > 0")
+    a, e = check_material(albedo_prime, eta)
     R0 = np.asarray(R0_opt, dtype=np.float64)
     if not np.all(np.isfinite(R0) & (R0 > 0)):
         raise ValueError("R0_opt must be finite and > 0")

@@ -13,7 +13,8 @@ A pool of ``pool`` photon slots is advanced in rounds:
    At most ``MAX_STEPS`` events per photon and round.
 
    * ``direct`` (default): every thread calls Embree's ``rtcIntersect1`` itself
-     (:mod:`meshshade.raycast.embree_direct`), so the boundary tests run on all cores;
+     (:mod:`meshshade.montecarlo.direct_walk` through :mod:`meshshade.raycast.embree_direct`), so the boundary
+     tests run on all cores;
    * ``batched``: the interior kernel stops every photon at its first uncertified free path, ONE embreex call
      traces all of them (embreex holds the GIL: one core), a second kernel resolves them.
 3. ``reduce_round`` (serial, slot order) adds the round's absorbed/lost/exit weights to the per-batch tallies.
@@ -40,10 +41,11 @@ import time
 import numba
 import numpy as np
 
-from meshshade.raycast import embree_direct as E
+from meshshade.light import BeamLight
 from meshshade.montecarlo import kernels as K
-from meshshade.light.samples import BeamLight
-from meshshade.montecarlo.simulate import ROULETTE_BOOST as K_BOOST, ROULETTE_THRESHOLD as K_THRESH
+from meshshade.montecarlo.direct_walk import walk_parallel
+from meshshade.montecarlo.sampling import ROULETTE_BOOST as K_BOOST, ROULETTE_THRESHOLD as K_THRESH
+from meshshade.raycast.embree_direct import TFAR_MARGIN_REL
 from meshshade.raycast.scene import OFFSET_ABS, OFFSET_REL
 
 ENTRY_CHUNK = 1 << 14
@@ -73,7 +75,15 @@ def first_hit_faces32(scene, o32, d32, tfar):
 
 
 class PoolWalk:
-    """One channel group's walk on a regenerating pool of photon slots (same tallies as WavefrontWalk)."""
+    """One channel group's walk on a regenerating pool of photon slots (same tallies as WavefrontWalk).
+
+    V : (n, 3) float64 mm; F : (m, 3) int64; normals : (m, 3) unit outward face normals; emitter :
+    :class:`~meshshade.montecarlo.emitter.Emitter`; scene : EmbreeScene or NumpyScene; grid :
+    :class:`~meshshade.montecarlo.interior.SafeDistanceGrid`; sigma_s, sigma_a : 1/mm; direct :
+    :class:`~meshshade.raycast.embree_direct.DirectEmbreeScene` or None (batched mode). After :meth:`run`:
+    ``face`` (B, m) and ``face_vert`` (B, n) exit power W per batch, ``tot`` (B, 7) W, ``events``, ``boundary``,
+    ``rays`` counts, ``exits`` of the beam's photons.
+    """
 
     def __init__(self, V, F, normals, emitter, scene, grid, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam,
                  seed, group, direct=None):
@@ -88,7 +98,6 @@ class PoolWalk:
         self.events = 0
         self.boundary = 0
         self.rays = 0
-        self.rounds = 0
         self.beam_light = next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), None)
         self.exits = {"face": [], "bary": [], "weight": [], "batch": []}
         tri = V[F]
@@ -100,7 +109,7 @@ class PoolWalk:
         self._facing = np.ascontiguousarray(emitter.facing)
         self._base = np.uint64(K.stream_base(np.uint64(self.seed & 0xFFFFFFFFFFFFFFFF), self.group))
         self._center = np.ascontiguousarray(scene.center, dtype=np.float64)
-        self._margin = E.TFAR_MARGIN_REL * scene.scale
+        self._margin = TFAR_MARGIN_REL * scene.scale
         self.direct = direct
         # the bound as uint8 in units of h/4, rounded down (conservative): 1/8 of the float64 grid's cache footprint
         unit = grid.h / SAFE_STEPS_PER_VOXEL
@@ -180,7 +189,7 @@ class PoolWalk:
         if self.direct is not None:
             # dynamic chunks: a thread preempted by another process does not hold up the round
             with numba.parallel_chunksize(CHUNK):
-                ev, bd, nr = E.walk_parallel(
+                ev, bd, nr = walk_parallel(
                     st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.lost, st.exit_face,
                     st.exit_bary, st.exit_w, self._safe, self._geo, grid.planes, grid.plane_index,
                     *common, self._margin, self.sigma_t, self.albedo, self.g, self.eta, K_THRESH, K_BOOST, steps,
@@ -209,7 +218,6 @@ class PoolWalk:
             for k, arr in (("face", st.beam_face), ("bary", st.beam_bary), ("weight", st.beam_w),
                            ("batch", st.beam_batch)):
                 self.exits[k].append(arr[:nb].copy())
-        self.rounds += 1
 
 
 class _PoolState:

@@ -25,6 +25,9 @@ import math
 import numba
 import numpy as np
 from numba import njit, prange
+from scipy.ndimage import binary_fill_holes, distance_transform_edt
+
+from meshshade.geometry.mesh import face_normals
 
 PLANE_K = 2
 #: skip the half-space certificates when the triangle-voxel registrations would exceed this (huge triangles)
@@ -42,8 +45,6 @@ class SafeDistanceGrid:
     """
 
     def __init__(self, vertices, faces, resolution: int = 96, mean_free_path: float | None = None):
-        from scipy.ndimage import binary_fill_holes, distance_transform_edt  # noqa: PLC0415
-
         V = np.asarray(vertices, dtype=np.float64)
         F = np.asarray(faces, dtype=np.int64)
         lo, hi = V.min(axis=0), V.max(axis=0)
@@ -69,7 +70,7 @@ class SafeDistanceGrid:
                 and F.shape[0] <= PLANE_MAX_FACES):
             start, tris = _register(i0, i1, np.array(shape), regs)
             vox = np.argwhere(binary_fill_holes(marked) & (self.safe < self.plane_radius))
-            an = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])   # area-weighted outward normals
+            an = 0.5 * face_normals(V, F, unit=False)   # area-weighted outward normals
             pl, ok = _planes(vox, start, tris, np.array(shape), an, np.ascontiguousarray(tri), self.origin, h,
                              PLANE_K, max(1, min(4 * numba.get_num_threads(), vox.shape[0])))
             self.planes = np.ascontiguousarray(pl[ok])

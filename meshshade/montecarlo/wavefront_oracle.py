@@ -1,9 +1,11 @@
-"""Baseline Monte Carlo engine: a numpy wavefront with one Embree query per photon and step.
+"""Oracle for tests and benchmarks: the baseline Monte Carlo engine, a numpy wavefront with one Embree query per step.
 
-All live photons advance together by one free path per iteration; dead photons are replaced by new ones from
-the lights as long as photons remain (a regenerating pool of ``pool`` photons, so the long tail of the walk does
-not starve the Embree batches). Physics and tallies as in :mod:`meshshade.montecarlo.simulate`; kept as the simple
-reference the pooled engine (:mod:`meshshade.montecarlo.engine`) is benchmarked and tested against.
+Not a production path: it is kept only as the simple, independent reference that the pooled engine
+(:mod:`meshshade.montecarlo.engine`) is tested and benchmarked against (``simulate(..., fast_interior=False)``,
+``tools/bench_mc.py``). All live photons advance together by one free path per iteration; dead photons are
+replaced by new ones from the lights as long as photons remain (a regenerating pool of ``pool`` photons, so the
+long tail of the walk does not starve the Embree batches). Physics and tallies as in
+:mod:`meshshade.montecarlo.simulate`, sampling from :mod:`meshshade.montecarlo.sampling`.
 """
 from __future__ import annotations
 
@@ -12,8 +14,8 @@ import time
 import numpy as np
 
 from meshshade.kernels.fresnel import fresnel_reflectance
-from meshshade.light.samples import BeamLight
-from meshshade.montecarlo.simulate import ROULETTE_BOOST, ROULETTE_THRESHOLD, scatter_directions
+from meshshade.light import BeamLight
+from meshshade.montecarlo.sampling import ROULETTE_BOOST, ROULETTE_THRESHOLD, scatter_directions
 
 
 class WavefrontWalk:

@@ -6,9 +6,17 @@ above ``floor`` times B's maximum (default 1e-3): far below the peak the ratio i
 """
 from __future__ import annotations
 
+from pathlib import Path
+from types import SimpleNamespace
+
 import numpy as np
 
+from meshshade import io
+from meshshade.montecarlo import simulate
+from meshshade.output import render
 from meshshade.output.tonemap import luminance
+from meshshade.raycast import make_scene
+from meshshade.transport.bake import bake
 
 #: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
 DEFAULT_FLOOR = 1e-3
@@ -67,10 +75,10 @@ def split_image(a, b):
 
 def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
     """Matplotlib figure of the signed relative difference image (NaN = background/below floor) with a colour bar."""
-    import matplotlib  # noqa: PLC0415
+    import matplotlib  # lazy: heavy plotting library, needed only for figures
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    import matplotlib.pyplot as plt  # lazy: as above
 
     finite = np.abs(rel[np.isfinite(rel)])
     lim = limit or (float(np.percentile(finite, 99)) if finite.size else 1.0) or 1.0
@@ -94,10 +102,6 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     "images": [(rgb, alpha), (rgb, alpha)],
     "split": (rgb, alpha), "rel": (H, W) signed relative difference, "stats": dict}`` (arrays only, no files).
     """
-    from meshshade.output import render  # noqa: PLC0415
-    from meshshade.raycast.scene import make_scene  # noqa: PLC0415
-    from meshshade.transport.bake import bake  # noqa: PLC0415
-
     if len(models) != 2:
         raise ValueError("compare needs exactly two models")
     camera = camera or render.auto_camera(mesh)
@@ -105,10 +109,6 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     bakes, images = [], []
     for m in models:
         if m == "mc":  # Monte Carlo reference: per-vertex exitance (per-pixel gathering does not apply)
-            from types import SimpleNamespace  # noqa: PLC0415
-
-            from meshshade.montecarlo.simulate import simulate  # noqa: PLC0415
-
             mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed)
             res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
         else:
@@ -133,11 +133,6 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
 def save_comparison(cmp: dict, out_dir, *, models, metadata: dict, operator="drago", bias=0.85,
                     background=None) -> list:
     """Write split.exr/png, <model>.exr/png, heatmap.png and stats.json into ``out_dir`` (via io); returns paths."""
-    from pathlib import Path  # noqa: PLC0415
-
-    from meshshade import io  # noqa: PLC0415
-    from meshshade.output import render  # noqa: PLC0415
-
     out = Path(out_dir)
     written = []
     rgb, alpha = cmp["split"]

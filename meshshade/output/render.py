@@ -24,11 +24,17 @@ Per-vertex vs per-pixel
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
+from meshshade.output.tonemap import srgb_encode, tonemap_linear
+from meshshade.raycast import make_scene
+from meshshade.transport.gather import gather
+from meshshade.transport.pair_kernel import PairKernel, source_frames, source_patch_radius
 
 
 # ------------------------------------------------------------------------------------------------ camera
@@ -165,12 +171,6 @@ class PixelGather:
     """
 
     def __init__(self, mesh, result, *, near_mm=None, max_pairs=3_000_000):
-        from types import SimpleNamespace  # noqa: PLC0415
-
-        from scipy.spatial import cKDTree  # noqa: PLC0415
-
-        from meshshade.transport.bake import PairKernel, source_frames  # noqa: PLC0415
-
         curv = SimpleNamespace(k1=result.k1, k2=result.k2, d1=result.d1)
         self.samples = result.samples
         self.frames = source_frames(result.samples, curv, mesh.faces)
@@ -180,7 +180,7 @@ class PixelGather:
         self.near_mm = float(near_mm)
         self.cut = np.minimum(np.asarray(result.cutoff_mm, float), self.near_mm)
         s = self.samples
-        self.radius = np.where(s.vertex >= 0, np.sqrt(mesh.vertex_areas[np.maximum(s.vertex, 0)] / np.pi), 0.0)
+        self.radius = source_patch_radius(s, mesh.vertex_areas)
         self.max_pairs = max_pairs
         self.faces = mesh.faces
         # only point samples (beams, inside triangles) have a peak sharper than the mesh: vertex samples stand for
@@ -191,10 +191,6 @@ class PixelGather:
 
     def near_field(self, points) -> np.ndarray:
         """(k, 3) mm points -> (k, 3) W/mm^2: the kernel summed over entry samples within ``near_mm``."""
-        from scipy.spatial import cKDTree  # noqa: PLC0415
-
-        from meshshade.transport.bake import gather  # noqa: PLC0415
-
         points = np.asarray(points, float)
         if self.tree is None or len(points) == 0:
             return np.zeros((len(points), 3))
@@ -227,7 +223,7 @@ class PixelGather:
 
 
 # ------------------------------------------------------------------------------------------------ rendering
-def _sample_offsets(spp: int, rng) -> np.ndarray:
+def sample_offsets(spp: int, rng) -> np.ndarray:
     """(spp, 2) jittered stratified sub-pixel offsets in [0, 1)."""
     n = int(np.ceil(np.sqrt(spp)))
     g = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="xy"), -1).reshape(-1, 2)[:spp]
@@ -253,13 +249,11 @@ def render_radiance(mesh, vertex_radiance, camera: Camera, width: int = 512, hei
     rgb : (H, W, 3) float64, radiance W/(mm^2 sr), premultiplied by coverage (background 0)
     alpha : (H, W) float64 coverage in [0, 1]
     """
-    from meshshade.raycast.scene import make_scene  # noqa: PLC0415
-
     if width < 1 or height < 1 or spp < 1:
         raise MeshshadeError("width, height and spp must be >= 1")
     scene = scene or make_scene(mesh.vertices, mesh.faces)
     rng = np.random.default_rng(seed)
-    off = _sample_offsets(spp, rng)
+    off = sample_offsets(spp, rng)
     jj, ii = np.meshgrid(np.arange(width), np.arange(height), indexing="xy")
     rgb = np.zeros((height, width, 3))
     alpha = np.zeros((height, width))
@@ -297,8 +291,6 @@ def image_rgba(rgb, alpha) -> np.ndarray:
 def display_rgba(rgb, alpha, *, operator="drago", bias=0.85, exposure=None, background=None) -> np.ndarray:
     """(H, W, 4) uint8 PNG: straight-alpha tone-mapped colours; ``background`` (3,) display [0, 1] composites
     onto that colour (alpha 255), None keeps the background transparent."""
-    from meshshade.output.tonemap import srgb_encode, tonemap_linear  # noqa: PLC0415
-
     cov = alpha > 0
     straight = np.where(cov[..., None], rgb / np.where(cov, alpha, 1.0)[..., None], 0.0)
     try:

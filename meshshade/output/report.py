@@ -65,10 +65,10 @@ def format_profile_table(rows, *, material, extra_columns=()) -> str:
 def profile_figure(rows, *, material, shapes):
     """Matplotlib figure: log10 reflectance vs geodesic distance, one panel per channel (one if grey),
     one labelled curve per model, radius and azimuth."""
-    import matplotlib  # noqa: PLC0415
+    import matplotlib  # lazy: heavy plotting library, needed only for figures
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    import matplotlib.pyplot as plt  # lazy: as above
 
     grey = _grey(rows)
     chans = ["r"] if grey else ["r", "g", "b"]

@@ -1,12 +1,14 @@
-"""Embree called from numba threads: the fused walk kernel of the pooled Monte Carlo engine.
+"""Embree called from numba threads: a ctypes binding of ``rtcIntersect1`` for the pooled Monte Carlo engine.
 
 embreex's ``run`` holds the GIL, so one process gets at most one core of Embree (measured ~3-7 M rays/s), while
 the near-surface walks of the benchmarks need a boundary test for ~35-40 % of their scattering events. Here the
 Embree 4 library that ships inside the embreex wheel is bound with ctypes (``rtcNewDevice`` ... ``rtcIntersect1``)
-and ``rtcIntersect1`` is called from a ``prange`` kernel (no GIL), so every core traces its own photons' rays.
+and ``rtcIntersect1`` is called from a ``prange`` kernel (no GIL; the walk kernel
+:func:`meshshade.montecarlo.direct_walk.walk_parallel` calls :func:`trace`), so every core traces its own photons'
+rays.
 
-Conventions are those of :class:`meshshade.raycast.scene.EmbreeScene`: the scene is built in float32 relative to the
-bounding-box centre, in Embree's robust (watertight) mode; Embree only *selects* the face, the distance and the
+Conventions are those of :class:`meshshade.raycast.embree.EmbreeScene`: the scene is built in float32 relative to
+the bounding-box centre, in Embree's robust (watertight) mode; Embree only *selects* the face, the distance and the
 barycentrics are recomputed in float64 on that face (:func:`meshshade.montecarlo.kernels.surface_event`). Each ray
 is limited to ``tfar = free path + margin`` (margin ``TFAR_MARGIN_REL * scale``, far above the ~1e-7 scale float32
 error), which lets Embree stop early; a miss within tfar is an interior event.
@@ -19,15 +21,16 @@ from __future__ import annotations
 
 import ctypes
 import glob
-import math
 import os
 
 import numpy as np
 from numba import njit, prange
 
-from meshshade.montecarlo import kernels as K
+__all__ = ["TFAR_MARGIN_REL", "DirectEmbreeScene", "rayhit_buffer", "trace"]
 
+#: tfar margin of a boundary test, relative to the scene's scale (bbox diagonal): ``tfar = free path + margin``
 TFAR_MARGIN_REL = 1e-5
+_NUMBA_OPTS = dict(cache=True, error_model="numpy")
 _INVALID = np.uint32(0xFFFFFFFF)
 _SCENE_FLAG_ROBUST = 1 << 2
 _GEOMETRY_TRIANGLE, _BUFFER_INDEX, _BUFFER_VERTEX = 0, 0, 1
@@ -41,7 +44,7 @@ def _library():
     """The Embree 4 shared library bundled with embreex (None if it cannot be found)."""
     global _LIB
     if _LIB is None:
-        import embreex  # noqa: PLC0415
+        import embreex  # noqa: PLC0415  # lazy: loads Embree; needed only to find the library in its wheel
 
         root = os.path.dirname(os.path.dirname(embreex.__file__))
         pats = ["embreex.libs/libembree4*.so*", "embreex/.dylibs/libembree4*.dylib", "embreex/embree4*.dll",
@@ -120,17 +123,21 @@ class DirectEmbreeScene:
                      np.ascontiguousarray(d32, dtype=np.float32))
 
 
-@njit(inline="always", **K._OPTS)
-def _rayhit():
-    """A 16-byte aligned 32-word RTCRayHit buffer (float32 view, uint32 view)."""
+@njit(inline="always", **_NUMBA_OPTS)
+def rayhit_buffer():
+    """A 16-byte aligned 32-word RTCRayHit buffer: (float32 view (32,), uint32 view (32,)) of the same memory."""
     raw = np.empty(40, dtype=np.float32)
     off = ((16 - raw.ctypes.data % 16) % 16) // 4
     rh = raw[off:off + 32]
     return rh, rh.view(np.uint32)
 
 
-@njit(inline="always", **K._OPTS)
-def _trace(intersect, scene, rh, rhi, ox, oy, oz, dx, dy, dz, tfar):
+@njit(inline="always", **_NUMBA_OPTS)
+def trace(intersect, scene, rh, rhi, ox, oy, oz, dx, dy, dz, tfar):
+    """First-hit face (int64, -1: none within ``tfar``) of one float32 ray relative to the scene's centre (mm).
+
+    intersect, scene : ``DirectEmbreeScene.intersect`` and ``.handle``; rh, rhi : a :func:`rayhit_buffer`.
+    """
     rh[0], rh[1], rh[2], rh[3] = ox, oy, oz, 0.0
     rh[4], rh[5], rh[6], rh[7] = dx, dy, dz, 0.0
     rh[8] = tfar
@@ -140,85 +147,12 @@ def _trace(intersect, scene, rh, rhi, ox, oy, oz, dx, dy, dz, tfar):
     return -1 if rhi[18] == _INVALID else np.int64(rhi[17])
 
 
-@njit(parallel=True, nogil=True, **K._OPTS)
+@njit(parallel=True, nogil=True, **_NUMBA_OPTS)
 def _cast(intersect, scene, o32, d32):
+    """(k,) int64 first-hit faces of float32 rays (k, 3) relative to the centre, in parallel."""
     out = np.empty(o32.shape[0], dtype=np.int64)
     for j in prange(o32.shape[0]):
-        rh, rhi = _rayhit()
-        out[j] = _trace(intersect, scene, rh, rhi, o32[j, 0], o32[j, 1], o32[j, 2], d32[j, 0], d32[j, 1],
+        rh, rhi = rayhit_buffer()
+        out[j] = trace(intersect, scene, rh, rhi, o32[j, 0], o32[j, 1], o32[j, 2], d32[j, 0], d32[j, 1],
                         d32[j, 2], np.float32(1e37))
     return out
-
-
-def _walk(status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w, safe, geo, planes,
-          pidx, v0, e1, e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh, boost,
-          max_steps, intersect, scene):
-    """Every live photon walks up to ``max_steps`` events (scattering or surface) or until it dies.
-
-    Free paths certified by the safe-distance grid (distance bound or half-space certificate) need no ray; the
-    others are traced by Embree from this thread. The photon's state stays in local variables for the whole
-    round. Returns (scattering events, boundary events, rays).
-    """
-    n = status.shape[0]
-    events = 0
-    boundary = 0
-    rays = 0
-    for i in prange(n):
-        if status[i] != K.ALIVE:
-            continue
-        rh, rhi = _rayhit()
-        x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
-        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-        wi, s, k, c = w[i], pend[i], key[i], ctr[i]
-        thr = thresh * w0[i]
-        ab_sum = 0.0
-        alive = True
-        ev = 0
-        bd = 0
-        nr = 0
-        steps = 0
-        while steps < max_steps:
-            steps += 1
-            if s < 0.0:
-                u, c = K._uniform(k, c)
-                s = -math.log(1.0 - u) / sigma_t
-            kind = K.SCATTER
-            if not K.certified(safe, geo, planes, pidx, x, y, z, dx, dy, dz, s):
-                f = _trace(intersect, scene, rh, rhi, x - center[0], y - center[1], z - center[2], dx, dy, dz,
-                           min(s + margin, 1e37))
-                nr += 1
-                kind, x, y, z, dx, dy, dz, c, u, v = K.surface_s(f, x, y, z, dx, dy, dz, s, k, c, v0, e1, e2,
-                                                                 normals, center, scale, off_rel, off_abs, eta)
-            if kind == K.SCATTER:
-                x, y, z, dx, dy, dz, wi, c, ab, alive = K.scatter_s(x, y, z, dx, dy, dz, wi, s, k, c, thr, albedo,
-                                                                    g, boost)
-                ab_sum += ab
-                ev += 1
-            elif kind == K.LEAK:
-                lost[i] += wi
-                wi = 0.0
-                alive = False
-            elif kind == K.EXIT:
-                exit_face[i] = f
-                exit_bary[i, 0], exit_bary[i, 1], exit_bary[i, 2] = 1.0 - u - v, u, v
-                exit_w[i] = wi
-                wi = 0.0
-                alive = False
-                bd += 1
-            else:
-                bd += 1
-            s = -1.0
-            if not alive:
-                status[i] = K.FREE
-                break
-        pos[i, 0], pos[i, 1], pos[i, 2] = x, y, z
-        d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
-        w[i], pend[i], ctr[i] = wi, s, c
-        absorbed[i] += ab_sum
-        events += ev
-        boundary += bd
-        rays += nr
-    return events, boundary, rays
-
-
-walk_parallel = njit(parallel=True, nogil=True, **K._OPTS)(_walk)

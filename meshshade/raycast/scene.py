@@ -1,10 +1,11 @@
-"""Ray casting against a triangle mesh: first hits, occlusion, scale-aware ray offsets.
+"""The shared ray-casting API: first hits (:class:`Hits`), occlusion, scale-aware ray offsets (:class:`_SceneBase`).
 
-Two backends share one API (trimesh/ray style):
+Two backends implement it (trimesh/ray style), built with :func:`meshshade.raycast.backends.make_scene`:
 
-* :class:`EmbreeScene`, the only embreex user in meshshade and the only place that casts to float32;
-* :class:`NumpyScene`, a pure-numpy float64 twin (Moller & Trumbore 1997), chunked over rays x triangles, used
-  by the tests as the reference and fine for tiny meshes.
+* :class:`meshshade.raycast.embree.EmbreeScene`, the only embreex user in meshshade and the only place that
+  casts to float32;
+* :class:`meshshade.raycast.numpy_twin.NumpyScene`, a pure-numpy float64 twin (Moller & Trumbore 1997), chunked
+  over rays x triangles, used by the tests as the reference and fine for tiny meshes.
 
 Both report hits in float64 computed from the float64 triangle: Embree only *selects* the triangle, then the
 distance ``t``, the barycentrics ``(u, v)`` and the hit point are recomputed in float64 (see
@@ -53,8 +54,7 @@ OFFSET_REL = 1e-6
 #: Absolute float64 term of the offset: OFFSET_ABS * |p| mm covers ~1e4 ulps of the point's own coordinates.
 OFFSET_ABS = 1e-12
 
-_FLOAT32_TFAR_MAX = 1e37  # embreex's own "infinite" tfar
-_EDGE_WIDEN = 1e-12       # NumpyScene: barycentric slack so rays through shared edges/vertices cannot slip through
+_EDGE_WIDEN = 1e-12       # brute force: barycentric slack so rays through shared edges/vertices cannot slip through
 
 
 @dataclass(frozen=True)
@@ -130,7 +130,10 @@ def _as_rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _SceneBase:
-    """Shared state and float64 geometry of both backends."""
+    """Shared state and float64 geometry of both backends (subclasses implement the two backend hooks).
+
+    vertices : (n, 3) float64 mm (copied, read-only); faces : (m, 3) int (copied as int64, read-only).
+    """
 
     backend = "base"
 
@@ -302,125 +305,3 @@ class _SceneBase:
             uv[idx, 0], uv[idx, 1] = u, v
             points[idx] = v0 + u[:, None] * e1 + v[:, None] * e2
         return Hits(face=face, t=t, uv=uv, points=points)
-
-
-class EmbreeScene(_SceneBase):
-    """Embree (embreex) triangle scene; float64 in and out, float32 only inside.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64, mm
-    faces : (m, 3) int
-
-    Notes
-    -----
-    On embreex (4.x) this adapter handles:
-
-    * ``EmbreeScene.run`` takes float32 (n, 3) arrays only (float64 raises "Buffer dtype mismatch");
-    * ``tnear`` is always 0 and ``tfar`` defaults to 1e37; a ``dists`` array is used *and overwritten* as tfar;
-    * ``output=1`` with ``query='OCCLUDED'`` returns uninitialised arrays, so occlusion uses the plain query,
-      which returns the geomID (0) for occluded rays and -1 otherwise;
-    * ``t`` is in units of the direction's length; directions are normalised before the cast;
-    * scenes are built with ``robust=True`` (Embree's watertight mode: no cracks along shared edges). Rays aimed
-      *exactly* at a vertex can still slip through (a known Embree limitation, RenderKit/embree issues 174 and
-      188; about 0.1-0.2 % of such rays in the tests, none through edges): use ``first_hit(..., exact=True)``
-      for the few rays whose answer must be exact (beams).
-    """
-
-    backend = "embree"
-
-    def __init__(self, vertices, faces):
-        super().__init__(vertices, faces)
-        try:
-            from embreex import rtcore_scene
-            from embreex.mesh_construction import TriangleMesh
-        except ImportError as exc:  # pragma: no cover - embreex is a required dependency
-            raise ImportError("meshshade needs embreex for EmbreeScene; use NumpyScene or install embreex") from exc
-        self._scene = rtcore_scene.EmbreeScene(robust=True)
-        local = np.ascontiguousarray(self.vertices - self.center, dtype=np.float32)
-        self._mesh = TriangleMesh(self._scene, local, np.ascontiguousarray(self.faces, dtype=np.int32))
-        self._radius = 0.5 * self.scale
-
-    def _local_rays(self, o, d):
-        """Float64 origins advanced to just before the bounding sphere, relative to the centre.
-
-        Returns (keep, origins32, directions32, t0): ``keep`` marks rays that can reach the bounding sphere;
-        the rest cannot hit the mesh. ``t0`` is the float64 distance the origin was advanced.
-        """
-        rel = o - self.center
-        b = np.einsum("ij,ij->i", rel, d)
-        c = np.einsum("ij,ij->i", rel, rel) - (1.01 * self._radius) ** 2
-        disc = b * b - c
-        # outside the (slightly enlarged) sphere and not reaching it -> cannot hit
-        keep = (c <= 0.0) | ((disc >= 0.0) & (b <= 0.0))
-        t0 = np.where(c > 0.0, np.clip(-b - np.sqrt(np.clip(disc, 0.0, None)), 0.0, None), 0.0)
-        local = rel + t0[:, None] * d
-        return (keep, np.ascontiguousarray(local[keep], dtype=np.float32),
-                np.ascontiguousarray(d[keep], dtype=np.float32), t0)
-
-    def first_hit_faces_local(self, o32, d32, tfar):
-        """(k,) int32 face of the first hit within ``tfar`` (-1: none) of float32 rays given relative to
-        ``self.center`` (one batched call, no float64 round trip; ``tfar`` (k,) float32 is overwritten)."""
-        return self._scene.run(o32, d32, dists=tfar)
-
-    def _first_hit_faces(self, o, d):
-        face = np.full(o.shape[0], -1, dtype=np.int64)
-        keep, o32, d32, _ = self._local_rays(o, d)
-        if o32.shape[0]:
-            out = self._scene.run(o32, d32, query="INTERSECT", output=1)
-            face[keep] = out["primID"].astype(np.int64)
-        face[face < 0] = -1
-        return face
-
-    def _occluded(self, o, d, t_max):
-        result = np.zeros(o.shape[0], dtype=bool)
-        keep, o32, d32, t0 = self._local_rays(o, d)
-        tfar = (t_max - t0)[keep]
-        live = tfar > 0.0
-        if np.any(live):
-            dists = np.ascontiguousarray(np.minimum(tfar[live], _FLOAT32_TFAR_MAX), dtype=np.float32)
-            ids = self._scene.run(np.ascontiguousarray(o32[live]), np.ascontiguousarray(d32[live]),
-                                  dists=dists, query="OCCLUDED")
-            sub = np.zeros(keep.sum(), dtype=bool)
-            sub[live] = ids >= 0
-            result[keep] = sub
-        return result
-
-
-class NumpyScene(_SceneBase):
-    """Pure-numpy float64 twin of :class:`EmbreeScene` (brute force, O(rays x faces)).
-
-    Moller & Trumbore (1997), "Fast, minimum storage ray-triangle intersection", J. Graphics Tools 2(1).
-    Triangles are widened by 1e-12 in barycentric units (``u, v >= -1e-12``, ``u + v <= 1 + 1e-12``) so that a
-    ray through a shared edge or vertex hits one of its faces despite rounding (watertight, like Embree's robust
-    mode); the reported (u, v) are clipped back onto the triangle. Ties go to the lowest face index. ``chunk``
-    bounds the number of ray-triangle pairs held in memory at once.
-    """
-
-    backend = "numpy"
-
-    def __init__(self, vertices, faces, *, chunk: int = 1 << 18):
-        super().__init__(vertices, faces)
-        self.chunk = int(chunk)
-
-    def _first_hit_faces(self, o, d):
-        return self._brute_first_hit_faces(o, d)
-
-    def _occluded(self, o, d, t_max):
-        result = np.zeros(o.shape[0], dtype=bool)
-        for rs, fs in self._chunks(o.shape[0]):
-            t = self._pair_t(o[rs], d[rs], fs)
-            result[rs] |= np.any(t < t_max[rs, None], axis=1)
-        return result
-
-
-def make_scene(vertices, faces, backend: str = "embree") -> EmbreeScene | NumpyScene:
-    """Build a ray-casting scene: ``backend`` is ``"embree"`` (default) or ``"numpy"`` (reference, tiny meshes).
-
-    vertices : (n, 3) float64 mm; faces : (m, 3) int.
-    """
-    if backend == "embree":
-        return EmbreeScene(vertices, faces)
-    if backend == "numpy":
-        return NumpyScene(vertices, faces)
-    raise ValueError(f"unknown ray-casting backend {backend!r} (expected 'embree' or 'numpy')")

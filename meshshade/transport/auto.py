@@ -13,9 +13,9 @@ the issue's ``|k| C(rho_cut)``). Then
   (the curved kernel at k = 0, exactly) is used;
 * ``exact-sphere`` — convex and umbilic (``k1 - k2 <= umbilic_tol k1``) with every principal curvature
   within the cutoff inside ``umbilic_tol`` of the mean curvature (the neighbourhood *is* that sphere; a sphere
-  fitted to one umbilic point of a bumpy surface would fill its whole neighbourhood with light), *and* too curved for first order
-  (``kmax (W + 1/sigma_t') > validity_tol``, the kernel's own validity measure, kernels/curvature.py): the exact
-  sphere series with the local radius 2/(k1 + k2);
+  fitted to one umbilic point of a bumpy surface would fill its whole neighbourhood with light), *and* too
+  curved for first order (``kmax (W + 1/sigma_t') > validity_tol``, the kernel's own validity measure,
+  kernels/curvature.py): the exact sphere series with the local radius 2/(k1 + k2);
 * ``curved`` — everything else: the first-order k1/k2 kernel.
 
 **Geodesic distance.** Exact polyhedral geodesics cost ~2 us per pair; the "arc" method (curvature-corrected
@@ -27,8 +27,8 @@ source (graph dilation, :func:`dilated_max`). Where ``kn_i rho <= geodesic_tol``
 uncorrected chord would be short by at most (k rho)^2/24 = 0.4 %) the arc method is used, otherwise the exact one.
 
 The other choices of the issue need no per-sample decision and are made elsewhere: the neighbourhood radius per
-channel from the dipole's tail (transport.cutoff_radii), shadow rays skipped where the mesh cannot occlude
-(lights.py), equal channels computed once (transport.PairKernel), the far field summed by clusters
+channel from the dipole's tail (gather.cutoff_radii), shadow rays skipped where the mesh cannot occlude
+(light/samples.py), equal channels computed once (pair_kernel.PairKernel), the far field summed by clusters
 (farfield.py), Monte Carlo never unless asked. ``AutoPlan.counts()`` reports the decisions.
 """
 from __future__ import annotations
@@ -36,18 +36,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from meshshade.kernels.curvature import curvature_ratios
+from meshshade.geometry.topology import vertex_adjacency
+from meshshade.kernels.curvature import VALIDITY_TOL, curvature_ratios
 from meshshade.materials import Material
+from meshshade.transport.models import KERNEL_NAMES
 
-KERNEL_NAMES = ("dipole", "curved", "exact-sphere")
-DIPOLE, CURVED, EXACT_SPHERE = 0, 1, 2
+#: plan codes of the kernels (indices into KERNEL_NAMES)
+DIPOLE, CURVED, EXACT_SPHERE = (KERNEL_NAMES.index(name) for name in ("dipole", "curved", "exact-sphere"))
 
-#: defaults (see module docstring)
+#: defaults (see module docstring; the validity tolerance is the curvature kernel's own, VALIDITY_TOL)
 CURVATURE_TOL = 1e-2
 GEODESIC_TOL = 0.3
 UMBILIC_TOL = 0.1
-VALIDITY_TOL = 0.25
 
 
 @dataclass(frozen=True)
@@ -59,7 +61,6 @@ class AutoPlan:
     kernel: np.ndarray
     exact_geodesic: np.ndarray
     far_dipole: np.ndarray
-    tolerances: dict
 
     def counts(self) -> dict:
         """Counts per decision, for metadata and ``--verbose``."""
@@ -91,17 +92,6 @@ def curvature_bound_mm(material: Material, radius_mm) -> np.ndarray:
         a, b = curvature_ratios(rho, albedo_prime=ch["albedo_prime"], eta=ch["eta"])
         out[c] = float(np.max(np.abs(a) + np.abs(b))) / st
     return out
-
-
-def vertex_adjacency(n_vertices: int, faces) -> tuple[np.ndarray, np.ndarray]:
-    """CSR ``(indptr, indices)`` of the vertex graph of ``faces`` (each undirected edge in both rows)."""
-    F = np.asarray(faces, dtype=np.int64)
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    e = np.concatenate([e, e[:, ::-1]])
-    e = np.unique(e[e[:, 0] != e[:, 1]], axis=0)  # sorted by row, then column
-    indptr = np.zeros(n_vertices + 1, dtype=np.int64)
-    np.add.at(indptr, e[:, 0] + 1, 1)
-    return np.cumsum(indptr), e[:, 1].copy()
 
 
 def dilated_max(values, indptr, indices, rings: int) -> np.ndarray:
@@ -155,9 +145,7 @@ def plan_sources(k1, k2, k_near, k_far, material: Material, near_mm, cutoff_mm, 
     near = np.broadcast_to(np.asarray(near_mm, dtype=np.float64), k1.shape)
     exact_geo = np.asarray(k_near, dtype=np.float64) * near > geodesic_tol
     far_dipole = np.asarray(k_far, dtype=np.float64) * W.max() <= curvature_tol
-    tol = {"curvature_tol": curvature_tol, "geodesic_tol": geodesic_tol, "umbilic_tol": umbilic_tol,
-           "validity_tol": validity_tol}
-    return AutoPlan(kernel, exact_geo, far_dipole, tol)
+    return AutoPlan(kernel, exact_geo, far_dipole)
 
 
 def neighbourhood_curvature(samples, vertex_values, vertices, faces, radii_mm, mean_edge_mm: float, *,
@@ -178,8 +166,6 @@ def neighbourhood_curvature(samples, vertex_values, vertices, faces, radii_mm, m
     if k == 0:
         return out
     if k < ball_query_below:
-        from scipy.spatial import cKDTree  # noqa: PLC0415
-
         tree = cKDTree(vertices)
         for r, o in zip(radii, out):
             for i, nb in enumerate(tree.query_ball_point(samples.positions, r)):

@@ -91,9 +91,10 @@ def _law_of_cosines(sc, d, t_dot_dx, dx_len, K):
     return out
 
 
-def expand_far_pairs_numpy(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
-                           max_distance: float = np.inf):
-    """Member pairs from their cluster centre's geodesic pairs (module docstring).
+def expand_far_pairs_reference(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
+                               max_distance: float = np.inf):
+    """Member pairs from their cluster centre's geodesic pairs (module docstring), in numpy: the test oracle of
+    :func:`expand_far_pairs` (same pairs, same order; the bake uses the numba version only).
 
     centre_pairs : (src_c, vertex, s_c, chord_c, phi_c) arrays of the centres' far query (src_c are sample ids
         of the centres); member_of_row : (members, centre) index arrays listing every member with its centre;
@@ -101,7 +102,7 @@ def expand_far_pairs_numpy(centre_pairs, member_of_row, positions, vertices, fra
     exclude_keys : sorted int64 array of ``sample * n + vertex`` keys already found (the members' near pairs);
     max_distance : pairs with s_i beyond it are dropped.
     Returns ``(src, vertex, s, chord, phi)`` of the members (centres included: their own pairs come out unchanged
-    up to rounding). The pure-numpy twin of :func:`expand_far_pairs` (same pairs, same order), kept to check it.
+    up to rounding).
     """
     src_c, vtx, s_c, _, phi_c = centre_pairs
     members, centres = member_of_row
@@ -162,7 +163,7 @@ def _centre_rows(src_c, centres):
 def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
                      max_distance: float = np.inf):
     """Member pairs from their cluster centre's geodesic pairs (module docstring): the numba version of
-    :func:`expand_far_pairs_numpy` (same arguments, same pairs in the same order), parallel over members, with
+    :func:`expand_far_pairs_reference` (same arguments, same pairs in the same order), parallel over members, with
     no intermediate arrays of all member x centre-pair candidates."""
     src_c, vtx, s_c, _, phi_c = centre_pairs
     members, centres = (np.asarray(a, dtype=np.int64) for a in member_of_row)

@@ -1,12 +1,12 @@
 """Clustered far-field summation of the planar dipole with a guaranteed relative error.
 
 The bake sums ``M(x_o) = sum_i Phi_i R(|x_o - x_i|)`` over entry samples i. Pairs closer than ``r_near`` (chord)
-stay in the geodesic near field (transport.py); the pairs with ``r_near < |x_o - x_i| <= cutoff`` are summed
+stay in the geodesic near field (gather.py); the pairs with ``r_near < |x_o - x_i| <= cutoff`` are summed
 here with the dipole of the chord distance. Following Jensen & Buhler 2002 ("A rapid hierarchical rendering
 technique for translucent materials", SIGGRAPH), the sources are clustered in a tree and a cluster far enough
 from the receiver is replaced by its total power at its power-weighted centroid.
 
-Cluster expansion and error bound (derivation in farfield_kernels.py; tested in tests/test_farfield.py): a
+Cluster expansion and error bound (derivation in farfield_kernels.py; tested in tests/transport/test_farfield.py): a
 cluster with total power P, power-weighted centroid c, second-moment tensor Q, radius a about c and mean cubed
 radius m3, seen from a receiver at distance d > a, is replaced by the second-order Taylor expansion of the
 dipole about c (the first-order term vanishes at the power-weighted centroid):
@@ -39,11 +39,14 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError
 from meshshade.kernels.dipole import dipole_cutoff_radius
 from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
+from meshshade.transport.farfield_kernels import (accumulate_pairs, kd_permutation, node_moments, node_ranges,
+                                                  traverse, tree_depth)
 
 #: default guaranteed relative tolerance on the far-field sum (measured maximum errors are 40-100x below it)
 DEFAULT_REL_TOL = 0.1
@@ -126,18 +129,16 @@ class SourceTree:
     @classmethod
     def build(cls, positions, power, *, leaf_size: int = DEFAULT_LEAF_SIZE) -> "SourceTree":
         """Tree over ``positions`` (k, 3) mm with ``power`` (k,) or (k, 3) W >= 0; O(k log^2 k), numba."""
-        from meshshade.transport import farfield_kernels as fk  # noqa: PLC0415
-
         pos = _points("source positions", positions)
         pw = _power(power, len(pos))
         if int(leaf_size) < 1:
             raise MeshshadeError(f"leaf_size must be >= 1, got {leaf_size}")
         k = len(pos)
-        depth = int(fk.tree_depth(max(k, 1), int(leaf_size)))
-        lo, hi = fk.node_ranges(k, depth)
-        perm = fk.kd_permutation(pos, depth, lo, hi) if k else np.zeros(0, np.int64)
+        depth = int(tree_depth(max(k, 1), int(leaf_size)))
+        lo, hi = node_ranges(k, depth)
+        perm = kd_permutation(pos, depth, lo, hi) if k else np.zeros(0, np.int64)
         pos_t, pw_t = np.ascontiguousarray(pos[perm]), np.ascontiguousarray(pw[perm])
-        P, C, A, Q, M3 = fk.node_moments(pos_t, pw_t, lo, hi)
+        P, C, A, Q, M3 = node_moments(pos_t, pw_t, lo, hi)
         return cls(pos_t, pw_t, perm, int(leaf_size), depth, lo, hi, P, C, A, Q, M3)
 
     @property
@@ -165,14 +166,12 @@ def _as_tree(sources, leaf_size) -> SourceTree:
 
 def _receiver_order(recv) -> np.ndarray:
     """A spatially coherent processing order of the receivers (k-d order), for cache locality."""
-    from meshshade.transport import farfield_kernels as fk  # noqa: PLC0415
-
     n = len(recv)
     if n < 2:
         return np.arange(n)
-    depth = int(fk.tree_depth(n, RECEIVER_BLOCK))
-    lo, hi = fk.node_ranges(n, depth)
-    order = fk.kd_permutation(recv, depth, lo, hi)
+    depth = int(tree_depth(n, RECEIVER_BLOCK))
+    lo, hi = node_ranges(n, depth)
+    order = kd_permutation(recv, depth, lo, hi)
     # numba's prange hands each thread one contiguous part: shuffle the k-d leaves (fixed seed) so that the
     # threads get a mix of cheap and expensive regions while each leaf keeps its locality
     first = (1 << depth) - 1
@@ -208,8 +207,6 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
         ``error_bound`` ((n, 3) W/mm^2, the sum of the accepted clusters' bounds, <= rel_tol * M_exact),
         ``seconds``, ``rel_tol``.
     """
-    from meshshade.transport import farfield_kernels as fk  # noqa: PLC0415
-
     t0 = time.perf_counter()
     recv = _points("receivers", receivers)
     rn = _radii("r_near_mm", r_near_mm, allow_zero=True)
@@ -223,7 +220,7 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
     if tree.n_sources == 0 or len(recv) == 0:
         M, E, counts = np.zeros((len(recv), 3)), np.zeros((len(recv), 3)), np.zeros((len(recv), 4), np.int64)
     else:
-        M, E, counts = fk.traverse(recv, _receiver_order(recv), tree.positions, tree.power, tree.node_lo,
+        M, E, counts = traverse(recv, _receiver_order(recv), tree.positions, tree.power, tree.node_lo,
                                    tree.node_hi, tree.first_leaf, tree.node_power, tree.node_centroid,
                                    tree.node_radius, tree.node_q, tree.node_m3, rn, cut, st, al, mu, zv, float(rel_tol),
                                    float(budget_share))
@@ -243,10 +240,6 @@ def far_field_exitance_direct(sources, receivers, material: Material, r_near_mm,
     ``r_near_c < r <= cutoff_c`` and the kernel are applied in numba with the same distance formula as the
     clustered sum. Cost O(n k_cutoff), never all pairs. stats: ``pairs_exact``, ``candidate_pairs``, ``seconds``.
     """
-    from scipy.spatial import cKDTree  # noqa: PLC0415
-
-    from meshshade.transport import farfield_kernels as fk  # noqa: PLC0415
-
     t0 = time.perf_counter()
     recv = _points("receivers", receivers)
     rn = _radii("r_near_mm", r_near_mm, allow_zero=True)
@@ -274,7 +267,7 @@ def far_field_exitance_direct(sources, receivers, material: Material, r_near_mm,
             pairs = cKDTree(recv[idx]).sparse_distance_matrix(src_tree, radius, output_type="ndarray")
             # (whether coincident pairs are listed does not matter: r = 0 <= r_near is never far field)
             ii, jj = idx[pairs["i"]], pairs["j"].astype(np.int64)
-            n_eval += fk.accumulate_pairs(M, recv, pos, pw, ii, jj, rn, cut, st, al, mu, zv)
+            n_eval += accumulate_pairs(M, recv, pos, pw, ii, jj, rn, cut, st, al, mu, zv)
             n_cand += len(ii)
             per = max(len(ii) / len(idx), 1.0)
             a += len(idx)

@@ -32,6 +32,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from meshshade.kernels.dipole import dipole_diffuse_reflectance
+
 FOUR_PI = 4.0 * np.pi
 #: relative margin on the near/cutoff radii for whole-cluster decisions (pairs at the boundary go to the leaves)
 EDGE_RTOL = 1e-12
@@ -42,12 +44,8 @@ STACK_SIZE = 256
 # dipole in optical units (one channel: alpha' = al, mu = sigma_tr/sigma_t', z_r = 1, z_v = zv)
 @njit(cache=True, inline="always")
 def dipole_opt(r, al, mu, zv):
-    """R_d / sigma_t'^2 at optical distance r (the same formula as kernels/dipole.py:dipole_profile)."""
-    r2 = r * r
-    dr = np.sqrt(r2 + 1.0)
-    dv = np.sqrt(r2 + zv * zv)
-    return al / FOUR_PI * ((mu * dr + 1.0) * np.exp(-mu * dr) / dr**3
-                           + zv * (mu * dv + 1.0) * np.exp(-mu * dv) / dv**3)
+    """R_d / sigma_t'^2 at optical distance r: the kernels' closed form (dipole_diffuse_reflectance), z_r = 1."""
+    return dipole_diffuse_reflectance(r, al, mu, 1.0, zv)
 
 
 @njit(cache=True)

@@ -1,22 +1,49 @@
 """How the bake finds each entry sample's pairs: zones of geodesic methods and far-field treatment.
 
-A zone is (name, method within the gather radius, method beyond r_near or None, far field summed by clusters of
-the dipole). ``exact`` and ``arc`` gather the whole neighbourhood with one geodesic method;
-``exact_near_arc_far`` and ``exact_near_cluster_far`` use exact geodesics near the sample and arc geodesics, or
-geodesics shared by clusters of samples (source_clusters.py), beyond; ``exact_near``/``arc_near`` gather only to
-r_near and leave the rest to the clustered dipole (farfield.py). transport.bake assigns the zones
-(:func:`assign_zones`) and runs them.
+A :class:`Zone` names the geodesic method within the gather radius, the method beyond r_near (or None) and
+whether the far field is summed by clusters of the dipole. ``exact`` and ``arc`` gather the whole neighbourhood
+with one geodesic method; ``exact_near_arc_far`` and ``exact_near_cluster_far`` use exact geodesics near the
+sample and arc geodesics, or geodesics shared by clusters of samples (clusters.py), beyond;
+``exact_near``/``arc_near`` gather only to r_near and leave the rest to the clustered dipole (farfield.py).
+transport.bake assigns the zones (:func:`assign_zones`), transport.gather runs them.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-#: how a source's pairs are found: (name, method within the gather radius, method beyond r_near or None,
-#: far field summed by clusters of the dipole). "exact-cluster": one exact far query per cluster of samples
-#: (source_clusters.py). Zones with the far-field sum gather only to r_near.
-ZONES = (("exact", "exact", None, False), ("arc", "arc", None, False),
-         ("exact_near_arc_far", "exact", "arc", False), ("exact_near", "exact", None, True),
-         ("arc_near", "arc", None, True), ("exact_near_cluster_far", "exact", "exact-cluster", False))
+from meshshade.geometry.geodesics.arc import FastGeodesicNeighbourhoods
+from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
+
+
+class Zone(NamedTuple):
+    """How the pairs of one group of entry samples are found.
+
+    name : the zone's name (``stats["zone_<name>"]`` counts its samples)
+    inner_method : geodesic method within the gather radius, "exact" or "arc"
+    outer_method : method beyond r_near: None (``inner_method`` covers the whole gather radius), "arc", or
+        "exact-cluster" (one exact far query per cluster of samples, clusters.py)
+    far_field : pairs beyond r_near are summed by clusters of the dipole (the zone gathers only to r_near)
+    """
+
+    name: str
+    inner_method: str
+    outer_method: str | None
+    far_field: bool
+
+    @property
+    def solver_methods(self) -> tuple[str, ...]:
+        """The geodesic neighbourhood solvers ("exact", "arc") the zone queries."""
+        outer = () if self.outer_method is None else (self.outer_method.replace("-cluster", ""),)
+        return (self.inner_method,) + outer
+
+
+#: the zones in the order of their index (the values :func:`assign_zones` returns)
+ZONES = (Zone("exact", "exact", None, False), Zone("arc", "arc", None, False),
+         Zone("exact_near_arc_far", "exact", "arc", False), Zone("exact_near", "exact", None, True),
+         Zone("arc_near", "arc", None, True), Zone("exact_near_cluster_far", "exact", "exact-cluster", False))
+EXACT, ARC, EXACT_NEAR_ARC_FAR, EXACT_NEAR, ARC_NEAR, EXACT_NEAR_CLUSTER_FAR = range(len(ZONES))
 #: geodesic search radius of the near zone, in units of r_near (pairs are kept by chord <= r_near)
 NEAR_MARGIN = 1.1
 #: cluster size of the exact-cluster far zone, in mean edge lengths (capped at cutoff / 12)
@@ -26,32 +53,35 @@ CLUSTER_NEAR = 3.0
 
 
 def assign_zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic: str = "cluster") -> np.ndarray:
-    """(k,) zone index per entry sample (see ZONES).
+    """(k,) int64 zone index (into ZONES) per entry sample.
 
     Without a plan: every source uses ``geodesic``; with a far field, vertex samples gather only to r_near.
-    With the auto plan: exact or arc per sample (only arc when ``geodesic`` is "arc"); vertex samples whose surroundings are flat to the cutoff
-    (``plan.far_dipole``) gather to r_near and leave the rest to the clustered dipole; the other vertex samples
-    keep their kernel over the whole neighbourhood, with exact geodesics in the near zone and, beyond it,
-    geodesics shared by clusters of samples (``far_geodesic="cluster"``) or arc geodesics ("arc").
+    With the auto plan: exact or arc per sample (only arc when ``geodesic`` is "arc"); vertex samples whose
+    surroundings are flat to the cutoff (``plan.far_dipole``) gather to r_near and leave the rest to the clustered
+    dipole; the other vertex samples keep their kernel over the whole neighbourhood, with exact geodesics in the
+    near zone and, beyond it, geodesics shared by clusters of samples (``far_geodesic="cluster"``) or arc
+    geodesics ("arc"). ``area`` : (k,) bool, the vertex samples (directional and point lights).
     """
     far = area & (far_field != "off")
     if plan is None:
-        zone = np.full(k, 0 if geodesic == "exact" else 1, dtype=np.int64)
-        zone[far] += 3
+        zone = np.full(k, EXACT if geodesic == "exact" else ARC, dtype=np.int64)
+        zone[far] = np.where(zone[far] == EXACT, EXACT_NEAR, ARC_NEAR)
         return zone
     ex = plan.exact_geodesic & (geodesic == "exact")  # geodesic="arc" caps auto at arc geodesics
     if geodesic != "exact":
         far_geodesic = "arc"
-    zone = np.where(ex, 0, 1).astype(np.int64)
+    zone = np.where(ex, EXACT, ARC).astype(np.int64)
     if far_geodesic != "none":
-        zone[far & ex & ~plan.far_dipole] = 5 if far_geodesic == "cluster" else 2
-    zone[far & plan.far_dipole] = np.where(ex[far & plan.far_dipole], 3, 4)
+        split = EXACT_NEAR_CLUSTER_FAR if far_geodesic == "cluster" else EXACT_NEAR_ARC_FAR
+        zone[far & ex & ~plan.far_dipole] = split
+    zone[far & plan.far_dipole] = np.where(ex[far & plan.far_dipole], EXACT_NEAR, ARC_NEAR)
     return zone
 
 
 def cluster_geometry(mesh, cut):
     """(cluster size, exact near radius) of the exact_near_cluster_far zone, mm: clusters of CLUSTER_EDGES mean
-    edges (at most 1/12 of the cutoff), exact per-sample geodesics within CLUSTER_NEAR cluster sizes."""
+    edges (at most 1/12 of the cutoff ``cut`` (3,) mm), exact per-sample geodesics within CLUSTER_NEAR cluster
+    sizes."""
     size = min(CLUSTER_EDGES * mesh.mean_edge_length, float(np.max(cut)) / 12.0)
     return size, CLUSTER_NEAR * size
 
@@ -72,7 +102,5 @@ def clusters_pay(mesh, cut) -> bool:
 def neighbourhood_solver(method: str, mesh):
     """The geodesic neighbourhood solver of ``method`` ("exact" or "arc") for ``mesh``."""
     if method == "exact":
-        from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods  # noqa: PLC0415
         return GeodesicNeighbourhoods(mesh.vertices, mesh.faces, mesh.vertex_normals)  # skips degenerate faces
-    from meshshade.geometry.geodesics.arc import FastGeodesicNeighbourhoods  # noqa: PLC0415
     return FastGeodesicNeighbourhoods(mesh.vertices, mesh.faces, mesh.vertex_normals)

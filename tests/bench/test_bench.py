@@ -8,12 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from meshshade.bench import runner as bench
+from meshshade import bench
 from meshshade.bench import references as br
 from meshshade.bench.report import ERROR_LEVELS, FILES, csv_text, pareto_front, table_markdown, write_bench
 from meshshade.cli.main import main
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.kernels.sphere import sphere_series_profile, sphere_total_reflectance
+from meshshade.transport import MODELS
 
 SKIN = bench.MATERIAL
 REQUIRED = ("scene", "model", "knob", "value", "error_max", "error_mean", "error_energy", "time_s")
@@ -73,8 +74,6 @@ def test_pareto_front_keeps_only_non_dominated_points():
 
 # ------------------------------------------------------------------------------------------------ API
 def test_bench_plan_iterates_over_transport_models():
-    from meshshade.transport.bake import MODELS
-
     plan = bench.bench_plan(quick=True, scenes=["sphere_r20_beam"])
     assert {r.model for r in plan if r.knob == "default"} == set(MODELS)
     assert {r.knob for r in plan} <= set(bench.KNOBS)
@@ -91,7 +90,16 @@ def test_bench_tiny_rows_finite_with_required_columns(tiny_result):
         assert r["n_eval"] > 10
     mc_rows = [r for r in rows if r["ref_kind"] == "mc"]
     assert mc_rows and all(0 < r["ref_stderr"] < br.MC_MAX_REL_STDERR for r in mc_rows)
-    assert all(0.0 <= r["resolved_frac"] <= 1.0 for r in mc_rows)
+    # resolved_frac: the share of the n_eval patches where |model - MC| > 2 MC stderr, so a multiple of 1/n_eval;
+    # the dipole on a 4 mm torus is off by many MC standard errors (mean error > 4x the median relative stderr:
+    # measured 0.36 vs 0.045) on most patches, an MC model against the MC reference only by noise
+    for r in mc_rows:
+        k = r["resolved_frac"] * r["n_eval"]
+        assert abs(k - round(k)) < 1e-9 and 0 <= round(k) <= r["n_eval"], r
+    dip = next(r for r in mc_rows if r["model"] == "dipole")
+    mc_mc = next(r for r in mc_rows if r["model"] == "mc")
+    assert dip["error_mean"] > 4 * dip["ref_stderr"] and dip["resolved_frac"] >= 0.5
+    assert mc_mc["resolved_frac"] < dip["resolved_frac"]
     meta = tiny_result.metadata
     assert meta["seed"] == 3 and len(meta["load_average_before"]) == 3 and meta["failures"] == []
 

@@ -6,6 +6,7 @@ import pytest
 
 from meshshade.cli.main import main
 from meshshade.kernels.dipole import dipole_profile
+from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
 
 
@@ -89,8 +90,6 @@ def test_profile_grey_material_table_merges_channels(capsys):
 
 
 def test_profile_sphere_exact_equals_series_kernel(tmp_path):
-    from meshshade.kernels.sphere import sphere_series_profile
-
     out = tmp_path / "p.csv"
     assert main(["profile", "--sigma-s-prime", "1", "--sigma-a", "0.01", "--shape", "sphere", "--radius", "10",
                  "--models", "exact", "--distances", "0,3,7", "--csv", str(out)]) == 0

@@ -3,12 +3,14 @@ from __future__ import annotations
 
 import warnings
 
+import igl
 import numpy as np
 import pytest
 
 from meshshade.geometry import procedural
 from meshshade.geometry.curvature import PrincipalCurvatures, principal_curvatures
 from meshshade.geometry.mesh import MeshDefectWarning
+from meshshade.io import load_mesh
 
 
 def _check_frames(c: PrincipalCurvatures, mask=slice(None)):
@@ -154,8 +156,6 @@ SHARED = ["armadillo.obj", "blub.obj", "bob.obj", "boot.obj", "bunny.ply", "hand
 
 @pytest.mark.parametrize("name", SHARED)
 def test_principal_curvatures_shared_meshes_finite(shared_meshes, name):
-    from meshshade.io import load_mesh
-
     mesh = load_mesh(shared_meshes / name)
     V = mesh.vertices * (100.0 / mesh.scale)  # about 100 mm across
     with warnings.catch_warnings():
@@ -171,8 +171,6 @@ def test_principal_curvatures_shared_meshes_finite(shared_meshes, name):
 
 
 def test_principal_curvatures_replaces_nan_and_outliers_by_neighbour_median(monkeypatch):
-    import igl
-
     V, F = procedural.icosphere(10.0, 3)
     real = igl.principal_curvature
 

@@ -1,12 +1,16 @@
 """Procedural generators: closed, outward, deterministic, exact where stated."""
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from meshshade.geometry import procedural
 from meshshade.geometry.mesh import validate_mesh
 from meshshade.geometry.topology import signed_volumes
+from meshshade.io import load_mesh
 
 CLOSED = {
     "icosphere": (lambda: procedural.icosphere(2.0, 3), 4 / 3 * np.pi * 8),
@@ -71,11 +75,6 @@ def test_procedural_rejects_bad_parameters(call):
 
 def test_assets_match_their_generators():
     """assets/*.ply are what tools/make_assets.py says (float32 positions in mm, same faces), and clean."""
-    import importlib.util
-    from pathlib import Path
-
-    from meshshade.io import load_mesh
-
     root = Path(__file__).resolve().parents[2]
     spec = importlib.util.spec_from_file_location("make_assets", root / "tools" / "make_assets.py")
     make_assets = importlib.util.module_from_spec(spec)

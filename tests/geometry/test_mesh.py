@@ -9,7 +9,7 @@ import pytest
 
 from meshshade.errors import MeshValidationError
 from meshshade.geometry import procedural
-from meshshade.geometry.mesh import Mesh, MeshDefectWarning, validate_mesh
+from meshshade.geometry.mesh import Mesh, MeshDefectWarning, face_normals, validate_mesh
 
 
 def _quiet_validate(V, F):
@@ -251,3 +251,32 @@ def test_mesh_unreferenced_vertex_has_zero_normal_and_area(sphere):
     assert mesh.vertex_areas[-1] == 0.0 and np.all(mesh.vertex_normals[-1] == 0.0)
     assert not mesh.referenced_vertex_mask[-1]
     np.testing.assert_allclose(mesh.bbox_size_mm, 20.0)  # the stray vertex does not inflate the scale
+
+
+# ------------------------------------------------------------------------------------------- face_normals
+
+def test_face_normals_against_a_per_face_loop():
+    V = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 1.5], [1.0, 1.0, 1.0]])
+    F = np.array([[0, 1, 2], [0, 3, 1], [1, 2, 4], [0, 0, 4]])  # the last one has a repeated index
+    cross = []
+    for a, b, c in F:  # independent route: explicit cross product per face
+        u, w = V[b] - V[a], V[c] - V[a]
+        cross.append([u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]])
+    cross = np.array(cross)
+    np.testing.assert_allclose(face_normals(V, F, unit=False), cross, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(face_normals(V, F, unit=False)[:2], [[0, 0, 6.0], [0, 3.0, 0]])
+    unit = face_normals(V, F)
+    np.testing.assert_allclose(unit[:3], cross[:3] / np.linalg.norm(cross[:3], axis=1, keepdims=True), rtol=1e-15)
+    np.testing.assert_array_equal(unit[3], 0.0)  # zero cross product: zero normal, no NaN
+    # half the norm of the area-weighted normal is the face area
+    np.testing.assert_allclose(0.5 * np.linalg.norm(face_normals(V, F, unit=False)[0]), 3.0)
+
+
+def test_face_normals_agree_with_the_mesh_container(sphere):
+    V, F = sphere
+    mesh = Mesh(V, F)
+    np.testing.assert_array_equal(face_normals(V, mesh.faces), mesh.face_normals)
+    np.testing.assert_array_equal(0.5 * np.linalg.norm(face_normals(V, mesh.faces, unit=False), axis=1),
+                                  mesh.face_areas)
+    # outward on a sphere centred at the origin
+    assert np.all(np.einsum("ij,ij->i", face_normals(V, mesh.faces), V[mesh.faces].mean(axis=1)) > 0)

@@ -6,13 +6,16 @@ torus and on a shared mesh.  Accuracy figures for the README come from ``tools/b
 """
 from __future__ import annotations
 
+import igl
 import numpy as np
 import pytest
+import trimesh
+from scipy.spatial import Delaunay
 
-from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods, Neighbourhoods, geodesic_distances_from, geodesic_neighbourhoods, tangent_azimuth
+from meshshade.geometry.geodesics.neighbourhoods import (GeodesicNeighbourhoods, Neighbourhoods,
+                                                          geodesic_distances_from, geodesic_neighbourhoods,
+                                                          tangent_azimuth)
 from meshshade.geometry.procedural import capped_cylinder, icosphere, torus
-
-igl = pytest.importorskip("igl")
 
 
 # ---------------------------------------------------------------------------------------------------- helpers
@@ -110,7 +113,6 @@ def test_geodesic_neighbourhoods_cylinder_helix():
 
 
 def test_geodesic_neighbourhoods_shared_mesh_matches_exact(shared_meshes):
-    trimesh = pytest.importorskip("trimesh")
     m = trimesh.load(shared_meshes / "spot.obj", process=False)
     V, F = np.asarray(m.vertices) * 50.0, np.asarray(m.faces, dtype=np.int64)  # ~90 mm cow
     solver = GeodesicNeighbourhoods(V, F)
@@ -130,7 +132,6 @@ def test_geodesic_neighbourhoods_shared_mesh_matches_exact(shared_meshes):
 def test_geodesic_neighbourhoods_flat_random_delaunay_exact():
     """Random Delaunay plate (obtuse and sliver triangles): window propagation = straight lines, vertex and
     in-face sources; FMM stays within 1 %; every vertex within the cutoff is found."""
-    from scipy.spatial import Delaunay
     rng = np.random.default_rng(3)
     P = rng.uniform(-20, 20, (8000, 2))
     F = Delaunay(P).simplices.astype(np.int64)
@@ -335,7 +336,6 @@ def test_geodesic_neighbourhoods_face_source_points_and_validation():
 @pytest.mark.slow
 def test_geodesic_neighbourhoods_exact_on_irregular_shared_meshes(shared_meshes):
     """Scanned / sliver-rich meshes (saddles, obtuse triangles): still igl-exact, never below it."""
-    trimesh = pytest.importorskip("trimesh")
     for name, scale in (("bunny.ply", 50.0), ("lee_perry_smith_head.obj", 10.0), ("hand.obj", 100.0)):
         m = trimesh.load(shared_meshes / name, process=False)
         V, F = np.asarray(m.vertices) * scale, np.asarray(m.faces, dtype=np.int64)

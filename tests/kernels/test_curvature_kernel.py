@@ -13,11 +13,9 @@ physics.md d, and checked against a brute-force mpmath evaluation of the same se
 """
 from __future__ import annotations
 
-import csv
-import hashlib
 import math
-import re
 
+import mpmath as mp
 import numpy as np
 import pytest
 from hypothesis import given
@@ -26,8 +24,10 @@ from scipy import special
 
 from meshshade.kernels import curvature as cv
 from meshshade.kernels.curvature import CurvatureTable, aux_integral, aux_integral_drho_over_rho, curvature_coefficients, curvature_factor, curvature_profile, curvature_ratios, curvature_relative_coefficient, curvature_validity
+from meshshade.kernels.cylinder import cylinder_exact_profile_geodesic
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.optics import diffusion_params
+from meshshade.kernels.sphere import sphere_series_profile
 
 EPS = np.finfo(np.float64).eps
 ST = 1.01
@@ -43,35 +43,26 @@ MATERIALS = {  # (albedo_prime, eta) for sigma_s', sigma_a [1/mm] of Jensen 2001
 }
 
 
-def _read(path):
-    with path.open() as fh:
-        return list(csv.DictReader(line for line in fh if not line.startswith("#")))
+def _read(reference_csv, name):
+    """Rows of tests/data/<name> through the shared loader (it checks the generator's sha256)."""
+    header, rows = reference_csv(name)
+    assert header["generator"] == "tools/precompute_curvature_references.py" and header["dps"].startswith("40 ")
+    return rows
 
 
 @pytest.fixture(scope="module")
-def aux_rows(data_dir):
-    return _read(data_dir / "curvature_aux_reference.csv")
+def aux_rows(reference_csv):
+    return _read(reference_csv, "curvature_aux_reference.csv")
 
 
 @pytest.fixture(scope="module")
-def coef_rows(data_dir):
-    return _read(data_dir / "curvature_coefficients_reference.csv")
+def coef_rows(reference_csv):
+    return _read(reference_csv, "curvature_coefficients_reference.csv")
 
 
 # --------------------------------------------------------------------------------------------------
 # reference data
 # --------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", ["curvature_aux_reference.csv", "curvature_coefficients_reference.csv"])
-def test_reference_csv_is_current(data_dir, name):
-    script = data_dir.parents[1] / "tools" / "precompute_curvature_references.py"
-    header = "".join(line for line in (data_dir / name).open() if line.startswith("#"))
-    recorded = re.search(r"sha256 ([0-9a-f]{64})", header)
-    assert recorded, "no generator sha256 in the CSV header"
-    assert recorded.group(1) == hashlib.sha256(script.read_bytes()).hexdigest(), (
-        "tools/precompute_curvature_references.py changed since the CSV was written; rerun it")
-    assert "dps: 40" in header and "mpmath version" in header
-
-
 def test_reference_grid_covers_the_requested_points(aux_rows):
     rho = {float(r["rho"]) for r in aux_rows}
     h = {float(r["h"]) for r in aux_rows}
@@ -253,14 +244,14 @@ def test_entry_point_has_no_direction_dependence():
 @given(rho=st.floats(0.0, 60.0), phi=st.floats(-10.0, 10.0), k1=st.floats(-0.3, 0.3), k2=st.floats(-0.3, 0.3))
 def test_curvature_profile_swap_symmetry(rho, phi, k1, k2):
     """(k1, k2, phi) and (k2, k1, phi + pi/2) describe the same surface."""
-    for policy in ("exp", "clamp"):
+    for policy in ("soft", "exp", "clamp"):
         r1 = curvature_profile(rho, phi, k1_opt=k1, k2_opt=k2, **SKIN, policy=policy)
         r2 = curvature_profile(rho, phi + np.pi / 2, k1_opt=k2, k2_opt=k1, **SKIN, policy=policy)
         assert abs(r1 - r2) <= 1e-13 * abs(r1) + 1e-300
 
 
 def test_curvature_profile_first_order_matches_coefficients():
-    """d R/d k at k = 0 is alpha' [cos^2 phi A + sin^2 phi B] for k1 (central difference, both policies)."""
+    """d R/d k at k = 0 is alpha' [cos^2 phi A + sin^2 phi B] for k1 (central difference, every policy)."""
     rho = np.array([0.0, 0.5, 1.0, 3.0, 10.0, 30.0])
     phi = 0.4
     A, B = curvature_coefficients(rho, **SKIN)
@@ -268,7 +259,7 @@ def test_curvature_profile_first_order_matches_coefficients():
     # step 1e-6: rounding costs eps_mach R_d/step ~ 1e-10 R_d, i.e. 1.4e-7 of the derivative at rho = 0 where
     # a(0) = 7e-4; the O(step^2 a^3) truncation is < 1e-10
     step = 1e-6
-    for policy in ("exp", "clamp"):
+    for policy in ("soft", "exp", "clamp"):
         up = curvature_profile(rho, phi, k1_opt=step, k2_opt=0.0, **SKIN, policy=policy)
         dn = curvature_profile(rho, phi, k1_opt=-step, k2_opt=0.0, **SKIN, policy=policy)
         np.testing.assert_allclose((up - dn) / (2 * step), want, rtol=3e-7)
@@ -422,31 +413,81 @@ def test_curvature_table_profile_equals_direct_coefficients():
     # curvature_profile tabulates up to max(rho) = 120 (the table above: 100, direct beyond)
     np.testing.assert_allclose(curvature_profile(rho, cos2phi=c2, k1_opt=k1, k2_opt=k2, policy="exp", **SKIN), R,
                                rtol=1e-10)
-    # the default "soft" policy saturates delta: exp(delta / sqrt(1 + (delta / D)^2)), D = DELTA_SAT
-    from meshshade.kernels.curvature import DELTA_SAT
-
-    soft = dipole_profile(rho, **SKIN) * np.exp(delta / np.sqrt(1 + (delta / DELTA_SAT) ** 2))
+    # the default "soft" policy saturates delta: exp(delta / sqrt(1 + (delta / 2)^2)) (module constant DELTA_SAT
+    # = 2, written out here so that a changed constant fails); |delta| reaches ~10 here, deep in saturation
+    assert np.max(np.abs(delta)) > 5
+    soft = dipole_profile(rho, **SKIN) * np.exp(delta / np.sqrt(1 + (delta / 2.0) ** 2))
     np.testing.assert_allclose(table.profile(rho, phi, k1_opt=k1, k2_opt=k2), soft, rtol=1e-10)
+    np.testing.assert_allclose(curvature_profile(rho, phi, k1_opt=k1, k2_opt=k2, **SKIN), soft, rtol=1e-10)
     assert "CurvatureTable(" in repr(table) and "intervals=" in repr(table)
 
 
 # --------------------------------------------------------------------------------------------------
 # policy
 # --------------------------------------------------------------------------------------------------
-def test_curvature_factor_is_identity_to_first_order():
+def test_every_policy_is_tested():
+    """The policy tests below name the policies literally: a new policy must be added to them."""
+    assert set(cv.POLICIES) == {"soft", "exp", "clamp"}
+
+
+@pytest.mark.parametrize("policy", ["soft", "exp", "clamp"])
+def test_curvature_factor_is_identity_to_first_order(policy):
     d = np.array([-1e-4, 0.0, 1e-4])
-    for policy in ("exp", "clamp"):
-        f = curvature_factor(d, policy)
-        assert f[1] == 1.0
-        np.testing.assert_allclose(f, 1 + d, atol=1e-8)
-    assert curvature_factor(-50.0, "exp") > 0 and curvature_factor(-50.0, "clamp") == 0
-    assert np.isfinite(curvature_factor(1e6, "exp"))
+    f = curvature_factor(d, policy)
+    assert f[1] == 1.0
+    np.testing.assert_allclose(f, 1 + d, atol=1e-8)
+    # far outside first order: exp(-50) (exp), 0 (clamp), exp(-50/sqrt(1 + 25^2)) = exp(-1.998402...) (soft)
+    far = {"exp": math.exp(-50.0), "clamp": 0.0, "soft": math.exp(-50.0 / math.sqrt(626.0))}[policy]
+    assert curvature_factor(-50.0, policy) == pytest.approx(far, rel=1e-14, abs=0.0)
+    assert np.isfinite(curvature_factor(1e6, policy))
+
+
+def test_soft_policy_stays_within_e_to_the_two_of_the_dipole():
+    """The "soft" policy (the default of every bake): f = exp(delta/sqrt(1 + (delta/2)^2)). The exponent is odd, increasing
+    and bounded by 2 in magnitude, so f lies in [e^-2, e^2] for every delta and tends to e^{+-2} as delta -> +-inf:
+    at delta = 1e6 the exponent is 2/sqrt(1 + 4e-12) = 2 (1 - 2e-12), f = e^2 (1 - 4e-12)."""
+    e2 = math.exp(2.0)  # 7.389056098930650
+    delta = np.concatenate([-np.geomspace(1e12, 1e-3, 301), [0.0], np.geomspace(1e-3, 1e12, 301)])  # sorted
+    f = curvature_factor(delta, "soft")
+    assert np.all(f >= (1 - 1e-15) / e2) and np.all(f <= e2 * (1 + 1e-15))
+    assert np.all(np.diff(f) >= -4 * EPS * f[1:])  # non-decreasing (to rounding where it saturates at e^{+-2})
+    for d, want in ((1e6, e2), (-1e6, 1 / e2)):
+        assert abs(curvature_factor(d, "soft") / want - 1) <= 1e-11
+    # inside first-order range it is not saturated yet: delta = 1 gives exp(1/sqrt(1.25)) = exp(0.894427...)
+    assert curvature_factor(1.0, "soft") == pytest.approx(math.exp(1.0 / math.sqrt(1.25)), rel=1e-15)
+
+
+@pytest.mark.parametrize("delta", [0.01, 0.05, 0.1, 0.2, -0.01, -0.05, -0.1, -0.2])
+def test_soft_policy_departs_from_exp_at_third_order(delta):
+    """ln f_exp - ln f_soft = delta (1 - (1 + delta^2/4)^{-1/2}) = delta^3/8 - 3 delta^5/128 + ... (alternating,
+    decreasing terms for |delta| < 2): the ratio to delta^3/8 lies in [1 - 3 delta^2/16, 1], and the factors differ
+    by at most |delta|^3/8 of the larger one (mean value theorem)."""
+    f_soft = curvature_factor(delta, "soft")
+    f_exp = curvature_factor(delta, "exp")
+    ratio = (delta - math.log(f_soft)) / (delta**3 / 8)
+    assert 1 - 3 * delta**2 / 16 - 1e-9 <= ratio <= 1 + 1e-9, ratio
+    assert abs(f_soft - f_exp) <= abs(delta) ** 3 / 8 * max(f_soft, f_exp) * (1 + 1e-9)
+
+
+def test_soft_policy_profile_within_e_to_the_two_of_the_dipole():
+    """Far outside first-order range (|k| up to 2 transport lengths^-1, rho to 60) the default profile stays
+    within [e^-2, e^2] of the dipole on concave and convex surfaces (the entry-point cap only lowers convex
+    values, never below R_d); the "exp" policy leaves that band (it is not saturated)."""
+    rho = np.linspace(0.05, 60, 400)
+    Rd = dipole_profile(rho, **SKIN)
+    pos = Rd > 0
+    e2 = math.exp(2.0)
+    for k in (-2.0, -0.5, -0.05, 0.05, 0.5, 2.0):
+        ratio = curvature_profile(rho, 0.3, k1_opt=k, k2_opt=k / 3, **SKIN)[pos] / Rd[pos]
+        assert np.all(ratio >= (1 - 1e-12) / e2) and np.all(ratio <= e2 * (1 + 1e-12)), k
+    concave = curvature_profile(rho, 0.3, k1_opt=-0.5, k2_opt=-0.5, **SKIN, policy="exp")[pos] / Rd[pos]
+    assert np.min(concave) < 1e-3 / e2
 
 
 def test_curvature_profile_never_exceeds_entry_value():
     """Strongly convex: the first-order term alone would exceed the peak; the cap keeps R <= R(0)."""
     rho = np.linspace(0, 60, 601)
-    for policy in ("exp", "clamp"):
+    for policy in ("soft", "exp", "clamp"):
         R = curvature_profile(rho, 0.0, k1_opt=2.0, k2_opt=2.0, **SKIN, policy=policy)
         assert np.all(R <= R[0] * (1 + 1e-15)) and np.all(R >= 0)
 
@@ -471,7 +512,7 @@ albedo_from_coefficients = st.tuples(
 @given(mat=albedo_from_coefficients, eta=st.floats(1.0, 2.0),
        k1=st.floats(-10.0, 10.0), k2=st.floats(-10.0, 10.0),
        rho_mm=st.lists(st.floats(0.0, 1e3), min_size=1, max_size=8), phi=st.floats(-7.0, 7.0),
-       policy=st.sampled_from(["exp", "clamp"]))
+       policy=st.sampled_from(["soft", "exp", "clamp"]))
 def test_curvature_profile_finite_nonnegative(mat, eta, k1, k2, rho_mm, phi, policy):
     """Physical ranges of physics.md f: curvatures up to +-10/mm, any distance; mm -> optical units."""
     st_p, a_p = mat
@@ -544,8 +585,7 @@ def _cavity_profile(theta, *, R0_opt, albedo_prime, eta, rtol=1e-14):
 
 
 def _sphere(theta, R0_opt):
-    sphere = pytest.importorskip("meshshade.kernels.sphere")
-    return sphere.sphere_series_profile(theta, R0_opt=R0_opt, **SKIN, rtol=1e-14)
+    return sphere_series_profile(theta, R0_opt=R0_opt, **SKIN, rtol=1e-14)
 
 
 R0_MM = np.array([50.0, 100.0, 200.0, 500.0, 1000.0])
@@ -553,7 +593,7 @@ S_MM = np.array([1.0, 2.0, 5.0])
 
 
 @pytest.mark.parametrize("kind", ["sphere", "cavity"])
-@pytest.mark.parametrize("policy", ["exp", "clamp"])
+@pytest.mark.parametrize("policy", ["soft", "exp", "clamp"])
 def test_curved_kernel_converges_like_inverse_square_radius(kind, policy):
     """(exact - curved)/exact ~ 1/R0^2 (fitted slope <= -1.8 over R0 = 50..1000 mm at s = 1, 2, 5 mm) while
     (exact - dipole)/exact ~ 1/R0 (slope -1 +- 0.1); physics.md e.3 "Validation" (skin case, geodesic s)."""
@@ -589,13 +629,12 @@ def test_curved_kernel_matches_physics_md_sphere_residuals():
 def test_curved_kernel_anisotropic_against_exact_cylinder():
     """Exact infinite cylinder (k1 = 1/R0 around, k2 = 0 along): the residual of the curved kernel falls like
     1/R0^2 around (checks A), along the axis (checks B) and at the entry point (A(0)); physics.md e.3."""
-    cylinder = pytest.importorskip("meshshade.kernels.cylinder")
     radii = np.array([40.0, 80.0, 160.0, 320.0])
     s = np.array([0.0, 2.0, 2.0, 5.0]) * ST
     phi = np.array([0.0, 0.0, np.pi / 2, np.pi / 2])
     res = []
     for R0 in radii * ST:
-        exact = cylinder.cylinder_exact_profile_geodesic(s, phi, R0_opt=R0, **SKIN, rtol=1e-11)
+        exact = cylinder_exact_profile_geodesic(s, phi, R0_opt=R0, **SKIN, rtol=1e-11)
         curved = curvature_profile(s, phi, k1_opt=1 / R0, k2_opt=0.0, **SKIN)
         res.append(np.abs(exact - curved) / exact)
     slopes = np.polyfit(np.log(radii), np.log(np.array(res)), 1)[0]
@@ -614,8 +653,6 @@ def _policy_errors(materials, radii_mm, s_mm):
             th = th[th <= 0.999 * np.pi]
             for sign in (1, -1):
                 if sign > 0:
-                    pytest.importorskip("meshshade.kernels.sphere")
-                    from meshshade.kernels.sphere import sphere_series_profile
                     exact = sphere_series_profile(th, R0_opt=R0, albedo_prime=a_p, eta=eta, rtol=1e-13)
                 else:
                     if R0 <= 3 * float(diffusion_params(a_p, eta).z_b):
@@ -667,7 +704,6 @@ def test_policy_error_against_exact_sphere_and_cavity_materials():
 @pytest.mark.slow
 def test_cavity_series_against_mpmath():
     """The exterior series above against a brute-force mpmath sum with I_nu, K_nu (30 digits), R0 = 5 mm."""
-    mp = pytest.importorskip("mpmath")
     p = diffusion_params(**SKIN)
     R0_f = 5 * ST
     for theta in (0.0, 0.1, 0.5):

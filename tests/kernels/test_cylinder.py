@@ -2,15 +2,18 @@
 flux, energy, mpmath references, planar limit and the first-order curvature kernel (physics.md c-e)."""
 from __future__ import annotations
 
-import csv
 import math
 
+import mpmath as mp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import special
 
 from meshshade.errors import MeshshadeError
 from meshshade.kernels import cylinder as cyl
+from meshshade.kernels.curvature import curvature_coefficients
 from meshshade.kernels.cylinder import cylinder_exact_profile, cylinder_exact_profile_geodesic
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.optics import diffusion_params
@@ -30,7 +33,6 @@ def _slope(x, y):
 
 def test_addition_theorem_matches_closed_form_mpmath():
     """e^{-mu|x-x'|}/|x-x'| = (2/pi) int dq cos(qz) sum_n eps_n cos(n theta) I_n(k r<) K_n(k r>), at 20 digits."""
-    mp = pytest.importorskip("mpmath")
     with mp.workdps(20):
         mu, r1, r2 = mp.mpf("0.7"), mp.mpf("0.3"), mp.mpf("1.5")
         th, z = mp.mpf("0.9"), mp.mpf("0.6")
@@ -58,7 +60,6 @@ def test_addition_theorem_matches_closed_form_mpmath():
 
 def test_ratios_backward_matches_mpmath():
     """t_n(x) = I_{n+1}(x)/I_n(x) by backward recurrence from the Amos-bound start, n <= 299, x up to 2e4."""
-    mp = pytest.importorskip("mpmath")
     out = np.empty(300)
     with mp.workdps(30):
         for x in [1e-3, 0.5, 7.0, 120.0, 3000.0, 2.0e4]:
@@ -148,24 +149,18 @@ def test_cylinder_exact_profile_energy_closed_form(R0, alb, eta):
 # mpmath references (tools/precompute_cylinder_references.py)
 # ------------------------------------------------------------------------------------------------------
 
-def _reference_rows(data_dir):
-    path = data_dir / "cylinder_reference.csv"
-    with open(path) as fh:
-        lines = [line for line in fh if not line.startswith("#")]
-    return list(csv.DictReader(lines))
-
-
-def test_cylinder_reference_file_has_provenance(data_dir):
-    head = [line for line in open(data_dir / "cylinder_reference.csv") if line.startswith("#")]
-    text = "".join(head)
-    for key in ("dps:", "mpmath", "sha256", "date:", "function:"):
-        assert key in text
-    assert len(_reference_rows(data_dir)) >= 20
+@pytest.fixture(scope="module")
+def reference_rows(reference_csv):
+    """Rows of tests/data/cylinder_reference.csv (the shared loader checks the generator's sha256)."""
+    header, rows = reference_csv("cylinder_reference.csv")
+    assert header["generator"] == "tools/precompute_cylinder_references.py" and header["dps"] == "34"
+    assert "function" in header and len(rows) >= 20
+    return rows
 
 
 @pytest.mark.parametrize("rtol, tol", [(1e-14, 1e-14), (1e-8, 1e-8)])
-def test_cylinder_exact_profile_matches_mpmath(data_dir, rtol, tol):
-    rows = _reference_rows(data_dir)
+def test_cylinder_exact_profile_matches_mpmath(reference_rows, rtol, tol):
+    rows = reference_rows
     for row in rows:
         ref = float(row["R"])
         val, err = cylinder_exact_profile(float(row["theta"]), float(row["z"]), R0_opt=float(row["R0_opt"]),
@@ -263,8 +258,7 @@ def _skin_residuals(s_mm, phi, radii_mm, A, B):
                          ids=["s0-checks-A0", "s2-around-checks-A", "s2-along-checks-B"])
 def test_cylinder_vs_first_order_curvature_kernel(s_mm, phi):
     """physics.md e.3: d1 = (R_exact - R_d - R1)/R_d falls like 1/R0^2 (R0 = 20, 40, 80 mm); d0 like 1/R0."""
-    curvature = pytest.importorskip("meshshade.kernels.curvature")
-    A, B = curvature.curvature_coefficients(s_mm * SIGMA_T, **SKIN)
+    A, B = curvature_coefficients(s_mm * SIGMA_T, **SKIN)
     radii = np.array([20.0, 40.0, 80.0])
     d0, d1 = _skin_residuals(s_mm, phi, radii, float(A), float(B))
     assert _slope(radii, d1) <= -1.8
@@ -278,9 +272,8 @@ def test_cylinder_vs_first_order_curvature_kernel(s_mm, phi):
 
 def test_cylinder_richardson_limit_equals_curvature_coefficients():
     """lim R0 (R_cyl/R_d - 1) = alpha' A/R_d (around) and alpha' B/R_d (along), to 1e-4 relative."""
-    curvature = pytest.importorskip("meshshade.kernels.curvature")
     rho = np.array([0.5, 2.0, 8.0])
-    A, B = curvature.curvature_coefficients(rho, **SKIN)
+    A, B = curvature_coefficients(rho, **SKIN)
     Rd = dipole_profile(rho, **SKIN)
     for phi, coef in ((0.0, A), (np.pi / 2, B)):
         f = [R0 * (cylinder_exact_profile_geodesic(rho, phi, R0_opt=R0, rtol=1e-12, **SKIN) / Rd - 1.0)
@@ -291,10 +284,6 @@ def test_cylinder_richardson_limit_equals_curvature_coefficients():
 # ------------------------------------------------------------------------------------------------------
 # property tests
 # ------------------------------------------------------------------------------------------------------
-
-hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
 
 _params = dict(
     R0=st.floats(0.5, 1e3, exclude_min=True),

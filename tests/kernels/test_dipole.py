@@ -5,10 +5,7 @@ mpmath implementation at 50 digits; provenance in the CSV header). Formulas: phy
 """
 from __future__ import annotations
 
-import csv
-import hashlib
 import math
-import re
 import warnings
 
 import numpy as np
@@ -18,35 +15,19 @@ from hypothesis import strategies as st
 from scipy import integrate
 
 from meshshade.errors import DiffusionValidityWarning
-from meshshade.kernels.dipole import dipole_profile, dipole_total_reflectance
+from meshshade.kernels.dipole import dipole_cutoff_radius, dipole_diffuse_reflectance, dipole_profile, dipole_tail_reflectance, dipole_total_reflectance
 from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
 
 EPS = np.finfo(np.float64).eps
 
 
-def _load_reference(data_dir):
-    path = data_dir / "dipole_reference.csv"
-    with path.open() as fh:
-        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
-    assert rows, f"no rows in {path}"
-    return rows
-
-
 @pytest.fixture(scope="module")
-def reference(data_dir):
-    return _load_reference(data_dir)
-
-
-def test_reference_csv_is_current(data_dir):
-    """The CSV header records the generator's sha256; a changed generator needs a regenerated CSV."""
-    script = data_dir.parents[1] / "tools" / "precompute_dipole_references.py"
-    header = "".join(line for line in (data_dir / "dipole_reference.csv").open() if line.startswith("#"))
-    recorded = re.search(r"sha256 ([0-9a-f]{64})", header)
-    assert recorded, "no generator sha256 in the CSV header"
-    assert recorded.group(1) == hashlib.sha256(script.read_bytes()).hexdigest(), (
-        "tools/precompute_dipole_references.py changed since tests/data/dipole_reference.csv was written; rerun it")
-    assert "dps: 50" in header and "mpmath version" in header
+def reference(reference_csv):
+    """Rows of tests/data/dipole_reference.csv (the shared loader checks the generator's sha256)."""
+    header, rows = reference_csv("dipole_reference.csv")
+    assert header["generator"] == "tools/precompute_dipole_references.py" and header["dps"].startswith("50 ")
+    return rows
 
 
 def _profile_rows(reference):
@@ -281,12 +262,8 @@ def test_dipole_profile_ketchup_material_warns_but_is_finite():
 # --- tail and cutoff (used to choose neighbourhood radii) ---------------------------------------------------
 @pytest.mark.parametrize("albedo,eta", [(1 / 1.01, 1.3), (0.999, 1.0), (0.5, 2.0), (0.02, 1.3)])
 def test_dipole_tail_reflectance_matches_quadrature(albedo, eta):
-    from scipy.integrate import quad
-
-    from meshshade.kernels.dipole import dipole_tail_reflectance
-
     for r in (0.0, 0.7, 3.0, 12.0):
-        num, _ = quad(lambda x: 2 * np.pi * x * dipole_profile(x, albedo_prime=albedo, eta=eta), r, np.inf,
+        num, _ = integrate.quad(lambda x: 2 * np.pi * x * dipole_profile(x, albedo_prime=albedo, eta=eta), r, np.inf,
                       epsabs=0, epsrel=1e-12, limit=400)
         assert dipole_tail_reflectance(r, albedo_prime=albedo, eta=eta) == pytest.approx(num, rel=1e-9)
     assert dipole_tail_reflectance(0.0, albedo_prime=albedo, eta=eta) == pytest.approx(
@@ -295,10 +272,58 @@ def test_dipole_tail_reflectance_matches_quadrature(albedo, eta):
 
 @pytest.mark.parametrize("tol", [1e-2, 1e-4, 1e-6])
 def test_dipole_cutoff_radius_leaves_tol_of_energy(tol):
-    from meshshade.kernels.dipole import dipole_cutoff_radius, dipole_tail_reflectance
-
     kw = dict(albedo_prime=1 / 1.01, eta=1.3)
     r = dipole_cutoff_radius(tol, **kw)
     total = dipole_total_reflectance(**kw)
     assert dipole_tail_reflectance(r, **kw) <= tol * total * (1 + 1e-9)
     assert dipole_tail_reflectance(r * (1 - 1e-6), **kw) > tol * total
+
+
+# --- one implementation of the closed form (kernels/dipole.py: dipole_diffuse_reflectance) ------------------
+R_FORM = np.concatenate([[0.0, 1e-300, 1e-8], np.geomspace(1e-3, 3e3, 600)])
+MATERIALS_OPT = [(1 / 1.01, 1.3), (1.0, 1.0), (0.3, 2.0), (0.02, 1.3)]
+
+
+@pytest.mark.parametrize("albedo,eta", MATERIALS_OPT)
+def test_dipole_profile_is_the_compiled_scalar_closed_form(albedo, eta):
+    """dipole_profile evaluates dipole_diffuse_reflectance elementwise (through a compiled ufunc)."""
+    p = diffusion_params(albedo, eta)
+    want = [dipole_diffuse_reflectance(r, float(p.albedo_prime), float(p.mu), float(p.z_r), float(p.z_v))
+            for r in R_FORM]
+    np.testing.assert_allclose(dipole_profile(R_FORM, albedo_prime=albedo, eta=eta), want, rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize("albedo,eta", MATERIALS_OPT)
+def test_dipole_profile_agrees_with_the_numpy_closed_form(albedo, eta):
+    """The same expression in numpy (the former implementation, with d**3 by pow): within 1e-15 relative."""
+    p = diffusion_params(albedo, eta)
+    d_r = np.sqrt(R_FORM**2 + p.z_r**2)
+    d_v = np.sqrt(R_FORM**2 + p.z_v**2)
+    g = lambda d: (p.mu * d + 1.0) * np.exp(-p.mu * d) / d**3  # noqa: E731
+    want = p.albedo_prime / (4.0 * np.pi) * (p.z_r * g(d_r) + p.z_v * g(d_v))
+    np.testing.assert_allclose(dipole_profile(R_FORM, albedo_prime=albedo, eta=eta), want, rtol=1e-15, atol=0)
+
+
+def test_dipole_diffuse_reflectance_log_gain_scales_the_profile():
+    """log_gain = 0 is R_d bit for bit; otherwise R_d e^log_gain, without overflow of e^log_gain alone."""
+    p = diffusion_params(1 / 1.01, 1.3)
+    args = (float(p.albedo_prime), float(p.mu), float(p.z_r), float(p.z_v))
+    for r in (0.0, 0.5, 7.0, 40.0):
+        rd = dipole_diffuse_reflectance(r, *args)
+        assert dipole_diffuse_reflectance(r, *args, 0.0) == rd
+        for gain in (-3.0, 0.25, 5.0):
+            assert dipole_diffuse_reflectance(r, *args, gain) == pytest.approx(rd * math.exp(gain), rel=4e-15)
+    # e^800 overflows, R_d(8000) e^800 does not (mu r ~ 1400)
+    far = dipole_diffuse_reflectance(8000.0, *args, 800.0)
+    assert 0.0 < far < math.inf
+
+
+def test_dipole_profile_broadcasts_material_arrays():
+    albedo = np.array([[0.5], [0.9], [1.0]])
+    r = np.array([0.0, 1.0, 10.0, 100.0])
+    got = dipole_profile(r, albedo_prime=albedo, eta=1.3)
+    assert got.shape == (3, 4) and got.dtype == np.float64
+    for i, a in enumerate(albedo[:, 0]):
+        np.testing.assert_array_equal(got[i], dipole_profile(r, albedo_prime=a, eta=1.3))
+    scalar = dipole_profile(2.0, albedo_prime=0.9, eta=1.3)
+    assert np.ndim(scalar) == 0 and scalar == dipole_profile([2.0], albedo_prime=0.9, eta=1.3)[0]

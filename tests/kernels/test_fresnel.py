@@ -1,19 +1,20 @@
 """Tests of meshshade.kernels.fresnel against closed forms, identities and mpmath references."""
 from __future__ import annotations
 
-import csv
 import importlib.util
 
 import numpy as np
 import pytest
+from mpmath import mp
 
 from meshshade.kernels.fresnel import fresnel_reflectance, fresnel_transmittance_entry
 
 
-def _read_reference(data_dir):
-    with open(data_dir / "fresnel_reference.csv") as fh:
-        rows = [line for line in fh if not line.startswith("#")]
-    table = list(csv.DictReader(rows))
+@pytest.fixture(scope="module")
+def reference(reference_csv):
+    """Columns of tests/data/fresnel_reference.csv as float arrays (the shared loader checks the generator)."""
+    header, table = reference_csv("fresnel_reference.csv")
+    assert header["generator"] == "tools/precompute_fresnel_references.py" and header["dps"].startswith("50 ")
     return {k: np.array([float(r[k]) for r in table]) for k in table[0]}
 
 
@@ -60,25 +61,22 @@ def test_fresnel_reflectance_monotonic_in_angle(eta_i, eta_t):
     assert np.all(np.diff(F) <= 1e-15)
 
 
-def test_fresnel_reflectance_mpmath_reference(data_dir):
+def test_fresnel_reflectance_mpmath_reference(reference):
     """Against tests/data/fresnel_reference.csv (tools/precompute_fresnel_references.py, mpmath 50 digits,
     Fresnel's sine/tangent laws: an independent form of the equations). Observed max rel. error 1e-15."""
-    ref = _read_reference(data_dir)
+    ref = reference
     F = fresnel_reflectance(ref["cos_i"], ref["eta_i"], ref["eta_t"])
     np.testing.assert_allclose(F, ref["F"], rtol=1e-14, atol=0.0)
 
 
 @pytest.mark.slow
-def test_fresnel_reflectance_live_mpmath(data_dir):
+def test_fresnel_reflectance_live_mpmath(data_dir, reference):
     """Recompute the reference rows in mpmath and compare them with the committed CSV."""
-    pytest.importorskip("mpmath")
-    from mpmath import mp
-
     spec = importlib.util.spec_from_file_location("fresnel_ref", data_dir.parents[1] / "tools" /
                                                   "precompute_fresnel_references.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    ref = _read_reference(data_dir)
+    ref = reference
     with mp.workdps(50):
         live = np.array([float(mod.reference(c, a, b)) for c, a, b in zip(ref["cos_i"], ref["eta_i"], ref["eta_t"])])
     np.testing.assert_allclose(live, ref["F"], rtol=1e-15)

@@ -1,4 +1,4 @@
-"""Tests of meshshade.light.samples: spec parsing, beam/directional/point entry samples, shadowing and its culling."""
+"""Tests of meshshade.light: spec parsing, beam/directional/point entry samples, shadowing and its culling."""
 from __future__ import annotations
 
 import dataclasses
@@ -9,12 +9,14 @@ import pytest
 import trimesh
 from scipy.integrate import quad
 
-from meshshade.light import samples as lights_mod
 from meshshade.errors import LightError, MeshshadeError, UnitsError
-from meshshade.kernels.fresnel import fresnel_transmittance_entry
+from meshshade.geometry.convexity import is_convex
 from meshshade.geometry.topology import winding_number
-from meshshade.light.samples import BeamLight, DirectionalLight, EntrySamples, PointLight, entry_samples, parse_light_spec
-from meshshade.raycast.scene import NumpyScene, make_scene
+from meshshade.kernels.fresnel import fresnel_transmittance_entry
+from meshshade.light import BeamLight, DirectionalLight, EntrySamples, PointLight, entry_samples, parse_light_spec
+from meshshade.light.shadows import ShadowCuller
+from meshshade.light.sources import BEAM_SAMPLES
+from meshshade.raycast import NumpyScene, make_scene
 
 ETA = 1.3
 
@@ -265,7 +267,7 @@ def test_entry_samples_shadow_culling_changes_nothing(scene_kind, backend, monke
     scene = make_scene(V, F, backend)
     culled = entry_samples(V, F, N, A, lights, scene, ETA)
     assert (culled.stats["shadow_rays_skipped"] > 0) == (scene_kind == "sphere" or backend == "numpy")
-    monkeypatch.setattr(lights_mod._ShadowCuller, "COS_TOL", np.inf)
+    monkeypatch.setattr(ShadowCuller, "COS_TOL", np.inf)
     brute = entry_samples(V, F, N, A, lights, scene, ETA)
     assert brute.stats["shadow_rays_skipped"] == 0
     assert brute.stats["shadow_rays_cast"] == culled.stats["candidates"]
@@ -375,17 +377,17 @@ def test_entry_samples_multiple_lights_and_shapes():
 def test_is_convex_certificate():
     ico = trimesh.creation.icosphere(subdivisions=3)
     box = trimesh.creation.box().subdivide()                     # coplanar faces count as convex
-    assert lights_mod._is_convex(ico.vertices, ico.faces)
-    assert lights_mod._is_convex(box.vertices, box.faces)
-    assert not lights_mod._is_convex(ico.vertices, ico.faces[:, ::-1])          # inward faces
-    assert not lights_mod._is_convex(ico.vertices, ico.faces[1:])               # open
+    assert is_convex(ico.vertices, ico.faces)
+    assert is_convex(box.vertices, box.faces)
+    assert not is_convex(ico.vertices, ico.faces[:, ::-1])        # inward faces
+    assert not is_convex(ico.vertices, ico.faces[1:])             # open
     tor = trimesh.creation.torus(10.0, 3.0)
-    assert not lights_mod._is_convex(tor.vertices, tor.faces)                    # genus 1
+    assert not is_convex(tor.vertices, tor.faces)                 # genus 1
     two = trimesh.util.concatenate([ico, trimesh.creation.icosphere(1).apply_translation([5.0, 0, 0])])
-    assert not lights_mod._is_convex(two.vertices, two.faces)                    # two components
+    assert not is_convex(two.vertices, two.faces)                 # two components
     dented = np.array(ico.vertices)
     dented[0] *= 0.99
-    assert not lights_mod._is_convex(dented, ico.faces)                          # one concave vertex
+    assert not is_convex(dented, ico.faces)                       # one concave vertex
 
 
 def test_winding_number_inside_outside():
@@ -396,10 +398,6 @@ def test_winding_number_inside_outside():
 
 
 def test_finite_width_beam_spreads_power_over_many_entry_points():
-    import trimesh
-
-    from meshshade.light.samples import BEAM_SAMPLES, BeamLight, entry_samples, parse_light_spec
-
     sphere = trimesh.creation.icosphere(subdivisions=4, radius=10.0)
     V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces)
     N = np.asarray(sphere.vertex_normals)

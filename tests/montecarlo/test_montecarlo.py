@@ -9,15 +9,19 @@ from __future__ import annotations
 import json
 import warnings
 
+import iadpython as iad
 import numpy as np
 import pytest
 
 from meshshade.cli.main import main
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import box, icosphere
-from meshshade.light.samples import BeamLight, DirectionalLight
+from meshshade.io import load_mesh, write_ply
+from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
-from meshshade.montecarlo.simulate import TOTAL_KEYS, sample_hg_cos, simulate
+from meshshade.montecarlo import TOTAL_KEYS, mc_profile, simulate
+from meshshade.montecarlo.sampling import sample_hg_cos
+from meshshade.profiles import Shape, reflectance_profile
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
 
@@ -101,8 +105,6 @@ def test_simulate_energy_balance_and_determinism():
 
 
 def test_cli_mc_end_to_end(tmp_path):
-    from meshshade.io import load_mesh, write_ply
-
     V, F = icosphere(10.0, 2)
     src = tmp_path / "s.ply"
     write_ply(src, V, F)
@@ -140,11 +142,7 @@ def test_cli_mc_bad_input_exit_2(tmp_path, capsys):
 
 
 def test_profile_mc_sphere_small(tmp_path):
-    from meshshade.profiles import Shape, reflectance_profile
-
     mat = Material(1.0, 0.01, eta=1.3)
-    from meshshade.montecarlo.simulate import mc_profile
-
     s = np.array([1.0, 2.0, 5.0])
     R, se = mc_profile(mat, s, shape=Shape.make("sphere", 10.0), photons=3000, subdivisions=4,
                        return_stderr=True)
@@ -166,7 +164,6 @@ IAD_SLABS = [(10.0, 0.1, 0.9, 1.4, 1.0, 80.0), (5.0, 0.5, 0.5, 1.33, 0.5, 30.0)]
 @pytest.mark.slow
 @pytest.mark.parametrize("mu_s, mu_a, g, n, d, side", IAD_SLABS)
 def test_simulate_slab_matches_adding_doubling(mu_s, mu_a, g, n, d, side):
-    iad = pytest.importorskip("iadpython")
     ref = iad.Sample(a=mu_s / (mu_s + mu_a), b=(mu_s + mu_a) * d, g=g, n=n, n_above=1.0, n_below=1.0, quad_pts=16)
     R_ref, T_ref = (float(x) for x in ref.rt()[:2])
     mesh = Mesh.from_arrays(*box((side, side, d)))
@@ -183,9 +180,6 @@ def test_simulate_slab_matches_adding_doubling(mu_s, mu_a, g, n, d, side):
 def test_mc_profile_sphere_vs_exact_diffusion(R0):
     """Skin-like medium: diffusion (exact sphere series) agrees with MC to < 8 % beyond 5 transport lengths and
     underestimates it by > 30 % within a quarter transport length of the beam (tools/mc_sphere_table.py)."""
-    from meshshade.montecarlo.simulate import mc_profile
-    from meshshade.profiles import Shape, reflectance_profile
-
     mat = Material(1.0, 0.01, eta=1.3)
     shape = Shape.make("sphere", R0)
     s = np.array([0.25, 5.0, 10.0])

@@ -15,14 +15,20 @@ import numba
 import numpy as np
 import pytest
 
+from meshshade.errors import LightError, MeshshadeError
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import box, icosphere
 from meshshade.kernels.fresnel import fresnel_reflectance
-from meshshade.light.samples import BeamLight, DirectionalLight, PointLight
+from meshshade.light import BeamLight, DirectionalLight, PointLight
 from meshshade.materials import Material
-from meshshade.montecarlo.simulate import ROULETTE_BOOST, ROULETTE_THRESHOLD, TOTAL_KEYS, simulate
+from meshshade.montecarlo import TOTAL_KEYS, simulate
 from meshshade.montecarlo import engine
+from meshshade.montecarlo import interior as montecarlo_interior
 from meshshade.montecarlo import kernels as K
+from meshshade.montecarlo.sampling import ROULETTE_BOOST, ROULETTE_THRESHOLD
+from meshshade.raycast import embree_direct as montecarlo_embree
+from meshshade.raycast import make_scene
+from meshshade.raycast.embree_direct import DirectEmbreeScene
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
 Z_MAX = 5.0
@@ -67,9 +73,6 @@ def test_fresnel_out_matches_array_kernel():
 
 
 def test_direct_embree_matches_embreex_and_float64():
-    from meshshade.raycast.embree_direct import DirectEmbreeScene
-    from meshshade.raycast.scene import make_scene
-
     V, F = icosphere(3.0, 3)
     scene = make_scene(V, F)
     direct = DirectEmbreeScene(V, F, scene.center)
@@ -87,6 +90,20 @@ def test_direct_embree_matches_embreex_and_float64():
 
 def test_roulette_constants_shared():
     assert (engine.K_THRESH, engine.K_BOOST) == (ROULETTE_THRESHOLD, ROULETTE_BOOST)
+
+
+def test_emitter_accepts_only_light_objects_outside_the_mesh():
+    """The light classes validate their fields; the emitter checks the type and the placement against the mesh."""
+    mesh = Mesh.from_arrays(*icosphere(5.0, 1))
+    mat = Material(1.0, 0.1, eta=1.4)
+    fake_beam = type("FakeBeam", (), {"origin": (0.0, 0.0, 20.0), "direction": (0.0, 0.0, -1.0), "power": 1.0})()
+    cases = [([], "at least one light"), ([fake_beam], "light 0 is not a BeamLight"),
+             ([DirectionalLight((0, 0, -1)), "beam:0,0,20:0,0,-1"], "light 1 is not a BeamLight"),
+             ([BeamLight((0.0, 0.0, 1.0), (0.0, 0.0, -1.0))], "beam light 0 starts inside the mesh"),
+             ([DirectionalLight((0, 0, -1)), PointLight((0.5, 0.0, 0.0))], "point light 1 .* is inside the mesh")]
+    for lights, message in cases:
+        with pytest.raises(LightError, match=message):
+            simulate(mesh, mat, lights, photons=16, beam_distances=False)
 
 
 # ------------------------------------------------------------------------------------------------ determinism
@@ -125,9 +142,6 @@ def test_batched_embreex_mode_walks_the_same_paths():
 
 @pytest.mark.slow
 def test_auto_engine_falls_back_to_batched(monkeypatch):
-    from meshshade.raycast import embree_direct as montecarlo_embree
-    from meshshade.errors import MeshshadeError
-
     mesh, mat, lights = _sphere_scene()
     kw = dict(photons=3000, seed=3, beam_distances=False)
     a = simulate(mesh, mat, lights, engine="batched", **kw)
@@ -139,8 +153,6 @@ def test_auto_engine_falls_back_to_batched(monkeypatch):
 
 def test_half_space_certificates_change_cost_not_paths(monkeypatch):
     """The certificates only skip rays whose answer is 'no hit within the free path': identical walks."""
-    from meshshade.montecarlo import interior as montecarlo_interior
-
     mesh = Mesh.from_arrays(*box((10.0, 10.0, 5.0)))
     args = (mesh, Material(9.0, 1.0, eta=1.5), [BeamLight((0.123, 0.0456, 10.0), (0.0, 0.0, -1.0))])
     kw = dict(photons=4000, seed=8, beam_distances=False)

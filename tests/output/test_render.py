@@ -5,11 +5,12 @@ import pytest
 from meshshade import Material, io
 from meshshade.output import render
 from meshshade.cli.main import main
+from meshshade.errors import MeshshadeError
 from meshshade.geometry import procedural
 from meshshade.geometry.mesh import Mesh
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.kernels.sphere import sphere_series_profile
-from meshshade.light.samples import BeamLight
+from meshshade.light import BeamLight, DirectionalLight
 from meshshade.transport.bake import bake
 
 
@@ -76,7 +77,8 @@ def test_auto_camera_frames_the_mesh():
         rgb, alpha = render.render_radiance(mesh, np.ones((mesh.n_vertices, 3)), cam, 48, 48, 1)
         assert alpha.sum() > 0.1 * alpha.size
         assert alpha[0].sum() == alpha[-1].sum() == alpha[:, 0].sum() == alpha[:, -1].sum() == 0  # margin
-    with pytest.raises(Exception):
+    # up parallel to the view direction (0, 0, -1): no image plane; the package's own error, with its reason
+    with pytest.raises(MeshshadeError, match="up vector is parallel to the view direction"):
         render.Camera("orthographic", (0, 0, 1), (0, 0, 0), (0, 0, 1))
 
 
@@ -96,8 +98,6 @@ def test_cli_render(tmp_path):
 
 
 def test_pixel_gather_equals_bake_at_vertices():
-    from meshshade.light.samples import DirectionalLight
-
     V, F = procedural.pebble(subdivisions=2)
     mesh = Mesh.from_arrays(V, F)
     res = bake(mesh, Material.preset("skin1"), [DirectionalLight((0.3, -0.5, -1))], model="curved")

@@ -1,4 +1,4 @@
-"""Tests of meshshade.raycast.scene: Embree adapter vs the pure-numpy twin, analytic hits, offsets across scales."""
+"""Tests of meshshade.raycast: Embree adapter vs the pure-numpy twin, analytic hits, offsets across scales."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 import trimesh
 
 from meshshade.errors import MeshValidationError
-from meshshade.raycast.scene import OFFSET_ABS, OFFSET_REL, EmbreeScene, Hits, NumpyScene, make_scene
+from meshshade.raycast import OFFSET_ABS, OFFSET_REL, EmbreeScene, Hits, NumpyScene, make_scene
 
 BACKENDS = ["embree", "numpy"]
 

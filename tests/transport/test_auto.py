@@ -7,16 +7,17 @@ import trimesh
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from meshshade.transport import auto
-from meshshade.transport import bake as transport
-from meshshade.transport import zones
+from meshshade import transport
 from meshshade.cli.main import main
 from meshshade.geometry.mesh import Mesh
-from meshshade.geometry.procedural import icosphere, torus
+from meshshade.geometry.procedural import box, icosphere
+from meshshade.geometry.topology import vertex_adjacency
 from meshshade.io import write_ply
 from meshshade.kernels.curvature import curvature_ratios
-from meshshade.light.samples import BeamLight, DirectionalLight
+from meshshade.kernels.dipole import dipole_profile
+from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import material_from_options
+from meshshade.transport import auto, zones
 
 SKIN = material_from_options("skin1")
 
@@ -26,22 +27,13 @@ def test_dilated_max_matches_breadth_first_search(rng):
     V, F = icosphere(1.0, 2)
     n = len(V)
     vals = rng.random(n)
-    indptr, indices = auto.vertex_adjacency(n, F)
+    indptr, indices = vertex_adjacency(n, F)
     # independent route: hop distances of the unweighted vertex graph from scipy's csgraph
     A = csr_matrix((np.ones(indices.size), indices, indptr), shape=(n, n))
     hops = shortest_path(A, unweighted=True)
     for rings in (0, 1, 2, 5):
         want = np.array([vals[hops[v] <= rings].max() for v in range(n)])
         np.testing.assert_array_equal(auto.dilated_max(vals, indptr, indices, rings), want)
-
-
-def test_vertex_adjacency_is_symmetric_and_has_no_self_loops():
-    V, F = torus(3.0, 1.0, 24, 12)
-    indptr, indices = auto.vertex_adjacency(len(V), F)
-    A = csr_matrix((np.ones(indices.size), indices, indptr), shape=(len(V),) * 2)
-    assert (A != A.T).nnz == 0
-    assert A.diagonal().sum() == 0
-    assert np.all(np.diff(indptr) == 6)  # the structured torus is 6-regular
 
 
 # ------------------------------------------------------------------------------------------- bounds
@@ -158,7 +150,6 @@ def test_auto_flat_forced_dipole_equals_geodesic_dipole(sphere10):
     got = transport.bake(sphere10, SKIN, light, model="auto", auto_options=dict(curvature_tol=np.inf,
                                                                                   geodesic_tol=0.0))
     assert got.stats["auto_kernel_dipole"] == 1
-    from meshshade.kernels.dipole import dipole_profile
     d = got.beam_distance
     ok = np.isfinite(d) & (d > 1.0)
     F_t = got.samples.power[0]
@@ -238,7 +229,18 @@ def test_auto_uses_clustered_far_field_only_where_flat(sphere40):
     assert r.stats.get("zone_exact_near", 0) + r.stats.get("zone_arc_near", 0) == 0
     flat = transport.bake(sphere40, MARBLE, light, model="auto", auto_options=dict(curvature_tol=np.inf))
     assert flat.stats.get("zone_exact_near", 0) + flat.stats.get("zone_arc_near", 0) == flat.stats["entry_samples"]
-    assert "near_mm" in flat.stats and flat.stats["far_clusters_accepted"] >= 0
+    # the clustered far field covers every (vertex, source, channel) pair with near_c < chord <= cutoff_c: an
+    # independent brute-force count (numpy, all pairs) equals the leaf pairs when no cluster is accepted (rel_tol
+    # 1e-2 on these 321 sources: 110340 pairs), else clusters replace some of them
+    y = flat.samples.positions[flat.samples.power > 0]
+    chord = np.sqrt(((sphere40.vertices[:, None, :] - y[None, :, :]) ** 2).sum(-1))
+    near, cut = flat.stats["near_mm"], flat.stats["cutoff_mm"]
+    n_far = sum(int(np.count_nonzero((chord > near[c]) & (chord <= cut[c]))) for c in range(3))
+    assert n_far > 0
+    if flat.stats["far_clusters_accepted"] == 0:
+        assert flat.stats["far_pairs_exact"] == n_far
+    else:
+        assert flat.stats["far_pairs_exact"] < n_far
 
 
 def test_neighbourhood_curvature_ball_query_and_dilation_agree_on_a_sphere_patch():
@@ -282,7 +284,6 @@ def test_auto_on_a_large_marble_box_uses_dipole_arc_and_far_field():
     clustered far field there; the curved kernel and exact geodesics near edges and corners. Auto must stay
     close to `curved` (measured: mean 0.12 %, p99 4 %, the largest differences beside the edges, where the edge's
     fitted curvature is spread over a few vertices) while computing fewer geodesic pairs."""
-    from meshshade.geometry.procedural import box
     mesh = Mesh.from_arrays(*box((300.0, 300.0, 300.0), 30))
     light = [DirectionalLight((0.2, 0.1, -1.0), 1.0)]
     ref = transport.bake(mesh, MARBLE, light, model="curved")

@@ -19,7 +19,7 @@ from meshshade.geometry.procedural import box, icosphere
 from meshshade.kernels.dipole import dipole_profile, dipole_tail_reflectance, dipole_total_reflectance
 from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
-from meshshade.transport.bake import cutoff_radii
+from meshshade.transport.gather import cutoff_radii
 
 MATERIALS = ("skin1", "marble", "wholemilk")
 

@@ -5,7 +5,7 @@ import pytest
 
 from meshshade.geometry.mesh import Mesh
 from meshshade.io import read_mesh_arrays
-from meshshade.light.samples import DirectionalLight
+from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.bake import bake
 

@@ -8,8 +8,9 @@ from meshshade.geometry.curvature import principal_curvatures
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 from meshshade.geometry.procedural import icosphere, saddle_patch
-from meshshade.transport.clusters import NORMAL_COS, _law_of_cosines, cluster_sources, expand_far_pairs
-from meshshade.transport.bake import source_frames
+from meshshade.transport.clusters import (NORMAL_COS, _law_of_cosines, cluster_sources, expand_far_pairs,
+                                          expand_far_pairs_reference)
+from meshshade.transport.pair_kernel import source_frames
 
 
 class _Samples:
@@ -69,7 +70,21 @@ def test_law_of_cosines_exact_on_plane_sphere_and_pseudosphere_limit():
     want = R * np.arccos(np.clip(np.einsum("ij,ij->i", o, i) / R ** 2, -1, 1))
     got = _law_of_cosines(sc, d, d * np.cos(g), d, np.full(20, 1 / R ** 2))
     np.testing.assert_allclose(got, want, rtol=1e-10)
-    assert np.all(np.isfinite(_law_of_cosines(sc, d, d * np.cos(g), d, np.full(20, -1 / R ** 2))))
+    # pseudosphere (K = -1/R^2): points on the hyperboloid -t^2 + x^2 + y^2 = -R^2 of Minkowski space, at geodesic
+    # distance sc along x and d at angle g (boosts instead of rotations); their distance from the Minkowski product,
+    # cosh(s/R) = (t1 t2 - x1 x2 - y1 y2)/R^2
+    o = R * np.stack([np.cosh(sc / R), np.sinh(sc / R), np.zeros(20)], axis=1)
+    i = R * np.stack([np.cosh(d / R), np.sinh(d / R) * np.cos(g), np.sinh(d / R) * np.sin(g)], axis=1)
+    want_h = R * np.arccosh((o[:, 0] * i[:, 0] - o[:, 1] * i[:, 1] - o[:, 2] * i[:, 2]) / R ** 2)
+    got_h = _law_of_cosines(sc, d, d * np.cos(g), d, np.full(20, -1 / R ** 2))
+    np.testing.assert_allclose(got_h, want_h, rtol=1e-10)
+    # comparison theorem: the third side is longer than the planar one at K < 0, shorter at K > 0, and both tend
+    # to it like K s^2 (at R = 1e4 mm: within 1e-5 relative)
+    flat = np.sqrt(sc ** 2 + d ** 2 - 2 * sc * d * np.cos(g))
+    assert np.all(got_h >= flat * (1 - 1e-12)) and np.all(got <= flat * (1 + 1e-12))
+    assert np.any(got_h > flat * (1 + 1e-4)) and np.any(got < flat * (1 - 1e-4))
+    for K in (1e-8, -1e-8):
+        np.testing.assert_allclose(_law_of_cosines(sc, d, d * np.cos(g), d, np.full(20, K)), flat, rtol=1e-5)
 
 
 def test_expanded_pairs_of_the_centre_reproduce_the_solver():
@@ -126,9 +141,8 @@ def test_law_of_cosines_finite_and_within_the_triangle_inequality(sc, d, cosg, K
     assert abs(sc - d) - 1e-9 * (sc + d + 1) <= s <= sc + d + 1e-9 * (sc + d + 1)
 
 
-def test_numba_expansion_equals_the_numpy_twin():
+def test_numba_expansion_equals_the_numpy_reference():
     """Same pairs in the same order, values to rounding, with exclusions and a distance limit."""
-    from meshshade.transport.clusters import expand_far_pairs_numpy
     mesh = Mesh.from_arrays(*icosphere(20.0, 3))
     frames, query = _setup(mesh)
     V, n = mesh.vertices, mesh.n_vertices
@@ -140,7 +154,7 @@ def test_numba_expansion_equals_the_numpy_twin():
     pn = query(mem, 6.0)
     keys = np.sort(pn[0] * n + pn[1])
     a = expand_far_pairs(pc, (mem, cen_of), V, V, frames, exclude_keys=keys, max_distance=25.0)
-    b = expand_far_pairs_numpy(pc, (mem, cen_of), V, V, frames, exclude_keys=keys, max_distance=25.0)
+    b = expand_far_pairs_reference(pc, (mem, cen_of), V, V, frames, exclude_keys=keys, max_distance=25.0)
     assert a[0].size == b[0].size > 1000
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], b[1])

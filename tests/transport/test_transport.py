@@ -5,10 +5,12 @@ import pytest
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
-from meshshade.kernels.sphere import sphere_series_profile
-from meshshade.light.samples import BeamLight, DirectionalLight
+from meshshade.kernels.sphere import sphere_series_profile, sphere_total_reflectance
+from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
-from meshshade.transport.bake import bake, cutoff_radii
+from meshshade.transport.bake import bake
+from meshshade.transport.gather import cutoff_radii
+from meshshade.transport.pair_kernel import patch_average_factor
 
 SKIN = Material(1.0, 0.01, 1.3, name="skin-like")  # physics.md's test case
 
@@ -137,8 +139,6 @@ def test_bake_energy_with_edges_much_longer_than_transport_length():
     """Point-sampling the kernel at vertices over-counts when z_r << edge length (the self term alone would
     exceed the entering power); the patch average keeps the exitant power below the entering power and close
     to the sphere's closed-form albedo."""
-    from meshshade.kernels.sphere import sphere_total_reflectance
-
     R = 20.0
     mesh = sphere_mesh(R, 3)  # edges ~ 3.3 mm
     dense = Material(5.0, 0.02, 1.3)  # z_r = 0.2 mm
@@ -152,8 +152,6 @@ def test_bake_energy_with_edges_much_longer_than_transport_length():
 
 
 def test_patch_average_factor_limits():
-    from meshshade.transport.bake import patch_average_factor
-
     kw = dict(albedo_prime=0.99, eta=1.3, sigma_t_prime=1.0)
     # far away the ring average differs from the point value only at second order in a (here 0.16 %)
     far = patch_average_factor(np.array([50.0]), np.array([0.5]), **kw)

@@ -1,78 +1,72 @@
-"""Numba kernels behind :mod:`meshshade.geometry.geodesics.neighbourhoods` (private; no I/O, no Python objects).
+"""Numba kernels of the exact ("window") method of :mod:`meshshade.geometry.geodesics.neighbourhoods` (private).
 
-Bounded single-source propagations, each processing a *block* of sources sequentially with reused,
-stamp-reset work arrays (no O(n) clearing per source), so that a block costs O(sum of neighbourhood sizes).
-Events are ordered by a bucket queue (width ``1/inv_delta``, ``nb`` circular buckets spanning the largest key
-jump; LIFO inside a bucket).  Every update below is a min over lengths of valid paths and every event re-checks
-its key, so processing slightly out of order changes the work, not the result (label-correcting).
+Exact polyhedral geodesics by continuous-Dijkstra *window* propagation (Mitchell-Mount-Papadimitriou 1987 windows,
+processed in the order and with the pruning of Xin & Wang 2009, "Improving Chen and Han's algorithm on the
+discrete geodesic problem", ACM TOG 28(4):104): a window is an interval of a half-edge lit by straight rays from a
+pseudo-source unfolded into the plane of the face it enters.  Pruning: the interval is trimmed where a path
+through one of its edge's end vertices is shorter (exact), a window whose whole interval is beaten through the
+opposite vertex is dropped (exact, the set where a point beats a pseudo-source along a line is an interval), and
+"one angle one split" trims the rays of a window that would cross a shorter ray to the same vertex (exact).
+Pseudo-sources are emitted at boundary and non-manifold vertices (all around) and at saddles (cone angle
+theta > 2 pi) only into the sector [alpha + pi, alpha + theta - pi] opposite the arrival direction alpha, where a
+path through the vertex can be shortest (MMP's rule; it halves the window count on scanned meshes).  Every
+distance is the length of an actual path on the mesh, so results never fall below the exact polyhedral distance
+(up to rounding).  Block structure, stamps and bucket queue: :mod:`._queue_kernels`.
 
-``_window_block``
-    Exact polyhedral geodesics by continuous-Dijkstra *window* propagation (Mitchell-Mount-Papadimitriou 1987
-    windows, processed in the order and with the pruning of Xin & Wang 2009, "Improving Chen and Han's algorithm
-    on the discrete geodesic problem", ACM TOG 28(4):104): a window is an interval of a half-edge lit by straight
-    rays from a pseudo-source unfolded into the plane of the face it enters.  Pruning: the interval is trimmed
-    where a path through one of its edge's end vertices is shorter (exact), a window whose whole interval is
-    beaten through the opposite vertex is dropped (exact, the set where a point beats a pseudo-source along a
-    line is an interval), and "one angle one split" trims the rays of a window that would cross a shorter ray
-    to the same vertex (exact).  Pseudo-sources are emitted at boundary and non-manifold vertices (all
-    around) and at saddles (cone angle theta > 2 pi) only into the sector [alpha + pi, alpha + theta - pi]
-    opposite the arrival direction alpha, where a path through the vertex can be shortest (MMP's rule; it
-    halves the window count on scanned meshes).  Every distance is the length of an actual path on the mesh,
-    so results never fall below the exact polyhedral distance (up to rounding).
-``_vertex_queue_block(..., use_triangles=True)``
-    First-order fast marching (Kimmel & Sethian 1998) with the point-source ("circle intersection") triangle
-    update of Novotni & Klein 2002 and re-opening of settled vertices; exact on flat meshes, O(h) on curved ones.
-``_vertex_queue_block(..., use_triangles=False)``
-    Plain Dijkstra on the edge graph (the baseline: zig-zag paths overestimate by 8-15 % on average).
+``_window_block`` (the driver) runs one source after the other:
 
-Half-edge convention (built in ``neighbourhood._build_topology``): half-edge ``h = 3 f + k`` runs from
+1. initial distances and windows from the source: ``_seed_vertex_source`` / ``_seed_face_source``;
+2. pending windows are pruned (``_trim_by_end_vertices``, ``_window_min`` against the cutoff,
+   ``_beaten_through_opposite``), offer paths to the corners of their face (``_path_to_window_vertex``) and are
+   queued (``_queue_window``);
+3. a popped window lights the face behind its half-edge: "one angle one split", then it is carried across each
+   exit edge (``_exit_edge``, ``_unfold_across_edge``, ``_cone_on_line``) as a pending window;
+4. a popped saddle/boundary vertex is a pseudo-source: paths to the other corners of its faces and pending
+   windows on their far edges, a saddle's only inside its sector (``_arrival_angle``, ``_sector_on_edge`` in
+   :mod:`._saddle_kernels`);
+5. the vertices within the cutoff are collected (``_append_results``).
+
+Numba note: the per-event helpers are inlined (``inline="always"``), and those that take arrays are straight-line
+code (no branch between their arguments and their last use: ``_first_visit``, ``_record_arrival``,
+``_push_child``, ``_queue_window``); every branching step over the shared state stays in the driver and calls
+scalar helpers.  An inlined helper that uses an array argument only inside branches keeps a reference-count
+increment and decrement per array and call (numba cannot pair them up), and helpers of that kind made this kernel
+2.7-3x slower.  Helpers that branch over arrays run once per source (``_seed_face_source``) or once per
+pseudo-source (``_arrival_angle``).
+
+Half-edge convention (built in ``neighbourhoods._build_topology``): half-edge ``h = 3 f + k`` runs from
 ``F[f, k]`` (tail) to ``F[f, (k+1) % 3]`` (head); its opposite corner is ``F[f, (k+2) % 3]``.  Its local frame
 puts the tail at (0, 0), the head at (L, 0) and the opposite corner at (ox, oy) with oy > 0.  A point (x, y)
 of frame(h) is (tox + tsx x, -y) in the frame of the twin half-edge (the same edge seen from the other face,
-unfolded flat): tox = L, tsx = -1 for a consistently wound neighbour, tox = 0, tsx = +1 otherwise.
+unfolded flat): tox = L, tsx = -1 for a consistently wound neighbour, tox = 0, tsx = +1 otherwise.  Lengths are
+in mm, angles in radians.
+
+Work arrays of the driver (one set per block, reset by stamps):
+
+* per vertex (n,): ``dist`` best distance, ``vstamp`` source stamp of ``dist``, ``vdone`` stamp of the source
+  that emitted from it, ``touched`` the vertices reached (first ``nt``), and how the best path arrived:
+  ``arr_role`` (0 opposite corner / 1 tail / 2 head of half-edge ``arr_h``, -1 the source itself) with its last
+  straight piece coming from (``arr_x``, ``arr_y``) in frame(``arr_h``);
+* per half-edge (3m,): ``astamp``, ``abest``, ``abx``: the shortest ray to the opposite vertex so far and where it
+  crosses the half-edge (one angle, one split);
+* window pool (``npool`` queued windows): ``p_h`` half-edge, pseudo-source (``p_sx``, ``p_sy``) in its frame
+  (y < 0), lit interval [``p_lo``, ``p_hi``] of the edge, ``p_sg`` distance of the pseudo-source;
+* pending windows (``nc``, at most ``_MAX_CHILDREN``): ``c_t``, ``c_sx``, ``c_sy``, ``c_lo``, ``c_hi``, ``c_sg``,
+  the same fields, not yet pruned or queued.
+
+Queue items: ``w >= 0`` is window ``w`` of the pool, ``-u - 1`` is a pseudo-source event at vertex ``u``.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-# relative improvement below which a vertex is not re-queued (rounding noise)
-_IMPROVE = 1.0 - 1e-13
+from meshshade.geometry.geodesics._queue_kernels import (_IMPROVE, _append_results, _bq_pop, _bq_push, _grow_f,
+                                                         _reserve_events)
+from meshshade.geometry.geodesics._saddle_kernels import _arrival_angle, _sector_on_edge
 
-
-@njit(cache=True, nogil=True, inline="always")
-def _bq_push(bhead, ek, ei, en, nev, key, item, inv_delta, cur, nb):
-    """Queue ``item`` with priority ``key`` in bucket floor(key / delta) (clamped to the live range)."""
-    b = int(key * inv_delta)
-    if b < cur:
-        b = cur
-    elif b >= cur + nb:
-        b = cur + nb - 1
-    slot = b % nb
-    ek[nev] = key
-    ei[nev] = item
-    en[nev] = bhead[slot]
-    bhead[slot] = nev
-    return nev + 1
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _bq_pop(bhead, ek, ei, en, cur, nb):
-    """Remove an event of the lowest non-empty bucket (LIFO inside a bucket); the queue must not be empty."""
-    while True:
-        slot = cur % nb
-        e = bhead[slot]
-        if e >= 0:
-            bhead[slot] = en[e]
-            return ek[e], ei[e], cur
-        cur += 1
-
-
-@njit(cache=True, nogil=True)
-def _grow_f(a, cap):
-    b = np.empty(cap, a.dtype)
-    b[:a.shape[0]] = a
-    return b
+#: pending windows at once (one per face around a pseudo-source vertex; further faces get no window)
+_MAX_CHILDREN = 64
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -117,92 +111,229 @@ def _window_min(sx, sy, lo, hi, sg):
     return sg - sy
 
 
-@njit(cache=True, nogil=True)
-def _append_results(out_v, out_d, nout, touched, nt, dist, cutoff):
-    """Append the touched vertices within ``cutoff`` (growing the outputs); returns arrays and new length."""
-    need = nout + nt
-    if need > out_v.shape[0]:
-        cap = max(need, 2 * out_v.shape[0])
-        out_v = _grow_f(out_v, cap)
-        out_d = _grow_f(out_d, cap)
-    for j in range(nt):
-        u = touched[j]
-        if dist[u] <= cutoff:
-            out_v[nout] = u
-            out_d[nout] = dist[u]
-            nout += 1
-    return out_v, out_d, nout
+# ---------------------------------------------------------------------------------------------------------------
+# bookkeeping (straight-line array helpers; see the module docstring)
+# ---------------------------------------------------------------------------------------------------------------
 
-
-@njit(cache=True, nogil=True)
-def _build_fans(n_vertices, he_twin, he_tsx, he_corner, v_ptr, v_he):
-    """Angular position of every corner in its vertex's fan (for the pseudo-source shadow rule).
-
-    Walking counter-clockwise around vertex v, the half-edge opposite v in the next face is
-    ``next(twin(next(h)))``.  Returns ``fan_start`` (3m,): the angle, around the opposite vertex of half-edge h,
-    of the direction towards tail(h) (the corner of h's face spans [fan_start, fan_start + corner]), and
-    ``fan_ok`` (n,): the walk closed over all of v's faces (interior manifold vertex, consistent winding).
-    """
-    fan_start = np.zeros(he_twin.shape[0])
-    fan_ok = np.zeros(n_vertices, np.bool_)
-    for v in range(n_vertices):
-        a, b = v_ptr[v], v_ptr[v + 1]
-        deg = b - a
-        if deg < 3:
-            continue
-        h = v_he[a]
-        acc = 0.0
-        ok = True
-        for _ in range(deg):
-            fan_start[h] = acc
-            acc += he_corner[h]
-            nx = 3 * (h // 3) + (h % 3 + 1) % 3
-            t = he_twin[nx]
-            if t < 0 or he_tsx[nx] > 0.0:  # open edge or inconsistent winding: no fan
-                ok = False
-                break
-            h = 3 * (t // 3) + (t % 3 + 1) % 3
-        fan_ok[v] = ok and h == v_he[a]
-    return fan_start, fan_ok
+@njit(cache=True, nogil=True, inline="always")
+def _first_visit(u, stamp, vstamp, dist, vdone, touched, nt):
+    """Vertex ``u`` is reached for the first time by the current source: distance inf, listed in ``touched``.
+    Returns nt."""
+    vstamp[u] = stamp
+    dist[u] = np.inf
+    vdone[u] = 0
+    touched[nt] = u
+    return nt + 1
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _arrival_angle(role, h, px, py, he_len, he_ox, he_oy, fan_start, he_corner):
-    """Fan angle, around the vertex, of the direction back along the path that reached it.
+def _record_arrival(u, dd, role, h, ax, ay, dist, arr_role, arr_h, arr_x, arr_y):
+    """Vertex ``u`` gets distance ``dd`` along a path whose last straight piece comes from (ax, ay) of frame(h),
+    ``u`` being corner ``role`` of h (0 opposite, 1 tail, 2 head)."""
+    dist[u] = dd
+    arr_role[u] = role
+    arr_h[u] = h
+    arr_x[u] = ax
+    arr_y[u] = ay
 
-    The path's last straight piece comes from point (px, py) of frame(h); the vertex is the opposite corner
-    (role 0), the tail (role 1) or the head (role 2) of h.
+
+@njit(cache=True, nogil=True, inline="always")
+def _push_child(c_t, c_sx, c_sy, c_lo, c_hi, c_sg, nc, t, sx, sy, lo, hi, sg):
+    """Add a pending window: interval [lo, hi] of half-edge t lit from (sx, sy) of frame(t) at distance sg.
+    Returns nc."""
+    c_t[nc] = t
+    c_sx[nc] = sx
+    c_sy[nc] = sy
+    c_lo[nc] = lo
+    c_hi[nc] = hi
+    c_sg[nc] = sg
+    return nc + 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _queue_window(p_h, p_sx, p_sy, p_lo, p_hi, p_sg, npool, t, sx, sy, lo, hi, sg, key, bhead, ek, ei, en, nev,
+                  inv_delta, cur, nb):
+    """Store a window as entry ``npool`` of the pool and queue it with priority ``key``.  Returns nev."""
+    p_h[npool] = t
+    p_sx[npool] = sx
+    p_sy[npool] = sy
+    p_lo[npool] = lo
+    p_hi[npool] = hi
+    p_sg[npool] = sg
+    return _bq_push(bhead, ek, ei, en, nev, key, npool, inv_delta, cur, nb)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# geometry of one window (scalar helpers)
+# ---------------------------------------------------------------------------------------------------------------
+
+@njit(cache=True, nogil=True, inline="always")
+def _trim_by_end_vertices(sx, sy, lo, hi, sg, Lt, reached_a, d_a, reached_b, d_b):
+    """Trim the interval [lo, hi] of an edge of length Lt (tail A at x = 0, head B at x = Lt) to where the window
+    from (sx, sy) at distance sg is shorter than the best path through A (left part) or B (right part).
+
+    ``d_a`` (``d_b``) is A's (B's) best distance, used only when ``reached_a`` (``reached_b``).  Returns (lo, hi).
     """
-    L = he_len[h]
-    ox = he_ox[h]
-    oy = he_oy[h]
-    base = 3 * (h // 3)
-    if role == 0:
-        ax = -ox
-        ay = -oy
-        dx = px - ox
-        dy = py - oy
-        return fan_start[h] + np.arctan2(ax * dy - ay * dx, ax * dx + ay * dy)
-    if role == 1:   # from direction tail -> head, counter-clockwise positive
-        hA = base + (h - base + 1) % 3
-        return fan_start[hA] + np.arctan2(py, px)
-    hB = base + (h - base + 2) % 3  # from direction head -> tail
-    dx = px - L
-    return fan_start[hB] + he_corner[hB] + np.arctan2(-py, -dx)
+    if reached_a:
+        dA = d_a - sg
+        den = 2.0 * (sx + dA)
+        if den > 0.0:
+            xA = (sx * sx + sy * sy - dA * dA) / den
+            if xA + dA >= 0.0 and xA > lo:
+                lo = xA
+    if reached_b:
+        dB = d_b - sg
+        sxm = Lt - sx
+        den = 2.0 * (sxm + dB)
+        if den > 0.0:
+            xB = (sxm * sxm + sy * sy - dB * dB) / den
+            if xB + dB >= 0.0 and Lt - xB < hi:
+                hi = Lt - xB
+    return lo, hi
 
+
+@njit(cache=True, nogil=True, inline="always")
+def _beaten_through_opposite(sx, sy, lo, hi, sg, vx, vy, d_o):
+    """Whether the path through the opposite vertex at (vx, vy), best distance ``d_o``, beats the window at both
+    interval ends (then it does over the whole interval, and the window is useless)."""
+    return (d_o + np.sqrt((vx - lo) ** 2 + vy * vy) < sg + np.sqrt((lo - sx) ** 2 + sy * sy) and
+            d_o + np.sqrt((vx - hi) ** 2 + vy * vy) < sg + np.sqrt((hi - sx) ** 2 + sy * sy))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _path_to_window_vertex(e, sx, sy, lo, hi, sg, Lt, vx, vy):
+    """Path from a window to corner ``e`` of its face (0 tail, 1 head, 2 opposite vertex at (vx, vy)).
+
+    Returns (lit, dd, ax, ay): whether the path exists (the tail and head only when the interval reaches them),
+    its length, and the start (ax, ay) of its last straight piece.  A ray to the opposite vertex that misses the
+    interval is replaced by the bent path through the interval's nearer end (a valid upper bound).
+    """
+    if e == 0:
+        if lo > 1e-12 * Lt:
+            return False, 0.0, sx, sy
+        return True, sg + np.sqrt(sx * sx + sy * sy), sx, sy
+    if e == 1:
+        if hi < Lt * (1.0 - 1e-12):
+            return False, 0.0, sx, sy
+        return True, sg + np.sqrt((Lt - sx) ** 2 + sy * sy), sx, sy
+    xc = sx + (vx - sx) * (-sy) / (vy - sy)
+    if xc < lo:
+        return True, sg + np.sqrt((lo - sx) ** 2 + sy * sy) + np.sqrt((vx - lo) ** 2 + vy * vy), lo, 0.0
+    if xc > hi:
+        return True, sg + np.sqrt((hi - sx) ** 2 + sy * sy) + np.sqrt((vx - hi) ** 2 + vy * vy), hi, 0.0
+    return True, sg + np.sqrt((vx - sx) ** 2 + (vy - sy) ** 2), sx, sy
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _exit_edge(e, h, Lh, vx, vy):
+    """Exit edge ``e`` of the face of half-edge h (frame(h): tail (0, 0), head (Lh, 0), opposite (vx, vy)).
+
+    e = 0: head -> opposite (fed by the rays right of the opposite vertex); e = 1: opposite -> tail (left of it).
+    Returns (he, px, py, qx, qy): its half-edge and its end points p -> q in frame(h).
+    """
+    base = 3 * (h // 3)
+    if e == 0:
+        return base + (h - base + 1) % 3, Lh, 0.0, vx, vy
+    return base + (h - base + 2) % 3, vx, vy, 0.0, 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _unfold_across_edge(sx, sy, c0, c1, px, py, qx, qy, Le, tox, tsx):
+    """Carry a window's rays through [c0, c1] of its half-edge (y = 0 of its frame) across the face's exit edge
+    p -> q (length Le), unfolding the pseudo-source (sx, sy) into the frame of that edge's twin.
+
+    Returns (lit, s1x, s1y, lo, hi): the pseudo-source and the lit interval in the twin's frame; ``lit`` is False
+    when the source is not behind the edge or the interval is empty.
+    """
+    ux = (qx - px) / Le
+    uy = (qy - py) / Le
+    # frame(h) -> frame(he): ((P - p).u, (P - p).n) with n = (-uy, ux); then -> frame(t)
+    s1x = tox + tsx * ((sx - px) * ux + (sy - py) * uy)
+    s1y = -((sx - px) * (-uy) + (sy - py) * ux)
+    if s1y >= 0.0:
+        return False, s1x, s1y, 0.0, 0.0
+    q0x = tox + tsx * ((c0 - px) * ux - py * uy)
+    q0y = -((c0 - px) * (-uy) - py * ux)
+    q1x = tox + tsx * ((c1 - px) * ux - py * uy)
+    q1y = -((c1 - px) * (-uy) - py * ux)
+    lo, hi = _cone_on_line(s1x, s1y, q0x, q0y, q1x, q1y)
+    if lo < 0.0:
+        lo = 0.0
+    if hi > Le:
+        hi = Le
+    return not (hi - lo <= 1e-12 * Le), s1x, s1y, lo, hi
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# sources (once per source)
+# ---------------------------------------------------------------------------------------------------------------
+
+@njit(cache=True, nogil=True, inline="always")
+def _seed_vertex_source(sv, stamp, vstamp, dist, vdone, touched, arr_role, bhead, ek, ei, en, inv_delta, nb):
+    """Start a source at vertex ``sv``: distance 0 and a pseudo-source event there.  Returns (nt, nev, qn)."""
+    vstamp[sv] = stamp
+    dist[sv] = 0.0
+    vdone[sv] = 0
+    arr_role[sv] = -1
+    touched[0] = sv
+    return 1, _bq_push(bhead, ek, ei, en, 0, 0.0, -sv - 1, inv_delta, 0, nb), 1
+
+
+@njit(cache=True, nogil=True)
+def _seed_face_source(f, bary, stamp, cut, he_tail, he_twin, he_tox, he_tsx, he_len, he_ox, he_oy, vstamp, dist,
+                      vdone, touched, arr_role, arr_h, arr_x, arr_y, emitter, pending, bhead, ek, ei, en, inv_delta,
+                      nb):
+    """Start a source inside face ``f`` at barycentric weights ``bary`` (3,): straight paths to the three corners,
+    a pending window on each neighbouring face's edge (into ``pending``, the six pending-window arrays) and
+    pseudo-source events at the corners that emit or that the source sits on.  Returns (nt, nev, qn, nc)."""
+    c_t, c_sx, c_sy, c_lo, c_hi, c_sg = pending
+    nt = 0
+    nev = 0
+    qn = 0
+    nc = 0
+    for kk in range(3):
+        h = 3 * f + kk
+        Lh = he_len[h]
+        px = bary[(kk + 1) % 3] * Lh + bary[(kk + 2) % 3] * he_ox[h]
+        py = bary[(kk + 2) % 3] * he_oy[h]
+        u = he_tail[h]
+        vstamp[u] = stamp
+        vdone[u] = 0
+        _record_arrival(u, np.sqrt(px * px + py * py), 1, h, px, py, dist, arr_role, arr_h, arr_x, arr_y)
+        touched[nt] = u
+        nt += 1
+        t = he_twin[h]
+        if t >= 0:
+            nc = _push_child(c_t, c_sx, c_sy, c_lo, c_hi, c_sg, nc, t, he_tox[h] + he_tsx[h] * px, -py, 0.0, Lh,
+                             0.0)
+    for kk in range(3):
+        u = he_tail[3 * f + kk]
+        if (emitter[u] or dist[u] == 0.0) and dist[u] <= cut:
+            nev = _bq_push(bhead, ek, ei, en, nev, dist[u], -u - 1, inv_delta, 0, nb)
+            qn += 1
+    return nt, nev, qn, nc
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# driver
+# ---------------------------------------------------------------------------------------------------------------
 
 @njit(cache=True, nogil=True)
 def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, he_head, he_opp, he_twin,
                   he_tox, he_tsx, he_len, he_ox, he_oy, v_ptr, v_he, emitter, inv_delta, nb,
                   fan_start, fan_ok, he_corner, v_theta):
-    """Window propagation for a block of sources.  Returns (counts (k,), vertex (nnz,) int32, distance (nnz,))."""
+    """Window propagation for a block of k sources (``src_vertex`` (k,) vertex or -1, else face ``src_face`` (k,)
+    at barycentric ``src_bary`` (k, 3)), each up to its ``cutoff`` (k,) mm.
+
+    Returns (counts (k,) int64, vertex (nnz,) int32, distance (nnz,) float64 mm), rows in source order.
+    """
     k = src_vertex.shape[0]
     m3 = he_tail.shape[0]
     dist = np.empty(n_vertices)
     vstamp = np.zeros(n_vertices, np.int32)
     vdone = np.zeros(n_vertices, np.int32)
     touched = np.empty(n_vertices, np.int64)
-    arr_role = np.zeros(n_vertices, np.int8)   # how the best path reached the vertex (see _arrival_angle)
+    arr_role = np.zeros(n_vertices, np.int8)
     arr_h = np.zeros(n_vertices, np.int64)
     arr_x = np.zeros(n_vertices)
     arr_y = np.zeros(n_vertices)
@@ -217,17 +348,15 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
     p_hi = np.empty(pcap)
     p_sg = np.empty(pcap)
     bhead = np.full(nb, -1, np.int64)
-    ecap = 4096
-    ek = np.empty(ecap)
-    ei = np.empty(ecap, np.int64)
-    en = np.empty(ecap, np.int64)
-    MAXC = 64
-    c_t = np.empty(MAXC, np.int64)
-    c_sx = np.empty(MAXC)
-    c_sy = np.empty(MAXC)
-    c_lo = np.empty(MAXC)
-    c_hi = np.empty(MAXC)
-    c_sg = np.empty(MAXC)
+    ek = np.empty(4096)
+    ei = np.empty(4096, np.int64)
+    en = np.empty(4096, np.int64)
+    c_t = np.empty(_MAX_CHILDREN, np.int64)
+    c_sx = np.empty(_MAX_CHILDREN)
+    c_sy = np.empty(_MAX_CHILDREN)
+    c_lo = np.empty(_MAX_CHILDREN)
+    c_hi = np.empty(_MAX_CHILDREN)
+    c_sg = np.empty(_MAX_CHILDREN)
     counts = np.zeros(k, np.int64)
     out_v = np.empty(max(1024, 64 * k), np.int32)
     out_d = np.empty(out_v.shape[0])
@@ -235,61 +364,22 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
     for i in range(k):
         stamp = i + 1
         cut = cutoff[i]
-        nt = 0
-        nev = 0
-        qn = 0
         cur = 0
         bhead[:] = -1
         npool = 0
         nc = 0
-        sv = src_vertex[i]
-        if sv >= 0:
-            vstamp[sv] = stamp
-            dist[sv] = 0.0
-            vdone[sv] = 0
-            arr_role[sv] = -1
-            touched[nt] = sv
-            nt += 1
-            nev = _bq_push(bhead, ek, ei, en, nev, 0.0, -sv - 1, inv_delta, cur, nb)
-            qn += 1
+        if src_vertex[i] >= 0:
+            nt, nev, qn = _seed_vertex_source(src_vertex[i], stamp, vstamp, dist, vdone, touched, arr_role, bhead,
+                                              ek, ei, en, inv_delta, nb)
         else:
-            f = src_face[i]
-            for kk in range(3):
-                h = 3 * f + kk
-                Lh = he_len[h]
-                px = src_bary[i, (kk + 1) % 3] * Lh + src_bary[i, (kk + 2) % 3] * he_ox[h]
-                py = src_bary[i, (kk + 2) % 3] * he_oy[h]
-                u = he_tail[h]
-                vstamp[u] = stamp
-                dist[u] = np.sqrt(px * px + py * py)
-                vdone[u] = 0
-                arr_role[u] = 1
-                arr_h[u] = h
-                arr_x[u] = px
-                arr_y[u] = py
-                touched[nt] = u
-                nt += 1
-                t = he_twin[h]
-                if t >= 0:
-                    c_t[nc] = t
-                    c_sx[nc] = he_tox[h] + he_tsx[h] * px
-                    c_sy[nc] = -py
-                    c_lo[nc] = 0.0
-                    c_hi[nc] = Lh
-                    c_sg[nc] = 0.0
-                    nc += 1
-            for kk in range(3):
-                u = he_tail[3 * f + kk]
-                if (emitter[u] or dist[u] == 0.0) and dist[u] <= cut:
-                    nev = _bq_push(bhead, ek, ei, en, nev, dist[u], -u - 1, inv_delta, cur, nb)
-                    qn += 1
+            nt, nev, qn, nc = _seed_face_source(src_face[i], src_bary[i], stamp, cut, he_tail, he_twin, he_tox,
+                                                he_tsx, he_len, he_ox, he_oy, vstamp, dist, vdone, touched,
+                                                arr_role, arr_h, arr_x, arr_y, emitter,
+                                                (c_t, c_sx, c_sy, c_lo, c_hi, c_sg), bhead, ek, ei, en, inv_delta,
+                                                nb)
         while True:
-            # ---- insert pending children (windows) after pruning -------------------------------------
-            if nev + 4 * nc + 8 >= ecap:
-                ecap = 2 * (nev + 4 * nc + 8)
-                ek = _grow_f(ek, ecap)
-                ei = _grow_f(ei, ecap)
-                en = _grow_f(en, ecap)
+            # ---- pending windows: prune, offer paths to the three corners of the face, queue -----------------
+            ek, ei, en = _reserve_events(ek, ei, en, nev + 4 * nc + 8)   # a window and up to three vertices each
             if npool + nc >= pcap:
                 pcap = 2 * (npool + nc)
                 p_h = _grow_f(p_h, pcap)
@@ -302,29 +392,13 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                 t = c_t[c]
                 sx = c_sx[c]
                 sy = c_sy[c]
-                lo = c_lo[c]
-                hi = c_hi[c]
                 sg = c_sg[c]
                 Lt = he_len[t]
                 A = he_tail[t]
                 B = he_head[t]
                 O = he_opp[t]
-                # trim where the path through A (x < xA) or B is shorter
-                if vstamp[A] == stamp:
-                    dA = dist[A] - sg
-                    den = 2.0 * (sx + dA)
-                    if den > 0.0:
-                        xA = (sx * sx + sy * sy - dA * dA) / den
-                        if xA + dA >= 0.0 and xA > lo:
-                            lo = xA
-                if vstamp[B] == stamp:
-                    dB = dist[B] - sg
-                    sxm = Lt - sx
-                    den = 2.0 * (sxm + dB)
-                    if den > 0.0:
-                        xB = (sxm * sxm + sy * sy - dB * dB) / den
-                        if xB + dB >= 0.0 and Lt - xB < hi:
-                            hi = Lt - xB
+                lo, hi = _trim_by_end_vertices(sx, sy, c_lo[c], c_hi[c], sg, Lt, vstamp[A] == stamp, dist[A],
+                                               vstamp[B] == stamp, dist[B])
                 if hi - lo <= 1e-12 * Lt:
                     continue
                 key = _window_min(sx, sy, lo, hi, sg)
@@ -332,246 +406,119 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                     continue
                 vx = he_ox[t]
                 vy = he_oy[t]
-                if vstamp[O] == stamp:
-                    dO = dist[O]
-                    if (dO + np.sqrt((vx - lo) ** 2 + vy * vy) < sg + np.sqrt((lo - sx) ** 2 + sy * sy) and
-                            dO + np.sqrt((vx - hi) ** 2 + vy * vy) < sg + np.sqrt((hi - sx) ** 2 + sy * sy)):
-                        continue
-                # distances to the window's end vertices (when lit) and to the opposite vertex
+                if vstamp[O] == stamp and _beaten_through_opposite(sx, sy, lo, hi, sg, vx, vy, dist[O]):
+                    continue
                 for e in range(3):
-                    ax_ = sx
-                    ay_ = sy
-                    if e == 0:
-                        if lo > 1e-12 * Lt:
-                            continue
-                        u = A
-                        dd = sg + np.sqrt(sx * sx + sy * sy)
-                    elif e == 1:
-                        if hi < Lt * (1.0 - 1e-12):
-                            continue
-                        u = B
-                        dd = sg + np.sqrt((Lt - sx) ** 2 + sy * sy)
-                    else:
-                        u = O
-                        xc = sx + (vx - sx) * (-sy) / (vy - sy)
-                        if xc < lo:    # bent path through the interval's end point (a valid upper bound)
-                            dd = sg + np.sqrt((lo - sx) ** 2 + sy * sy) + np.sqrt((vx - lo) ** 2 + vy * vy)
-                            ax_ = lo
-                            ay_ = 0.0
-                        elif xc > hi:
-                            dd = sg + np.sqrt((hi - sx) ** 2 + sy * sy) + np.sqrt((vx - hi) ** 2 + vy * vy)
-                            ax_ = hi
-                            ay_ = 0.0
-                        else:
-                            dd = sg + np.sqrt((vx - sx) ** 2 + (vy - sy) ** 2)
+                    lit, dd, ax, ay = _path_to_window_vertex(e, sx, sy, lo, hi, sg, Lt, vx, vy)
+                    if not lit:
+                        continue
+                    u = A if e == 0 else (B if e == 1 else O)
                     if vstamp[u] != stamp:
-                        vstamp[u] = stamp
-                        dist[u] = np.inf
-                        vdone[u] = 0
-                        touched[nt] = u
-                        nt += 1
+                        nt = _first_visit(u, stamp, vstamp, dist, vdone, touched, nt)
                     if dd < dist[u] * _IMPROVE:
-                        dist[u] = dd
-                        arr_role[u] = (e + 1) % 3   # e: 0 = tail (role 1), 1 = head (role 2), 2 = opposite (0)
-                        arr_h[u] = t
-                        arr_x[u] = ax_
-                        arr_y[u] = ay_
+                        # arrival role: tail 1, head 2, opposite 0
+                        _record_arrival(u, dd, (e + 1) % 3, t, ax, ay, dist, arr_role, arr_h, arr_x, arr_y)
                         if emitter[u] and dd <= cut:
                             vdone[u] = 0
                             nev = _bq_push(bhead, ek, ei, en, nev, dd, -u - 1, inv_delta, cur, nb)
                             qn += 1
-                p_h[npool] = t
-                p_sx[npool] = sx
-                p_sy[npool] = sy
-                p_lo[npool] = lo
-                p_hi[npool] = hi
-                p_sg[npool] = sg
-                nev = _bq_push(bhead, ek, ei, en, nev, key, npool, inv_delta, cur, nb)
+                nev = _queue_window(p_h, p_sx, p_sy, p_lo, p_hi, p_sg, npool, t, sx, sy, lo, hi, sg, key, bhead,
+                                    ek, ei, en, nev, inv_delta, cur, nb)
                 qn += 1
                 npool += 1
             nc = 0
-            # ---- next event ------------------------------------------------------------------------
+            # ---- next event ------------------------------------------------------------------------------
             if qn == 0:
                 break
             key, item, cur = _bq_pop(bhead, ek, ei, en, cur, nb)
             qn -= 1
             if key > cut:
                 continue
-            if item < 0:  # vertex event: emit a pseudo-source into every face around the vertex
-                v = -item - 1
-                if vdone[v] == stamp or key > dist[v]:
-                    continue
-                vdone[v] = stamp
-                # MMP: a shortest path through a saddle turns by >= pi on both sides, so the pseudo-source
-                # only lights the sector [alpha + pi, alpha + theta - pi] opposite the arrival direction alpha
-                sector = fan_ok[v] and arr_role[v] >= 0
-                if sector:
-                    theta = v_theta[v]
-                    width = theta - 2.0 * np.pi
-                    alpha = _arrival_angle(arr_role[v], arr_h[v], arr_x[v], arr_y[v], he_len, he_ox, he_oy,
-                                           fan_start, he_corner)
-                for j in range(v_ptr[v], v_ptr[v + 1]):
-                    h = v_he[j]
-                    vx = he_ox[h]
-                    vy = he_oy[h]
-                    Lh = he_len[h]
-                    for e in range(2):  # the face's other corners directly (needed at open boundaries)
-                        if e == 0:
-                            u = he_tail[h]
-                            dd = key + np.sqrt(vx * vx + vy * vy)
-                        else:
-                            u = he_head[h]
-                            dd = key + np.sqrt((Lh - vx) ** 2 + vy * vy)
-                        if vstamp[u] != stamp:
-                            vstamp[u] = stamp
-                            dist[u] = np.inf
-                            vdone[u] = 0
-                            touched[nt] = u
-                            nt += 1
-                        if dd < dist[u] * _IMPROVE:
-                            dist[u] = dd
-                            arr_role[u] = e + 1
-                            arr_h[u] = h
-                            arr_x[u] = vx
-                            arr_y[u] = vy
-                            if emitter[u] and dd <= cut:
-                                vdone[u] = 0
-                                if nev + 8 >= ecap:
-                                    ecap = 2 * (nev + 8)
-                                    ek = _grow_f(ek, ecap)
-                                    ei = _grow_f(ei, ecap)
-                                    en = _grow_f(en, ecap)
-                                nev = _bq_push(bhead, ek, ei, en, nev, dd, -u - 1, inv_delta, cur, nb)
-                                qn += 1
-                    t = he_twin[h]
-                    if t < 0 or nc >= MAXC:
+            if item >= 0:
+                # ---- window: light the face behind its half-edge, continue across the two other edges ----------
+                h = p_h[item]
+                sx = p_sx[item]
+                sy = p_sy[item]
+                b0 = p_lo[item]
+                b1 = p_hi[item]
+                sg = p_sg[item]
+                vx = he_ox[h]
+                vy = he_oy[h]
+                # one angle, one split: rays crossing a shorter ray to the opposite vertex are useless
+                l0 = b0
+                l1 = b1
+                r0 = b0
+                r1 = b1
+                xc = sx + (vx - sx) * (-sy) / (vy - sy)
+                if b0 <= xc <= b1:
+                    dO = sg + np.sqrt((vx - sx) ** 2 + (vy - sy) ** 2)
+                    if astamp[h] != stamp or dO < abest[h]:
+                        astamp[h] = stamp
+                        abest[h] = dO
+                        abx[h] = xc
+                    elif abx[h] < xc:
+                        l1 = min(b1, abx[h])
+                    else:
+                        r0 = max(b0, abx[h])
+                for e in range(2):
+                    he, px, py, qx, qy = _exit_edge(e, h, he_len[h], vx, vy)
+                    c0 = r0 if e == 0 else l0
+                    c1 = r1 if e == 0 else l1
+                    t = he_twin[he]
+                    if t < 0 or c1 <= c0:
                         continue
-                    x0 = 0.0
-                    x1 = Lh
-                    if sector:
-                        # the sector relative to this corner, which spans [0, corner] from direction v -> tail
-                        cor = he_corner[h]
-                        a0 = (alpha + np.pi - fan_start[h]) % theta
-                        b0 = -1.0
-                        b1 = -2.0
-                        for wrap in range(2):
-                            lo_a = max(a0 - wrap * theta, 0.0) - 1e-9
-                            hi_a = min(a0 - wrap * theta + width, cor) + 1e-9
-                            if hi_a >= lo_a:
-                                if b1 < b0:
-                                    b0 = lo_a
-                                    b1 = hi_a
-                                else:
-                                    b0 = min(b0, lo_a)
-                                    b1 = max(b1, hi_a)
-                        if b1 < b0:
-                            continue
-                        # rays from v at those angles (counter-clockwise from v -> tail) meet the edge y = 0
-                        ux = -vx
-                        uy = -vy
-                        nu = np.sqrt(ux * ux + uy * uy)
-                        ux /= nu
-                        uy /= nu
-                        for e in range(2):
-                            ang = max(b0, 0.0) if e == 0 else min(b1, cor)
-                            ca = np.cos(ang)
-                            sa = np.sin(ang)
-                            rx = ux * ca - uy * sa
-                            ry = ux * sa + uy * ca
-                            xe = vx + rx * (-vy) / ry if ry < -1e-15 else (0.0 if e == 0 else Lh)
-                            if e == 0:
-                                x0 = min(max(xe, 0.0), Lh)
-                            else:
-                                x1 = min(max(xe, 0.0), Lh)
-                        if x1 < x0:
-                            x0, x1 = x1, x0
-                    # interval [x0, x1] of frame(h) -> frame(t)
-                    q0 = he_tox[h] + he_tsx[h] * x0
-                    q1 = he_tox[h] + he_tsx[h] * x1
-                    c_t[nc] = t
-                    c_sx[nc] = he_tox[h] + he_tsx[h] * vx
-                    c_sy[nc] = -vy
-                    c_lo[nc] = min(q0, q1)
-                    c_hi[nc] = max(q0, q1)
-                    c_sg[nc] = key
-                    nc += 1
+                    lit, s1x, s1y, lo, hi = _unfold_across_edge(sx, sy, c0, c1, px, py, qx, qy, he_len[he],
+                                                                he_tox[he], he_tsx[he])
+                    if lit:
+                        nc = _push_child(c_t, c_sx, c_sy, c_lo, c_hi, c_sg, nc, t, s1x, s1y, lo, hi, sg)
                 continue
-            w = item
-            h = p_h[w]
-            sx = p_sx[w]
-            sy = p_sy[w]
-            b0 = p_lo[w]
-            b1 = p_hi[w]
-            sg = p_sg[w]
-            Lh = he_len[h]
-            base = 3 * (h // 3)
-            kk = h - base
-            vx = he_ox[h]
-            vy = he_oy[h]
-            # one angle, one split: rays crossing a shorter ray to the opposite vertex are useless
-            l0 = b0
-            l1 = b1
-            r0 = b0
-            r1 = b1
-            xc = sx + (vx - sx) * (-sy) / (vy - sy)
-            if b0 <= xc <= b1:
-                dO = sg + np.sqrt((vx - sx) ** 2 + (vy - sy) ** 2)
-                if astamp[h] != stamp or dO < abest[h]:
-                    astamp[h] = stamp
-                    abest[h] = dO
-                    abx[h] = xc
-                elif abx[h] < xc:
-                    l1 = min(b1, abx[h])
-                else:
-                    r0 = max(b0, abx[h])
-            for e in range(2):
-                if e == 0:  # exit edge head -> opposite, fed by rays right of the opposite vertex
-                    he = base + (kk + 1) % 3
-                    px = Lh
-                    py = 0.0
-                    qx = vx
-                    qy = vy
-                    c0 = r0
-                    c1 = r1
-                else:       # exit edge opposite -> tail
-                    he = base + (kk + 2) % 3
-                    px = vx
-                    py = vy
-                    qx = 0.0
-                    qy = 0.0
-                    c0 = l0
-                    c1 = l1
-                t = he_twin[he]
-                if t < 0 or c1 <= c0:
+            # ---- vertex: a pseudo-source lighting the faces around it -------------------------------------------
+            v = -item - 1
+            if vdone[v] == stamp or key > dist[v]:
+                continue
+            vdone[v] = stamp
+            ek, ei, en = _reserve_events(ek, ei, en, nev + 2 * (v_ptr[v + 1] - v_ptr[v]) + 8)   # two per face
+            # MMP: a shortest path through a saddle turns by >= pi on both sides, so the pseudo-source only lights
+            # the sector [alpha + pi, alpha + theta - pi] opposite the arrival direction alpha
+            sector = fan_ok[v] and arr_role[v] >= 0
+            alpha = 0.0
+            if sector:
+                alpha = _arrival_angle(arr_role[v], arr_h[v], arr_x[v], arr_y[v], he_len, he_ox, he_oy,
+                                       fan_start, he_corner)
+            for j in range(v_ptr[v], v_ptr[v + 1]):
+                h = v_he[j]
+                vx = he_ox[h]
+                vy = he_oy[h]
+                Lh = he_len[h]
+                for e in range(2):  # the face's other corners directly (needed at open boundaries)
+                    if e == 0:
+                        u = he_tail[h]
+                        dd = key + np.sqrt(vx * vx + vy * vy)
+                    else:
+                        u = he_head[h]
+                        dd = key + np.sqrt((Lh - vx) ** 2 + vy * vy)
+                    if vstamp[u] != stamp:
+                        nt = _first_visit(u, stamp, vstamp, dist, vdone, touched, nt)
+                    if dd < dist[u] * _IMPROVE:
+                        _record_arrival(u, dd, e + 1, h, vx, vy, dist, arr_role, arr_h, arr_x, arr_y)
+                        if emitter[u] and dd <= cut:
+                            vdone[u] = 0
+                            nev = _bq_push(bhead, ek, ei, en, nev, dd, -u - 1, inv_delta, cur, nb)
+                            qn += 1
+                t = he_twin[h]
+                if t < 0 or nc >= _MAX_CHILDREN:
                     continue
-                Le = he_len[he]
-                ux = (qx - px) / Le
-                uy = (qy - py) / Le
-                tox = he_tox[he]
-                tsx = he_tsx[he]
-                # frame(h) -> frame(he): ((P - p).u, (P - p).n) with n = (-uy, ux); then -> frame(t)
-                s1x = tox + tsx * ((sx - px) * ux + (sy - py) * uy)
-                s1y = -((sx - px) * (-uy) + (sy - py) * ux)
-                if s1y >= 0.0:
-                    continue
-                q0x = tox + tsx * ((c0 - px) * ux - py * uy)
-                q0y = -((c0 - px) * (-uy) - py * ux)
-                q1x = tox + tsx * ((c1 - px) * ux - py * uy)
-                q1y = -((c1 - px) * (-uy) - py * ux)
-                lo, hi = _cone_on_line(s1x, s1y, q0x, q0y, q1x, q1y)
-                if lo < 0.0:
-                    lo = 0.0
-                if hi > Le:
-                    hi = Le
-                if hi - lo <= 1e-12 * Le:
-                    continue
-                c_t[nc] = t
-                c_sx[nc] = s1x
-                c_sy[nc] = s1y
-                c_lo[nc] = lo
-                c_hi[nc] = hi
-                c_sg[nc] = sg
-                nc += 1
+                x0 = 0.0
+                x1 = Lh
+                if sector:
+                    lit, x0, x1 = _sector_on_edge(alpha, v_theta[v], fan_start[h], he_corner[h], vx, vy, Lh)
+                    if not lit:
+                        continue
+                # interval [x0, x1] of frame(h) -> frame(t)
+                q0 = he_tox[h] + he_tsx[h] * x0
+                q1 = he_tox[h] + he_tsx[h] * x1
+                nc = _push_child(c_t, c_sx, c_sy, c_lo, c_hi, c_sg, nc, t, he_tox[h] + he_tsx[h] * vx, -vy,
+                                 min(q0, q1), max(q0, q1), key)
         before = nout
         out_v, out_d, nout = _append_results(out_v, out_d, nout, touched, nt, dist, cut)
         counts[i] = nout - before

@@ -53,7 +53,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods, Neighbourhoods, _default_threads, assemble_neighbourhoods
+from meshshade.geometry.geodesics.neighbourhoods import (GeodesicNeighbourhoods, Neighbourhoods, _default_threads,
+                                                           assemble_neighbourhoods)
+from meshshade.geometry.mesh import face_normals
 
 __all__ = ["FastGeodesicNeighbourhoods", "ACCURACY"]
 
@@ -286,9 +288,8 @@ class FastGeodesicNeighbourhoods:
         self._X = np.ascontiguousarray(self.vertices[self._vperm])
         self._N = np.ascontiguousarray(self.vertex_normals[self._vperm])
         self._e = (t["e_ptr"], t["e_nbr"], t["e_len"])
-        self._area_per_vertex = 0.5 * float(np.linalg.norm(np.cross(
-            self.vertices[self.faces[:, 1]] - self.vertices[self.faces[:, 0]],
-            self.vertices[self.faces[:, 2]] - self.vertices[self.faces[:, 0]]), axis=1).sum()) / len(self.vertices)
+        self._area_per_vertex = 0.5 * float(np.linalg.norm(face_normals(self.vertices, self.faces, unit=False),
+                                                           axis=1).sum()) / len(self.vertices)
         self._cap = None
         self.stats: dict = {}
 

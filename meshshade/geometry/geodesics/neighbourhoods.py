@@ -41,15 +41,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshshade.geometry.geodesics import _window_kernels as _k
 from meshshade.geometry.geodesics import _graph_kernels as _g
+from meshshade.geometry.geodesics import _window_kernels as _k
+from meshshade.geometry.geodesics._saddle_kernels import _build_fans
+from meshshade.geometry.mesh import face_geometry, face_normals
+from meshshade.geometry.topology import vertex_adjacency
 
 __all__ = ["GeodesicNeighbourhoods", "Neighbourhoods", "geodesic_neighbourhoods", "geodesic_distances_from",
            "tangent_azimuth", "METHODS"]
 
 METHODS = ("window", "fmm", "dijkstra")
-#: a face is degenerate (excluded from propagation) when |cross(e1, e2)| <= this * (longest edge)^2
-_DEGENERATE_REL_TOL = 1e-12
 #: barycentric weights are kept at least this far inside their face (a source on an edge lights both faces)
 _BARY_FLOOR = 1e-9
 
@@ -138,10 +139,7 @@ def _build_topology(V: np.ndarray, F: np.ndarray) -> dict:
     e_ab = V[head] - V[tail]
     e_ao = V[opp] - V[tail]
     L = np.linalg.norm(e_ab, axis=1)
-    cross = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    longest = L.reshape(m, 3).max(axis=1)
-    good_face = ((F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])
-                 & (cross > _DEGENERATE_REL_TOL * longest ** 2))
+    good_face = ~face_geometry(V, F)[1]  # degenerate faces (mesh.DEGENERATE_REL_TOL) are left out
     good = np.repeat(good_face, 3)
     with np.errstate(invalid="ignore", divide="ignore"):
         ox = np.where(good, np.einsum("ij,ij->i", e_ao, e_ab) / np.where(good, L, 1.0), 0.0)
@@ -176,19 +174,16 @@ def _build_topology(V: np.ndarray, F: np.ndarray) -> dict:
     # one-ring: half-edges opposite each vertex
     v_he = idx[np.argsort(opp[idx], kind="stable")]
     v_ptr = np.r_[0, np.cumsum(np.bincount(opp[idx], minlength=n))].astype(np.int64)
-    # undirected edge CSR (both directions)
-    uk = np.unique(key[idx])
-    ea, eb = uk // n, uk % n
-    src = np.r_[ea, eb]
-    dst = np.r_[eb, ea]
-    o = np.argsort(src, kind="stable")
-    src, dst = src[o], dst[o]
-    e_ptr = np.r_[0, np.cumsum(np.bincount(src, minlength=n))].astype(np.int64)
+    # undirected edge CSR (both directions) of the good faces. Each row lists the higher-index neighbours first
+    # (both halves ascending): the graph searches break ties in this order, so it fixes the bits of their results
+    e_ptr, dst = vertex_adjacency(n, F[good_face])
+    src = np.repeat(np.arange(n), np.diff(e_ptr))
+    dst = dst[np.argsort(2 * src + (dst < src), kind="stable")]
     e_len = np.linalg.norm(V[dst] - V[src], axis=1)
     out = dict(he_tail=tail, he_head=head, he_opp=opp, he_twin=twin, he_tox=tox, he_tsx=tsx, he_len=L,
                he_ox=ox, he_oy=oy, v_ptr=v_ptr, v_he=v_he.astype(np.int64), angle_excess=angle_sum - 2.0 * np.pi, open_vertex=open_vertex,
                he_corner=np.where(good, angle, 0.0), v_theta=angle_sum,
-               e_ptr=e_ptr, e_nbr=dst.astype(np.int64), e_len=e_len, good_face=good_face,
+               e_ptr=e_ptr, e_nbr=dst, e_len=e_len, good_face=good_face,
                n_boundary_edges=int(np.count_nonzero(sizes == 1)),
                n_nonmanifold_edges=int(np.count_nonzero(sizes > 2)),
                mean_edge=float(e_len.mean()) if e_len.size else 0.0,
@@ -278,11 +273,11 @@ class GeodesicNeighbourhoods:
         topo.update(vperm=_readonly(vperm), vinv=_readonly(vinv), finv=_readonly(finv))
         # pseudo-sources: open/non-manifold vertices and saddles (cone angle above 2 pi)
         topo["emitter"] = _readonly(topo["open_vertex"] | (topo["angle_excess"] > 2.0 * np.pi * 1e-9))
-        fan_start, fan_ok = _k._build_fans(V.shape[0], topo["he_twin"], topo["he_tsx"], topo["he_corner"],
-                                           topo["v_ptr"], topo["v_he"])
+        fan_start, fan_ok = _build_fans(V.shape[0], topo["he_twin"], topo["he_tsx"], topo["he_corner"],
+                                        topo["v_ptr"], topo["v_he"])
         topo.update(fan_start=_readonly(fan_start), fan_ok=_readonly(fan_ok))
         if self.vertex_normals is None:
-            fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+            fn = face_normals(V, F, unit=False)  # area-weighted
             N = np.zeros_like(V)
             for c in range(3):
                 N += np.stack([np.bincount(F[:, c], weights=fn[:, j], minlength=V.shape[0]) for j in range(3)], 1)
@@ -356,7 +351,7 @@ class GeodesicNeighbourhoods:
                 raise ValueError("source_points disagree with source_vertex / source_faces + source_bary "
                                  "(face indices must refer to the solver's faces)")
         if source_normals is None:
-            fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])[np.maximum(sf, 0)]
+            fn = face_normals(V, F[np.maximum(sf, 0)], unit=False)
             nrm = np.where(on_face[:, None], fn, self.vertex_normals[np.maximum(sv, 0)])
         else:
             nrm = np.asarray(source_normals, dtype=np.float64).reshape(k, 3)

@@ -1,0 +1,46 @@
+"""``meshshade bake``: per-vertex radiance of a translucent mesh, written as a coloured PLY (thin layer over
+:func:`meshshade.transport.bake.bake` and :func:`meshshade.output.bake_file.write_bake`)."""
+from __future__ import annotations
+
+import argparse
+
+from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args,
+                                   add_mesh_args, add_model_arg, lights_from_args, mesh_and_material)
+from meshshade.io import check_output_path
+from meshshade.output.bake_file import write_bake
+from meshshade.transport import bake, describe_result
+
+HELP = "per-vertex radiance of a translucent mesh, written as a coloured PLY"
+
+
+def add_bake_args(p: argparse.ArgumentParser) -> None:
+    add_mesh_args(p)
+    add_material_args(p)
+    add_light_arg(p)
+    add_model_arg(p)
+    p.add_argument("--cutoff-tol", type=float, default=1e-4,
+                   help="neighbourhood radius: reflectance beyond it below this fraction (default 1e-4)")
+    p.add_argument("--curvature-radius", type=float, default=None, metavar="MM",
+                   help="neighbourhood for the curvature fit [mm] (default 2 mean edge lengths)")
+    add_geodesic_arg(p)
+    add_far_field_arg(p)
+    p.add_argument("--out", required=True, metavar="OUT.ply",
+                   help="PLY with radiance_r/g/b (W/mm^2) and tone-mapped red/green/blue vertex colours")
+    p.add_argument("--npz", metavar="OUT.npz", help="also save radiance, k1, k2, d1, d2, beam distance")
+
+
+def run_bake(args) -> int:
+    check_output_path(args.out, [args.mesh])
+    if args.npz:
+        check_output_path(args.npz, [args.mesh, args.out])
+    mesh, material = mesh_and_material(args)
+    result = bake(mesh, material, lights_from_args(args, mesh), model=args.model, cutoff_tol=args.cutoff_tol,
+                  curvature_radius_mm=args.curvature_radius, progress=not args.quiet, geodesic=args.geodesic,
+                  far_field=args.far_field)
+    write_bake(result, mesh, args.out, npz=args.npz)
+    if not args.quiet:
+        print(describe_result(result))
+        if result.plan is not None:
+            print(result.plan.describe())
+        print(f"wrote {args.out}" + (f" and {args.npz}" if args.npz else ""))
+    return 0

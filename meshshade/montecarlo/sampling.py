@@ -1,0 +1,54 @@
+"""Sampling of the Monte Carlo random walk: Russian roulette constants, Henyey-Greenstein scattering, refraction.
+
+Pure array functions on float64 unit directions (n, 3); random numbers come from a ``numpy.random.Generator``.
+The pooled engine's numba kernels (:mod:`meshshade.montecarlo.kernels`) implement the same physics per photon.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["ROULETTE_THRESHOLD", "ROULETTE_BOOST", "sample_hg_cos", "scatter_directions", "refract_in"]
+
+#: Russian roulette starts below this fraction of the photon's initial weight
+ROULETTE_THRESHOLD = 1e-4
+#: a photon survives the roulette with probability 1/ROULETTE_BOOST, its weight multiplied by ROULETTE_BOOST
+ROULETTE_BOOST = 10.0
+
+
+def _orthonormal_basis(d):
+    """(t, b) unit vectors orthogonal to unit ``d`` (n, 3) (Duff et al. 2017, branchless)."""
+    sign = np.where(d[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + d[:, 2])
+    b = d[:, 0] * d[:, 1] * a
+    t = np.stack([1.0 + sign * d[:, 0] ** 2 * a, sign * b, -sign * d[:, 0]], axis=1)
+    s = np.stack([b, sign + d[:, 1] ** 2 * a, -d[:, 1]], axis=1)
+    return t, s
+
+
+def sample_hg_cos(g: float, u) -> np.ndarray:
+    """cos(theta) of the Henyey-Greenstein phase function with anisotropy ``g`` by inversion (u uniform in [0, 1))."""
+    u = np.asarray(u, dtype=np.float64)
+    if abs(g) < 1e-6:
+        return 1.0 - 2.0 * u
+    tmp = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
+    return np.clip((1.0 + g * g - tmp * tmp) / (2.0 * g), -1.0, 1.0)
+
+
+def scatter_directions(d, g: float, rng) -> np.ndarray:
+    """New unit directions (n, 3) after HG scattering of unit directions ``d`` (n, 3)."""
+    n = d.shape[0]
+    cos_t = sample_hg_cos(g, rng.random(n))
+    sin_t = np.sqrt(np.clip(1.0 - cos_t * cos_t, 0.0, None))
+    phi = 2.0 * np.pi * rng.random(n)
+    t, b = _orthonormal_basis(d)
+    out = (sin_t * np.cos(phi))[:, None] * t + (sin_t * np.sin(phi))[:, None] * b + cos_t[:, None] * d
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def refract_in(d, n, eta: float) -> np.ndarray:
+    """Refract unit directions ``d`` arriving from outside (index 1) through outward unit normals ``n`` into eta."""
+    cos_i = np.clip(-np.einsum("ij,ij->i", d, n), 0.0, 1.0)
+    sin2_t = (1.0 - cos_i ** 2) / eta ** 2
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, None))
+    out = d / eta + (cos_i / eta - cos_t)[:, None] * n
+    return out / np.linalg.norm(out, axis=1, keepdims=True)

@@ -1,0 +1,120 @@
+"""Monte Carlo tallies: radial exitance profiles, beam radial power, the summary (files: output/mc_file.py).
+
+Every estimate comes with its batch-means standard error (:func:`meshshade.montecarlo.simulate.batch_stats`).
+No file I/O here: :func:`meshshade.output.mc_file.write_mc` writes a run's files.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from meshshade.errors import MeshshadeError
+from meshshade.geometry.mesh import Mesh
+from meshshade.geometry.procedural import icosphere
+from meshshade.light import BeamLight
+from meshshade.materials import Material
+from meshshade.montecarlo.simulate import MCResult, batch_stats, simulate
+
+__all__ = ["radial_exitance", "mc_profile", "beam_radial_power", "summary_dict", "describe_mc", "write_mc"]
+
+
+def radial_exitance(exit_distance, weight, batch, distances_mm, *, halfwidth_mm, annulus_area, n_batches,
+                    entering_power):
+    """Exitance per unit entering power [mm^-2] in annuli [s - h, s + h] (clipped at 0) around each distance.
+
+    exit_distance, weight, batch : (k,) exit geodesic distance (mm), power (W), batch index
+    annulus_area : callable (a, b) -> area (mm^2) of the surface between geodesic distances a and b
+    Returns (value (n,), stderr (n,)).
+    """
+    s = np.asarray(distances_mm, dtype=np.float64)
+    h = np.broadcast_to(np.asarray(halfwidth_mm, dtype=np.float64), s.shape)
+    lo, hi = np.maximum(s - h, 0.0), s + h
+    per = np.zeros((n_batches, s.size))
+    for j in range(s.size):
+        sel = (exit_distance >= lo[j]) & (exit_distance < hi[j])
+        per[:, j] = np.bincount(batch[sel], weights=weight[sel], minlength=n_batches) / annulus_area(lo[j], hi[j])
+    per /= entering_power
+    return batch_stats(per)
+
+
+def mc_profile(material: Material, distances_mm, *, shape, photons: int = 200_000, seed: int = 0,
+               subdivisions: int | None = None, return_stderr: bool = False):
+    """Monte Carlo reflectance profile [mm^-2] per unit entering power, (3, n), for a unit beam at a sphere's pole.
+
+    The sphere is an icosphere of ``shape.radius_mm`` (subdivision chosen so edges are <= ~R/30, at most 6);
+    the beam enters at normal incidence at the north pole; exit points are tallied against their great-circle
+    distance from the pole in annuli of half-width max(0.1 s, 0.05/sigma_t'_min) (exact spherical annulus area).
+    """
+    if shape is None or shape.kind != "sphere":
+        raise MeshshadeError("the Monte Carlo profile is implemented for --shape sphere only "
+                             "(use `meshshade mc` on a mesh for other geometry)")
+    R = float(shape.radius_mm)
+    s = np.asarray(distances_mm, dtype=np.float64)
+    level = subdivisions if subdivisions is not None else 5 if R <= 20 else 6
+    V, F = icosphere(R, level)
+    # rotate so that no vertex sits on the pole: the beam then enters inside a face
+    ang = 0.0123
+    rot = np.array([[1, 0, 0], [0, np.cos(ang), -np.sin(ang)], [0, np.sin(ang), np.cos(ang)]])
+    mesh = Mesh.from_arrays(V @ rot.T, F)
+    beam = BeamLight((0.0, 0.0, 2.0 * R + 1.0), (0.0, 0.0, -1.0), 1.0)
+    res = simulate(mesh, material, [beam], photons=photons, seed=seed, beam_distances=False)
+    h = np.maximum(0.1 * s, 0.05 / float(np.min(material.sigma_t_prime)))
+    area = lambda a, b: 2.0 * np.pi * R * R * (np.cos(a / R) - np.cos(min(b / R, np.pi)))  # noqa: E731
+    out = np.zeros((3, s.size))
+    err = np.zeros((3, s.size))
+    for c in range(3):
+        ex = res.beam_exits[c]
+        if ex is None:
+            continue
+        p = np.einsum("ij,ijk->ik", ex["bary"], mesh.vertices[mesh.faces[ex["face"]]])
+        dist = R * np.arctan2(np.linalg.norm(p[:, :2], axis=1), p[:, 2])
+        out[c], err[c] = radial_exitance(dist, ex["weight"], ex["batch"], s, halfwidth_mm=h, annulus_area=area,
+                                         n_batches=res.n_batches, entering_power=float(res.entering_power[c]))
+    return (out, err) if return_stderr else out
+
+
+def beam_radial_power(result: MCResult, mesh, edges_mm):
+    """Exit power of the first beam's photons against geodesic distance from its entry point, per channel.
+
+    The distance of an exit point is the barycentric interpolation of ``result.beam_distance`` (exact polyhedral
+    geodesic distances of the vertices from the entry point). edges_mm : (k + 1,) increasing bin edges [mm].
+    Returns (power (3, k) W, stderr (3, k) W).
+    """
+    edges = np.asarray(edges_mm, dtype=np.float64)
+    out, err = np.zeros((3, edges.size - 1)), np.zeros((3, edges.size - 1))
+    if result.beam_distance is None:
+        raise MeshshadeError("no beam light (or beam_distances=False): no geodesic distance tally")
+    for c, ex in enumerate(result.beam_exits):
+        if ex is None:
+            continue
+        dist = np.einsum("ij,ij->i", ex["bary"], result.beam_distance[mesh.faces[ex["face"]]])
+        k = np.searchsorted(edges, dist, side="right") - 1
+        ok = (k >= 0) & (k < edges.size - 1)
+        per = np.zeros((result.n_batches, edges.size - 1))
+        np.add.at(per, (ex["batch"][ok], k[ok]), ex["weight"][ok])
+        out[c], err[c] = batch_stats(per)
+    return out, err
+
+
+# ------------------------------------------------------------------------------------------------ output
+def summary_dict(result: MCResult) -> dict:
+    """The JSON summary: totals (three values, or one for a grey material) with stderrs, photons, events, seconds."""
+    grey = result.material.is_grey
+    out = {}
+    for key, val in result.totals.items():
+        out[key] = float(val[0]) if grey else [float(x) for x in val]
+    out.update(lost=float(result.lost[0]) if grey else [float(x) for x in result.lost],
+               photons=int(result.photons), events=int(result.events),
+               boundary_events=int(result.boundary_events), boundary_tests=int(result.boundary_tests),
+               seconds=float(result.seconds), cpu_seconds=float(result.cpu_seconds),
+               events_per_second=float(result.events_per_second), n_batches=int(result.n_batches),
+               material=result.material.to_dict())
+    return out
+
+
+def describe_mc(result: MCResult) -> str:
+    """One line for the terminal: photons, events, rate and the channel-r totals with their standard errors."""
+    t = result.totals
+    f = lambda k: f"{t[k][0]:.5f}±{t[k + '_stderr'][0]:.5f}"  # noqa: E731
+    return (f"mc: {result.photons} photons, {result.events} scattering events in {result.seconds:.2f} s "
+            f"({result.events_per_second:.3g}/s); R_spec {f('specular_reflectance')}, "
+            f"R_diffuse {f('diffuse_reflectance')}, T {f('transmittance')}, A {f('absorbed')} (channel r)")

@@ -1,0 +1,179 @@
+"""The gather: M[v, c] = sum_i Phi_i R_c(x_v; x_i) over the (entry sample, vertex) pairs of each sample's neighbourhood.
+
+Each entry sample reaches the vertices within a cutoff radius chosen per channel from the dipole's closed-form
+tail (:func:`cutoff_radii`: the reflectance beyond it is below ``cutoff_tol`` of the total). Sources are
+processed in chunks so that memory stays bounded (:class:`PairStream` yields the pairs of one chunk at a time,
+zone by zone, see zones.py); the gather per chunk is vectorised (``np.bincount``), never a Python loop over
+vertices (:func:`gather`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from meshshade.kernels.dipole import dipole_cutoff_radius
+from meshshade.materials import Material
+from meshshade.transport.clusters import cluster_sources, expand_far_pairs
+from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, SourceFrames, patch_average_factor
+from meshshade.transport.zones import NEAR_MARGIN, ZONES, cluster_geometry
+
+#: pairs evaluated per chunk (memory ~ 100 bytes per pair)
+PAIRS_PER_CHUNK = 4_000_000
+
+
+def cutoff_radii(material: Material, tol: float) -> np.ndarray:
+    """(3,) mm: per channel, the radius beyond which the dipole's reflectance is below ``tol`` of its total."""
+    out = np.empty(3)
+    for c in range(3):
+        ch = material.channel(c)
+        out[c] = dipole_cutoff_radius(tol, albedo_prime=ch["albedo_prime"], eta=ch["eta"]) / ch["sigma_t_prime"]
+    return out
+
+
+def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, source_radius=None,
+           chord_cutoff_mm=None) -> tuple[np.ndarray, dict]:
+    """Accumulate M[v, c] = sum_i power_i R_c(pair) over the pair chunks yielded by ``pairs_iter``.
+
+    ``pairs_iter`` yields ``(src, vertex, s, chord, phi)`` arrays (src indexes ``power`` (k,) W and the kernel's
+    frames; s and chord in mm, phi in rad). Channel c uses only pairs with s <= cutoff_mm[c] (beyond, its
+    reflectance is negligible); ``cutoff_mm`` is (3,), or (k, 3) per source and channel. ``chord_cutoff_mm``
+    (k, 3) or None: pairs must also have chord <= it (the near zone of sources whose far field is summed by
+    clusters). ``source_radius`` (k,) mm: patch radius of each source (0 for a pencil beam), see
+    :func:`~meshshade.transport.pair_kernel.patch_average_factor`. Returns M (n_vertices, 3) W/mm^2 and counts.
+    """
+    M = np.zeros((n_vertices, 3))
+    cutoff_mm = np.asarray(cutoff_mm, dtype=np.float64)
+    n_pairs = np.zeros(3, dtype=np.int64)
+    for src, vtx, s, chord, phi in pairs_iter:
+        for c, same in kernel.channels:
+            keep = s <= (cutoff_mm[c] if cutoff_mm.ndim == 1 else cutoff_mm[src, c])
+            if chord_cutoff_mm is not None:
+                keep &= chord <= chord_cutoff_mm[src, c]
+            if not np.any(keep):
+                continue
+            R = kernel.evaluate(c, src[keep], s[keep], chord[keep], phi[keep])
+            if source_radius is not None:
+                a = source_radius[src[keep]]
+                near = np.flatnonzero(s[keep] < PATCH_AVERAGE_RADII * a)
+                if near.size:
+                    ch = kernel.material.channel(c)
+                    R[near] *= patch_average_factor(s[keep][near], a[near], albedo_prime=ch["albedo_prime"],
+                                                    eta=ch["eta"], sigma_t_prime=ch["sigma_t_prime"])
+            acc = np.bincount(vtx[keep], weights=power[src[keep]] * R, minlength=n_vertices)
+            n_pairs[c] += int(keep.sum())
+            for cc in same:
+                M[:, cc] += acc
+    return M, {"pairs_evaluated": int(n_pairs.sum()), "channels_computed": len(kernel.channels)}
+
+
+class Stopwatch:
+    """Wall time per stage: :meth:`lap` charges the time since the previous lap to a stage (seconds, summed)."""
+
+    def __init__(self):
+        self.timings: dict = {}
+        self._t0 = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        t = time.perf_counter()
+        self.timings[name] = self.timings.get(name, 0.0) + t - self._t0
+        self._t0 = t
+
+
+def chunk_size(mesh, src_cut) -> int:
+    """Sources per chunk: PAIRS_PER_CHUNK over the expected neighbours per source (the area of its gather disc,
+    ``src_cut`` (k, 3) mm, over the mean area per vertex)."""
+    per_vertex_area = mesh.total_area / max(mesh.n_vertices, 1)
+    expected = max(1.0, np.pi * float(np.mean(src_cut.max(axis=1) ** 2)) / per_vertex_area)
+    return int(max(1, min(len(src_cut), PAIRS_PER_CHUNK // expected)))
+
+
+@dataclass(eq=False)
+class PairStream:
+    """The chunked pair iteration of the bake: ``(src, vertex, s, chord, phi)`` chunks of ``chunk`` sources.
+
+    mesh : Mesh (mm); samples : EntrySamples (k); frames : SourceFrames of the samples; solvers : geodesic
+    neighbourhood solver per method ("exact", "arc"); cut, near : (3,) mm, cutoff and r_near per channel;
+    src_cut : (k, 3) mm, geodesic gather radius per source and channel. Time spent finding pairs is charged to
+    ``clock``'s "neighbourhoods", time between chunks (the gather) to "gather"; ``bar`` (tqdm or None) counts
+    sources. ``pairs_found`` and ``geodesic_pairs`` count the pairs yielded and the geodesic distances a
+    solver computed.
+    """
+
+    mesh: object
+    samples: object
+    frames: SourceFrames
+    solvers: dict
+    cut: np.ndarray
+    near: np.ndarray
+    src_cut: np.ndarray
+    chunk: int
+    clock: Stopwatch
+    bar: object = None
+    pairs_found: int = 0
+    geodesic_pairs: int = 0
+
+    def pairs(self, groups):
+        """Pairs of every ``(zone index, source indices)`` group, in order."""
+        for z, idx in groups:
+            if ZONES[z].outer_method == "exact-cluster":
+                yield from self._cluster_pairs(idx)
+            else:
+                yield from self._zone_pairs(ZONES[z], idx)
+
+    def query(self, method: str, sel, radius) -> tuple:
+        """Pairs of sources ``sel`` within geodesic ``radius`` (mm, scalar or per source) by solver ``method``."""
+        s, f = self.samples, self.frames
+        nb = self.solvers[method].query(s.positions[sel], s.face[sel], s.bary[sel], s.vertex[sel], f.normals[sel],
+                                        radius, d1=f.d1[sel], d2=f.d2[sel], k1=f.k1[sel], k2=f.k2[sel])
+        return sel[nb.source_index()], nb.vertex.astype(np.int64), nb.distance, nb.chord, nb.phi
+
+    def _emit(self, p, geodesic_pairs: int, n_sources: int):
+        self.pairs_found += p[0].size
+        self.geodesic_pairs += geodesic_pairs
+        self.clock.lap("neighbourhoods")
+        yield p
+        self.clock.lap("gather")
+        if self.bar is not None:
+            self.bar.update(n_sources)
+
+    def _zone_pairs(self, zone, idx):
+        """One method over each source's whole gather radius, or exact geodesics in the near zone and arc
+        geodesics for the rest of the neighbourhood (pairs the near query found are not repeated)."""
+        n = np.int64(self.mesh.n_vertices)
+        for a in range(0, idx.size, self.chunk):
+            sel = idx[a:a + self.chunk]
+            if zone.outer_method is None:
+                p = self.query(zone.inner_method, sel, self.src_cut[sel].max(axis=1))
+                n_geo = p[0].size
+            else:
+                pi = self.query(zone.inner_method, sel, NEAR_MARGIN * self.near.max())
+                po = self.query(zone.outer_method, sel, self.cut.max())
+                fresh = ~np.isin(po[0] * n + po[1], pi[0] * n + pi[1])
+                p = tuple(np.concatenate([x, y[fresh]]) for x, y in zip(pi, po))
+                n_geo = pi[0].size + po[0].size
+            yield from self._emit(p, n_geo, sel.size)
+
+    def _cluster_pairs(self, idx):
+        """Zone exact_near_cluster_far: exact near pairs per sample, far pairs from cluster centres."""
+        samples, mesh, cut = self.samples, self.mesh, self.cut
+        size, near_c = cluster_geometry(mesh, cut)
+        order, ptr = cluster_sources(samples.positions[idx], self.frames.normals[idx], size)
+        order = idx[order]
+        centre_rows = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
+        centre_of = order[ptr[:-1]][centre_rows]  # the centre sample of each entry of ``order``
+        n = np.int64(mesh.n_vertices)
+        a_max = float(np.max(np.linalg.norm(samples.positions[order] - samples.positions[centre_of], axis=1)))
+        c_chunk = max(1, int(self.chunk * (ptr.size - 1) / max(order.size, 1)))
+        for c0 in range(0, ptr.size - 1, c_chunk):
+            c1 = min(ptr.size - 1, c0 + c_chunk)
+            mem = order[ptr[c0]:ptr[c1]]
+            cen = order[ptr[c0:c1]]
+            pn = self.query("exact", mem, near_c)
+            pc = self.query("exact", cen, cut.max() + a_max)
+            keys = np.sort(pn[0] * n + pn[1])
+            pf = expand_far_pairs(pc, (mem, centre_of[ptr[c0]:ptr[c1]]), samples.positions, mesh.vertices,
+                                  self.frames, exclude_keys=keys, max_distance=cut.max())
+            p = tuple(np.concatenate([x, y]) for x, y in zip(pn, pf))
+            yield from self._emit(p, pn[0].size + pc[0].size, mem.size)

@@ -1,0 +1,14 @@
+"""The bake's kernel models: the one list of their names (the CLI's choices, the benchmark's models).
+
+* ``dipole``: Jensen's planar dipole of the chord distance;
+* ``curved``: the first-order k1/k2 kernel (kernels/curvature.py);
+* ``exact-sphere``: the exact sphere series with the local radius 2/(k1 + k2);
+* ``auto``: per entry sample the cheapest of the three that the scene calls for (transport/auto.py).
+"""
+from __future__ import annotations
+
+#: the kernels ``auto`` chooses between per entry sample, in the order of its plan codes (``AutoPlan.kernel``,
+#: the NPZ's ``auto_kernel``: 0 dipole, 1 curved, 2 exact-sphere)
+KERNEL_NAMES = ("dipole", "curved", "exact-sphere")
+#: every model :func:`meshshade.transport.bake.bake` accepts
+MODELS = KERNEL_NAMES + ("auto",)

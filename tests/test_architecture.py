@@ -1,0 +1,495 @@
+"""Architecture lint: the package's layering rules, checked on the AST of every module under meshshade/.
+
+Rules (the issue "One package per stage"):
+
+(a) ``meshshade/kernels/`` imports only numpy, scipy, numba, math (and the stdlib __future__, typing,
+    dataclasses, functools) and meshshade.errors / meshshade.kernels.*: kernels are pure array functions;
+(b) only ``meshshade/io.py`` (and the CLI's output-directory helper ``meshshade.cli.options.output_dir``)
+    creates, opens, writes, moves or deletes files;
+(c) only ``meshshade/raycast/`` imports embreex or loads a native library (Embree) with ctypes;
+(d) no import cycles among meshshade modules (graph of all imports, module- and function-level);
+(e) no function-level imports of meshshade modules (they hide the dependency graph).
+
+The checkers are plain functions of a root directory (the folder that holds the ``meshshade`` package); nothing
+is imported or executed. They are themselves tested on a small fake package written to tmp_path with one
+planted violation per rule.
+"""
+from __future__ import annotations
+
+import ast
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = "meshshade"
+
+KERNEL_ALLOWED_ROOTS = {"numpy", "scipy", "numba", "math", "__future__", "typing", "dataclasses", "functools"}
+#: (module, function qualname) allowed to touch files; None: the whole module
+FILE_IO_ALLOWED = {("meshshade.io", None), ("meshshade.cli.options", "output_dir")}
+#: method names that create, open, write, move or delete files on whatever object they are called
+FILE_METHODS = {"open", "write_text", "write_bytes", "mkdir", "touch", "unlink", "savefig", "tofile", "imsave"}
+#: Path.rename(target) / Path.replace(target): one positional argument (str.replace needs two)
+FILE_METHODS_ONE_ARG = {"rename", "replace"}
+FILE_FUNCTIONS = {"open", "io.open", "codecs.open", "os.open", "os.replace", "os.rename", "os.renames", "os.remove",
+                  "os.unlink", "os.makedirs", "os.mkdir", "os.rmdir", "os.removedirs", "numpy.save", "numpy.savez",
+                  "numpy.savez_compressed", "numpy.savetxt"}
+FILE_MODULES = ("shutil.", "tempfile.")
+CTYPES_LOADERS = ("ctypes.CDLL", "ctypes.PyDLL", "ctypes.WinDLL", "ctypes.OleDLL", "ctypes.LibraryLoader",
+                  "ctypes.cdll", "ctypes.pydll", "ctypes.windll", "ctypes.util.find_library")
+
+
+@dataclass(frozen=True)
+class Violation:
+    rule: str
+    path: str
+    line: int
+    message: str
+
+    def __str__(self):
+        return f"{self.path}:{self.line}: [{self.rule}] {self.message}"
+
+
+@dataclass(frozen=True)
+class Import:
+    """One imported module, absolute (``from pkg import name`` resolved to ``pkg.name`` when that is a module)."""
+    target: str
+    line: int
+    scope: str | None  # qualname of the enclosing function, None at module or class level
+
+
+@dataclass
+class Module:
+    name: str
+    path: Path
+    rel: str
+    is_package: bool
+    tree: ast.Module
+    imports: list[Import] = field(default_factory=list)
+    aliases: dict[str, str] = field(default_factory=dict)  # local name -> dotted name (all imports)
+
+
+# ------------------------------------------------------------------------------------------------------
+# collection
+# ------------------------------------------------------------------------------------------------------
+def collect_modules(root: Path, package: str = PACKAGE) -> dict[str, Module]:
+    """Every module of ``root/package`` by dotted name, parsed, with its imports resolved."""
+    root = Path(root)
+    mods = {}
+    for path in sorted((root / package).rglob("*.py")):
+        parts = path.relative_to(root).with_suffix("").parts
+        is_pkg = parts[-1] == "__init__"
+        name = ".".join(parts[:-1] if is_pkg else parts)
+        mods[name] = Module(name, path, path.relative_to(root).as_posix(), is_pkg,
+                            ast.parse(path.read_text(), filename=str(path)))
+    for mod in mods.values():
+        _ImportCollector(mod, set(mods)).visit(mod.tree)
+    return mods
+
+
+def _absolute(mod: Module, level: int, module: str | None) -> str:
+    """The absolute module of a (possibly relative) ``from`` import."""
+    if level == 0:
+        return module or ""
+    base = mod.name.split(".")
+    base = base if mod.is_package else base[:-1]
+    base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([module] if module else []))
+
+
+class _Scoped(ast.NodeVisitor):
+    """Tracks the qualname of the enclosing function (None outside functions)."""
+
+    def __init__(self):
+        self.stack: list[tuple[str, bool]] = []  # (name, is_function)
+
+    @property
+    def scope(self) -> str | None:
+        if not any(is_fn for _, is_fn in self.stack):
+            return None
+        return ".".join(name for name, _ in self.stack)
+
+    def _enter(self, node, name, is_fn):
+        self.stack.append((name, is_fn))
+        self.generic_visit(node)
+        self.stack.pop()
+
+    def visit_FunctionDef(self, node):
+        self._enter(node, node.name, True)
+
+    visit_AsyncFunctionDef = visit_FunctionDef
+
+    def visit_Lambda(self, node):
+        self._enter(node, "<lambda>", True)
+
+    def visit_ClassDef(self, node):
+        self._enter(node, node.name, False)
+
+
+class _ImportCollector(_Scoped):
+    def __init__(self, mod: Module, names: set[str]):
+        super().__init__()
+        self.mod, self.names = mod, names
+
+    def _add(self, target, line):
+        self.mod.imports.append(Import(target, line, self.scope))
+
+    def visit_Import(self, node):
+        for a in node.names:
+            self._add(a.name, node.lineno)
+            self.mod.aliases[a.asname or a.name.split(".")[0]] = a.name if a.asname else a.name.split(".")[0]
+
+    def visit_ImportFrom(self, node):
+        base = _absolute(self.mod, node.level, node.module)
+        targets = []
+        for a in node.names:
+            sub = f"{base}.{a.name}"
+            targets.append(sub if sub in self.names else base)
+            self.mod.aliases[a.asname or a.name] = sub
+        for target in dict.fromkeys(targets):  # once per statement and module
+            self._add(target, node.lineno)
+
+    def visit_Call(self, node):
+        # importlib.import_module("x") / __import__("x") with a literal name: an import like any other
+        fn = _dotted(node.func, self.mod.aliases)
+        if fn in ("importlib.import_module", "__import__") and node.args and isinstance(node.args[0], ast.Constant) \
+                and isinstance(node.args[0].value, str):
+            self._add(node.args[0].value, node.lineno)
+        self.generic_visit(node)
+
+
+def _dotted(node: ast.AST, aliases: dict[str, str]) -> str | None:
+    """``a.b.c`` of a Name/Attribute chain with its root resolved through the module's imports."""
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    if not isinstance(node, ast.Name):
+        return None
+    return ".".join([aliases.get(node.id, node.id), *reversed(parts)])
+
+
+def _in(name: str, prefix: str) -> bool:
+    return name == prefix or name.startswith(prefix + ".")
+
+
+# ------------------------------------------------------------------------------------------------------
+# rules
+# ------------------------------------------------------------------------------------------------------
+def check_kernel_imports(root: Path, package: str = PACKAGE) -> list[Violation]:
+    """(a) kernels import only numerics, meshshade.errors and other kernels."""
+    out = []
+    for mod in collect_modules(root, package).values():
+        if not _in(mod.name, f"{package}.kernels"):
+            continue
+        for imp in mod.imports:
+            ok = (imp.target.split(".")[0] in KERNEL_ALLOWED_ROOTS or _in(imp.target, f"{package}.errors")
+                  or _in(imp.target, f"{package}.kernels"))
+            if not ok:
+                out.append(Violation("kernels", mod.rel, imp.line, f"kernel module imports {imp.target}"))
+    return out
+
+
+class _CallCollector(_Scoped):
+    def __init__(self, mod: Module):
+        super().__init__()
+        self.mod = mod
+        self.calls: list[tuple[ast.Call, str | None]] = []
+        # names bound to an OpenImageIO ImageBuf anywhere in the module: their .write() writes a file
+        self.imagebufs = {t.id for n in ast.walk(mod.tree) if isinstance(n, ast.Assign)
+                          and isinstance(n.value, ast.Call) and (_dotted(n.value.func, mod.aliases) or "")
+                          .endswith("ImageBuf") for t in n.targets if isinstance(t, ast.Name)}
+
+    def visit_Call(self, node):
+        self.calls.append((node, self.scope))
+        self.generic_visit(node)
+
+
+def _file_call(call: ast.Call, aliases: dict[str, str], imagebufs: set[str]) -> str | None:
+    """What a call does to the file system, or None."""
+    fn = _dotted(call.func, aliases)
+    if fn is not None:
+        if fn in FILE_FUNCTIONS or fn.startswith(FILE_MODULES) or "ImageOutput" in fn:
+            return f"calls {fn}"
+    if isinstance(call.func, ast.Attribute):
+        attr, recv = call.func.attr, call.func.value
+        if attr in FILE_METHODS:
+            return f"calls .{attr}()"
+        if attr in FILE_METHODS_ONE_ARG and len(call.args) == 1 and not call.keywords \
+                and (_dotted(recv, aliases) or "").split(".")[0] != "dataclasses":
+            return f"calls .{attr}(target) (Path.{attr})"
+        if attr == "write" and ((isinstance(recv, ast.Name) and recv.id in imagebufs) or (
+                isinstance(recv, ast.Call) and (_dotted(recv.func, aliases) or "").endswith("ImageBuf"))):
+            return "calls ImageBuf.write()"
+    return None
+
+
+def check_file_io(root: Path, package: str = PACKAGE, allowed=FILE_IO_ALLOWED) -> list[Violation]:
+    """(b) only meshshade.io (and the allow-listed CLI helper) touches files."""
+    out = []
+    for mod in collect_modules(root, package).values():
+        if (mod.name, None) in allowed:
+            continue
+        collector = _CallCollector(mod)
+        collector.visit(mod.tree)
+        for call, scope in collector.calls:
+            what = _file_call(call, mod.aliases, collector.imagebufs)
+            if what is None:
+                continue
+            if scope is not None and any(m == mod.name and f is not None and (scope == f or scope.startswith(f + "."))
+                                         for m, f in allowed):
+                continue
+            out.append(Violation("file-io", mod.rel, call.lineno, f"{what} in {scope or '<module>'}"))
+    return out
+
+
+def check_embree_confinement(root: Path, package: str = PACKAGE) -> list[Violation]:
+    """(c) embreex and ctypes library loading only in meshshade/raycast/."""
+    out = []
+    for mod in collect_modules(root, package).values():
+        if _in(mod.name, f"{package}.raycast"):
+            continue
+        for imp in mod.imports:
+            if _in(imp.target, "embreex"):
+                out.append(Violation("embree", mod.rel, imp.line, f"imports {imp.target} outside raycast/"))
+        collector = _CallCollector(mod)
+        collector.visit(mod.tree)
+        for call, _ in collector.calls:
+            fn = _dotted(call.func, mod.aliases) or ""
+            if any(_in(fn, loader) for loader in CTYPES_LOADERS):
+                out.append(Violation("embree", mod.rel, call.lineno, f"loads a native library ({fn}) outside raycast/"))
+    return out
+
+
+def import_graph(root: Path, package: str = PACKAGE) -> dict[str, set[str]]:
+    """module -> the meshshade modules it imports (module- and function-level; no implicit parent packages)."""
+    mods = collect_modules(root, package)
+    graph = {name: set() for name in mods}
+    for mod in mods.values():
+        for imp in mod.imports:
+            if imp.target in mods and imp.target != mod.name:
+                graph[mod.name].add(imp.target)
+    return graph
+
+
+def strongly_connected_components(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Tarjan's algorithm (iterative); every component, each sorted."""
+    index, low, on_stack, stack, comps = {}, {}, set(), [], []
+    counter = 0
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = counter
+        counter += 1
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, it = work[-1]
+            for nxt in it:
+                if nxt not in index:
+                    index[nxt] = low[nxt] = counter
+                    counter += 1
+                    stack.append(nxt)
+                    on_stack.add(nxt)
+                    work.append((nxt, iter(sorted(graph[nxt]))))
+                    break
+                if nxt in on_stack:
+                    low[node] = min(low[node], index[nxt])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    comp = []
+                    while True:
+                        top = stack.pop()
+                        on_stack.discard(top)
+                        comp.append(top)
+                        if top == node:
+                            break
+                    comps.append(sorted(comp))
+    return comps
+
+
+def import_cycles(root: Path, package: str = PACKAGE) -> list[list[str]]:
+    """(d) the strongly connected components of more than one module."""
+    return sorted(c for c in strongly_connected_components(import_graph(root, package)) if len(c) > 1)
+
+
+def check_function_level_imports(root: Path, package: str = PACKAGE) -> list[Violation]:
+    """(e) meshshade modules are imported at module level only."""
+    out = []
+    for mod in collect_modules(root, package).values():
+        for imp in mod.imports:
+            if imp.scope is not None and _in(imp.target, package):
+                out.append(Violation("function-import", mod.rel, imp.line, f"imports {imp.target} inside {imp.scope}"))
+    return out
+
+
+def _report(violations) -> str:
+    return "\n".join(str(v) for v in violations)
+
+
+# ------------------------------------------------------------------------------------------------------
+# the real tree
+# ------------------------------------------------------------------------------------------------------
+def test_kernels_import_only_numerics_and_kernels():
+    violations = check_kernel_imports(ROOT)
+    assert not violations, "\n" + _report(violations)
+
+
+def test_only_io_touches_files():
+    violations = check_file_io(ROOT)
+    assert not violations, "\n" + _report(violations)
+
+
+def test_only_raycast_uses_embree():
+    violations = check_embree_confinement(ROOT)
+    assert not violations, "\n" + _report(violations)
+
+
+def test_no_import_cycles():
+    cycles = import_cycles(ROOT)
+    assert not cycles, "\n" + "\n".join(" <-> ".join(c) for c in cycles)
+
+
+def test_no_function_level_meshshade_imports():
+    violations = check_function_level_imports(ROOT)
+    assert not violations, "\n" + _report(violations)
+
+
+def test_the_lint_sees_the_whole_package():
+    mods = collect_modules(ROOT)
+    assert {"meshshade", "meshshade.io", "meshshade.kernels.dipole", "meshshade.raycast"} <= set(mods)
+    graph = import_graph(ROOT)
+    assert sum(map(len, graph.values())) > len(graph)  # the graph has edges (resolution works)
+
+
+# ------------------------------------------------------------------------------------------------------
+# the checker itself, on a fake package with one planted violation per rule
+# ------------------------------------------------------------------------------------------------------
+FAKE = {
+    "__init__.py": '"""Fake package."""\n',
+    "errors.py": "class FakeError(Exception):\n    pass\n",
+    "io.py": ("from pathlib import Path\n\n\ndef write(path, text):\n    Path(path).parent.mkdir(exist_ok=True)\n"
+              "    with open(path, 'w') as fh:\n        fh.write(text)\n"),
+    "kernels/__init__.py": "from meshshade.kernels.good import helper\n",
+    "kernels/good.py": ("from __future__ import annotations\n\nimport math\nfrom dataclasses import dataclass\n\n"
+                        "import numba\nimport numpy as np\nfrom scipy import special\n\n"
+                        "from meshshade.errors import FakeError\nfrom meshshade.kernels import other\n\n\n"
+                        "def helper(x):\n    return np.asarray(x) * math.pi + special.k0(1.0) + other.ONE\n"),
+    "kernels/other.py": "ONE = 1.0\n",
+    "kernels/planted.py": "import os  # PLANTED (a)\n\nSEP = os.sep\n",
+    "cli/__init__.py": "",
+    "cli/options.py": ("import dataclasses\nimport os\nfrom pathlib import Path\n\n\ndef output_dir(path):\n"
+                       "    p = Path(path)\n    p.mkdir(parents=True, exist_ok=True)\n    return p\n\n\n"
+                       "def harmless(text, obj):\n    os.path.join(text, 'a')\n"
+                       "    return text.replace('a', 'b'), dataclasses.replace(obj, x=1), text.rename(columns={})\n\n\n"
+                       "def planted(path):\n    Path(path).write_text('x')  # PLANTED (b)\n"),
+    "raycast/__init__.py": "",
+    "raycast/backend.py": ("import ctypes\n\nimport embreex\n\n\ndef load():\n"
+                           "    return ctypes.CDLL('libembree4.so'), embreex\n"),
+    "montecarlo/__init__.py": "",
+    "montecarlo/engine.py": "from embreex import rtcore_scene  # PLANTED (c)\n\nfrom meshshade.kernels import helper\n",
+    "a.py": "from meshshade import b  # PLANTED (d): a -> b -> a\n",
+    "b.py": "import meshshade.a\n",
+    "c.py": "def f():\n    import meshshade.errors  # PLANTED (e)\n    return meshshade.errors\n",
+}
+
+
+@pytest.fixture
+def fake_root(tmp_path):
+    for rel, text in FAKE.items():
+        path = tmp_path / "meshshade" / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    return tmp_path
+
+
+def _planted_line(rel):
+    return next(i for i, line in enumerate(FAKE[rel].splitlines(), 1) if "PLANTED" in line)
+
+
+def test_checker_flags_a_non_numeric_kernel_import(fake_root):
+    assert [(v.path, v.line) for v in check_kernel_imports(fake_root)] == [
+        ("meshshade/kernels/planted.py", _planted_line("kernels/planted.py"))]
+
+
+def test_checker_flags_file_writes_outside_io(fake_root):
+    violations = check_file_io(fake_root)
+    assert [(v.path, v.line) for v in violations] == [("meshshade/cli/options.py", _planted_line("cli/options.py"))]
+    assert "write_text" in violations[0].message and "planted" in violations[0].message
+    # without the allow-list entry the CLI helper is flagged too
+    assert len(check_file_io(fake_root, allowed={("meshshade.io", None)})) == 2
+
+
+@pytest.mark.parametrize("snippet", [
+    "open('f', 'w')", "os.makedirs('d')", "os.replace('a', 'b')", "shutil.copy('a', 'b')",
+    "tempfile.mkdtemp()", "np.save('f', x)", "np.savetxt('f', x)", "fig.savefig('f.png')",
+    "Path('f').unlink()", "Path('f').touch()", "Path('f').write_bytes(b'')", "Path('a').rename('b')",
+    "Path('a').replace('b')", "oiio.ImageOutput.create('f.exr')", "oiio.ImageBuf(spec).write('f.exr')",
+    "remove('f')"])
+def test_checker_knows_every_way_to_touch_a_file(tmp_path, snippet):
+    pkg = tmp_path / "meshshade"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "stage.py").write_text("import os\nimport shutil\nimport tempfile\nfrom os import remove\nfrom pathlib import"
+                                  " Path\n\nimport numpy as np\nimport OpenImageIO as oiio\n\n\n"
+                                  f"def f(x, fig, spec):\n    {snippet}\n")
+    assert len(check_file_io(tmp_path)) == 1, snippet
+
+
+def test_checker_flags_embreex_outside_raycast(fake_root):
+    assert [(v.path, v.line) for v in check_embree_confinement(fake_root)] == [
+        ("meshshade/montecarlo/engine.py", _planted_line("montecarlo/engine.py"))]
+    (fake_root / "meshshade" / "light.py").write_text("import ctypes\n\nLIB = ctypes.cdll.LoadLibrary('libembree4.so')\n")
+    assert [v.path for v in check_embree_confinement(fake_root)] == ["meshshade/light.py",
+                                                                    "meshshade/montecarlo/engine.py"]
+
+
+def test_checker_finds_the_planted_cycle(fake_root):
+    assert import_cycles(fake_root) == [["meshshade.a", "meshshade.b"]]
+    graph = import_graph(fake_root)
+    # "from meshshade import b" resolves to the submodule; "from meshshade.kernels import helper" to the package
+    assert graph["meshshade.a"] == {"meshshade.b"}
+    assert graph["meshshade.montecarlo.engine"] == {"meshshade.kernels"}
+    assert graph["meshshade.kernels.good"] == {"meshshade.errors", "meshshade.kernels.other"}
+    assert graph["meshshade.c"] == {"meshshade.errors"}  # function-level imports are edges too
+
+
+def test_checker_finds_cycles_through_function_level_imports(fake_root):
+    (fake_root / "meshshade" / "b.py").write_text("def f():\n    from meshshade import c\n")
+    (fake_root / "meshshade" / "a.py").write_text("")
+    (fake_root / "meshshade" / "errors.py").write_text("def g():\n    import meshshade.c\n")
+    assert import_cycles(fake_root) == [["meshshade.c", "meshshade.errors"]]
+
+
+def test_checker_flags_function_level_meshshade_imports(fake_root):
+    assert [(v.path, v.line) for v in check_function_level_imports(fake_root)] == [
+        ("meshshade/c.py", _planted_line("c.py"))]
+
+
+def test_relative_imports_are_resolved(tmp_path):
+    pkg = tmp_path / "meshshade" / "kernels"
+    pkg.mkdir(parents=True)
+    (tmp_path / "meshshade" / "__init__.py").write_text("")
+    (tmp_path / "meshshade" / "io.py").write_text("")
+    (pkg / "__init__.py").write_text("from . import x\n")
+    (pkg / "x.py").write_text("from ..io import load\nfrom .y import z\n")
+    (pkg / "y.py").write_text("z = 1\n")
+    graph = import_graph(tmp_path)
+    assert graph["meshshade.kernels"] == {"meshshade.kernels.x"}
+    assert graph["meshshade.kernels.x"] == {"meshshade.io", "meshshade.kernels.y"}
+    assert [v.message for v in check_kernel_imports(tmp_path)] == ["kernel module imports meshshade.io"]
+
+
+def test_scc_on_a_known_graph():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": {"e"}, "e": {"d"}, "f": set()}
+    comps = strongly_connected_components(graph)
+    assert sorted(comps) == [["a", "b", "c"], ["d", "e"], ["f"]]
+    deep = {str(i): {str(i + 1)} for i in range(sys.getrecursionlimit() + 10)}
+    deep[str(len(deep))] = {"0"}
+    assert len(strongly_connected_components(deep)) == 1  # iterative: no recursion limit
