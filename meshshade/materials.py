@@ -138,7 +138,7 @@ class Material:
         """True when all three channels have the same coefficients (compute once, copy three times)."""
         return bool(np.all(self.sigma_s_prime == self.sigma_s_prime[0]) and np.all(self.sigma_a == self.sigma_a[0]))
 
-    # --- derived quantities (physics.md a), per channel, in mm or 1/mm --------------------------------
+    # --- derived quantities (docs/physics.md §2.1), per channel, in mm or 1/mm --------------------------------
     @property
     def sigma_t_prime(self) -> np.ndarray:
         """Reduced extinction sigma_t' = sigma_s' + sigma_a [1/mm]."""

@@ -10,7 +10,7 @@ first principal direction, k1 >= k2):
 shape      (k1, k2)            dipole                                 exact                      curved
 =========  ==================  =====================================  =========================  ===========
 plane      (0, 0)              R_d(s)                                 R_d(s) (exact for a plane)  R_d(s)
-sphere     (1/R, 1/R)          R_d(chord), chord = 2R sin(s/2R)       series of physics.md c     k1/k2 kernel
+sphere     (1/R, 1/R)          R_d(chord), chord = 2R sin(s/2R)       docs/physics.md eq. (23)   k1/k2 kernel
 cylinder   (1/R, 0)            R_d(chord of the helix)                exact infinite cylinder    k1/k2 kernel
 saddle     (1/R, -1/R)         R_d(s)                                 (none)                     k1/k2 kernel
 point      (--k1, --k2)        R_d(s)                                 (none)                     k1/k2 kernel

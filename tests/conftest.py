@@ -1,9 +1,11 @@
-"""Shared fixtures: seeded RNG, the ../shared folder (skip with a reason where absent), hypothesis profiles,
-and the one loader of the reference CSVs in tests/data (``reference_csv``)."""
+"""Shared fixtures: seeded RNG, the ../shared folder (skip with a reason where absent), hypothesis profiles, the
+one loader of the reference CSVs in tests/data (``reference_csv``) and a load-independent clock for Monte Carlo
+time budgets (``mc_work_clock``)."""
 from __future__ import annotations
 
 import csv
 import hashlib
+import importlib
 import os
 import re
 from pathlib import Path
@@ -120,3 +122,46 @@ def load_reference(name: str, data: Path = DATA, root: Path = ROOT) -> tuple[dic
 def reference_csv():
     """The reference loader :func:`load_reference`: ``header, rows = reference_csv("dipole_reference.csv")``."""
     return load_reference
+
+
+class WorkClock:
+    """Stands in for the ``time`` module of the Monte Carlo engine and of simulate(): its seconds advance only with
+    the walk's own work, SECONDS_PER_STEP per live photon and step of each round, so a time budget sees the same
+    elapsed time however loaded the machine is (wall-clock bounds flake on a busy 2-core machine)."""
+
+    SECONDS_PER_STEP = 1e-7  # ~10 M photon steps per second, the order of the pooled engine on 2 cores
+
+    def __init__(self):
+        self.t = 0.0
+        self.longest_round = 0.0
+
+    def perf_counter(self) -> float:
+        return self.t
+
+    def process_time(self) -> float:
+        return self.t
+
+
+@pytest.fixture
+def mc_work_clock(monkeypatch):
+    """``start()`` -> WorkClock: from then on the pooled engine and simulate() (and the CLI's ``mc``) run on it."""
+
+    def start() -> WorkClock:
+        # the modules themselves: the package attribute ``simulate`` is the function
+        engine = importlib.import_module("meshshade.montecarlo.engine")
+        simulate_module = importlib.import_module("meshshade.montecarlo.simulate")
+        clock = WorkClock()
+        real_round = engine.PoolWalk._round
+
+        def timed_round(self, st, live, steps):
+            dt = live * steps * clock.SECONDS_PER_STEP
+            clock.t += dt
+            clock.longest_round = max(clock.longest_round, dt)
+            return real_round(self, st, live, steps)
+
+        monkeypatch.setattr(engine.PoolWalk, "_round", timed_round)
+        monkeypatch.setattr(engine, "time", clock)
+        monkeypatch.setattr(simulate_module, "time", clock)
+        return clock
+
+    return start

@@ -83,9 +83,9 @@ def test_preset_unknown_without_match_lists_presets():
     assert "did you mean" not in str(info.value)
 
 
-# --- derived quantities (physics.md a) ---------------------------------------------------------------
+# --- derived quantities (docs/physics.md §2.1) ---------------------------------------------------------------
 
-# physics.md section a, skin-like test case sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3, printed to 12 significant
+# docs/physics.md §11.1, skin test case sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3, printed to 12 significant
 # digits; rtol 1e-11 covers the printing (half a unit in the 12th digit is <= 5e-12 relative).
 PHYSICS_MD_A_ETA13 = {
     "sigma_t_prime": 1.01,
@@ -98,7 +98,7 @@ PHYSICS_MD_A_ETA13 = {
     "z_b": 1.71753424941,
     "z_v": 4.42516750873,
 }
-# physics.md section a, "For eta = 1.0" line (same coefficients)
+# docs/physics.md §11.1, column "eta = 1.0" (same coefficients)
 PHYSICS_MD_A_ETA10 = {"F_dr": 0.0016, "A": 1.00320512821, "z_b": 0.662181602776, "z_v": 2.31446221545}
 
 
@@ -117,7 +117,7 @@ def test_material_derived_quantities_physics_md_eta10(quantity):
 
 
 def test_material_dimensional_and_optical_parameters_agree():
-    """Material's mm quantities are diffusion_params' optical ones divided by sigma_t' (physics.md a)."""
+    """Material's mm quantities are diffusion_params' optical ones divided by sigma_t' (docs/physics.md §2.1)."""
     m = _quiet_preset("skin1")
     p = diffusion_params(m.albedo_prime, m.eta)
     st = m.sigma_t_prime

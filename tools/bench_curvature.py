@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Benchmark the first-order curvature kernel against the planar dipole; prints JSON on stdout.
 
-Per-evaluation cost on the same N random pairs (skin test case of physics.md a, optical units): distances
+Per-evaluation cost on the same N random pairs (skin test case of docs/physics.md §11.1, optical units): distances
 uniform in [0, 50 mm], directions uniform, principal curvatures uniform in [-0.1, 0.1] /mm. Every variant is
 timed in the same run, interleaved (round-robin over ``--repeat`` rounds, best time kept), so load from other
 processes affects all of them alike. Variants:

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Benchmark the reflectance kernels; prints JSON on stdout.
 
-* evaluations/second of ``dipole_profile`` and ``sphere_series_profile`` (skin test case of physics.md a:
+* evaluations/second of ``dipole_profile`` and ``sphere_series_profile`` (skin test case of docs/physics.md §11.1:
   sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3) by radius R0 in mm and by rtol;
 * the sphere's terms-vs-accuracy-vs-time table: terms N, achieved error against an rtol = 1e-16 run
   (max over theta relative to the peak R_sph(0), and max relative error where R_sph >= 1e-6 R_sph(0)),

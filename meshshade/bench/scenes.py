@@ -2,7 +2,7 @@
 
 Spheres of R0 = 5, 20 and 100 mm, a long cylinder and a torus (procedural, refined by level), and two real
 meshes of ../shared/meshes at realistic sizes, each under a beam or a directional light. The material is the
-skin-like grey medium of physics.md (sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3); errors are taken on
+skin-like grey medium of docs/physics.md §11 (sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3); errors are taken on
 channel 0.
 """
 from __future__ import annotations

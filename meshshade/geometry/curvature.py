@@ -9,7 +9,7 @@ six vertices are taken); values below 2 are raised to 2 by libigl. This adapter 
 mm and converts it once: ``radius = max(2, round(radius_mm / h))``; the radius actually used,
 ``radius * h``, is returned in ``PrincipalCurvatures.radius_mm``.
 
-Conventions (physics.md f)
+Conventions (docs/physics.md §1.3)
 --------------------------
 * ``k1 >= k2`` per vertex, in 1/mm; positive where the surface bends away from its normal (convex, with outward
   normals), so a sphere of radius R has ``k1 = k2 = +1/R``. libigl already follows this sign for the winding's

@@ -1,6 +1,6 @@
 """Exact diffusion reflectance of an infinite circular cylinder (reference solution), in optical units.
 
-Geometry and boundary treatment are those of the exact sphere (physics.md c), transplanted to a cylinder:
+Geometry and boundary treatment are those of the exact sphere (docs/physics.md §5), transplanted to a cylinder:
 
 * the medium is ``r < R0`` (cylinder radius ``R0``, axis along ``z``);
 * the fluence vanishes on the **extrapolated** cylinder ``r = R = R0 + z_b``;
@@ -8,7 +8,7 @@ Geometry and boundary treatment are those of the exact sphere (physics.md c), tr
   ``r' = R0 - z_r``, angle 0, axial position 0 (for ``R0 < z_r`` it lies past the axis, at radius
   ``|r'|`` and angle pi);
 * ``Lap Psi - mu^2 Psi = -(1/D) delta``, and the reflectance is ``alpha' (-D dPsi/dr)`` on the **physical**
-  surface ``r = R0`` (Jensen normalisation, physics.md b).
+  surface ``r = R0`` (Jensen normalisation, docs/physics.md eq. (9)).
 
 Method (free-space term minus a regular part)::
 
@@ -24,7 +24,7 @@ Method (free-space term minus a regular part)::
     G_n(k) = Q_n W_n (k t_n(k R0) + n/R0)     (= I_n(k r') K_n(k R) k I_n'(k R0) / I_n(k R)),
 
 with ``Q_n = I_n(k r') I_n(k R0)/I_n(k R)^2``, ``W_n = I_n(k R) K_n(k R)``, ``t_n = I_{n+1}/I_n``. As in
-physics.md d no I or K is ever formed: ``t_n`` comes from backward recurrence started from the Amos (1974)
+docs/physics.md §5.4 no I or K is ever formed: ``t_n`` comes from backward recurrence started from the Amos (1974)
 bounds, ``K_{n+1}/K_n`` from forward recurrence, and ``Q_0, W_0`` from ``scipy.special.ive/kve`` with the
 exponent ``-k((R - r') + (R - R0)) = -k z_v`` written without cancellation.
 
@@ -36,7 +36,7 @@ width ``min(2, 8/z_v, 16/max|z|)`` (so that ``cos(q z)`` is resolved), and conti
 integral. The n-series at each node is summed until the geometric tail bound ``2 |G_N| rho/(1 - rho)``,
 ``rho = max(|G_N/G_{N-1}|, r' R0/R^2)`` (the term ratios decrease towards ``r' R0/R^2`` from above), is below
 ``eps`` times the running absolute sum. The count is ``~ (R0/z_v) ln(1/eps)`` at small k (the sphere's rule,
-physics.md d) and ``~ R0 sqrt(2 k ln(1/eps)/z_v)`` at large k, where the terms are Gaussian in n. The angular
+docs/physics.md eq. (31)) and ``~ R0 sqrt(2 k ln(1/eps)/z_v)`` at large k, where the terms are Gaussian in n. The angular
 sum uses ``e^{i n theta}`` by rotation, re-synchronised with exact cos/sin every 32 orders.
 ``eps = 1e-4 rtol`` (clipped to [1e-16, 1e-3]).
 
@@ -293,7 +293,7 @@ def cylinder_exact_profile(theta, z, *, R0_opt, albedo_prime, eta, rtol=1e-8, fu
     """Exact diffuse reflectance of an infinite cylinder, in optical units (reference solution).
 
     Defined as ``alpha' (-D dPsi/dr)`` at the physical surface ``r = R0`` for the source at depth ``z_r`` under
-    the entry point, with ``Psi = 0`` on ``r = R0 + z_b`` (module docstring; physics.md c for the sphere).
+    the entry point, with ``Psi = 0`` on ``r = R0 + z_b`` (module docstring; docs/physics.md §5 for the sphere).
 
     Parameters
     ----------
@@ -338,7 +338,7 @@ def cylinder_exact_profile(theta, z, *, R0_opt, albedo_prime, eta, rtol=1e-8, fu
     R = R0 + z_b
     r_src = R0 - z_r
     if r_src >= 0.0:
-        # d^2 = R0^2 + r'^2 - 2 R0 r' cos(theta) + z^2 and R0 - r' cos(theta), without cancellation (physics.md d)
+        # d^2 = R0^2 + r'^2 - 2 R0 r' cos(theta) + z^2 and R0 - r' cos(theta), without cancellation (docs/physics.md §5.2)
         sin2 = np.sin(0.5 * th) ** 2
         d = np.sqrt(z_r**2 + 4.0 * R0 * r_src * sin2 + zz**2)
         geo = z_r + 2.0 * r_src * sin2

@@ -1,4 +1,4 @@
-"""Planar dipole (Jensen, Marschner, Levoy & Hanrahan 2001; physics.md section b), in optical units.
+"""Planar dipole (Jensen, Marschner, Levoy & Hanrahan 2001; docs/physics.md §4), in optical units.
 
 :func:`dipole_diffuse_reflectance` is the one implementation of the closed form ``R_d(r)``: a compiled scalar
 function that the numpy :func:`dipole_profile` (through a compiled ufunc), the curvature kernel's profile loop
@@ -27,7 +27,7 @@ def dipole_diffuse_reflectance(r, albedo_prime, mu, z_r, z_v, log_gain=0.0):
     """Planar-dipole diffuse reflectance ``R_d(r) e^log_gain`` for one distance (compiled scalar, optical units).
 
     Defined as ``alpha'/(4 pi) [z_r g(d_r) + z_v g(d_v)]`` with ``g(d) = (mu d + 1) e^{-mu d}/d^3``,
-    ``d_r = sqrt(r^2 + z_r^2)``, ``d_v = sqrt(r^2 + z_v^2)`` (physics.md b, Jensen et al. 2001 eq. 4 with
+    ``d_r = sqrt(r^2 + z_r^2)``, ``d_v = sqrt(r^2 + z_v^2)`` (docs/physics.md eq. (15), Jensen et al. 2001 eq. 4 with
     S = alpha'), times ``e^log_gain``, which is folded into the two exponentials (``e^{log_gain - mu d}``): the
     curvature kernel's "exp" policy multiplies R_d by ``e^delta`` without an exponential more and without
     overflow of ``e^delta`` alone. ``log_gain = 0`` gives R_d itself, bit for bit.
@@ -66,7 +66,7 @@ def dipole_profile(r_opt, *, albedo_prime, eta):
     """Planar-dipole diffuse reflectance R_d in optical units.
 
     Defined as ``alpha'/(4 pi) [z_r g(d_r) + z_v g(d_v)]`` with ``d_r = sqrt(r^2 + z_r^2)``,
-    ``d_v = sqrt(r^2 + z_v^2)`` (physics.md b, Jensen et al. 2001 eq. 4 with S = alpha'), evaluated by
+    ``d_v = sqrt(r^2 + z_v^2)`` (docs/physics.md eq. (15), Jensen et al. 2001 eq. 4 with S = alpha'), evaluated by
     :func:`dipole_diffuse_reflectance` elementwise.
 
     Parameters
@@ -97,7 +97,7 @@ def dipole_profile(r_opt, *, albedo_prime, eta):
 def dipole_total_reflectance(*, albedo_prime, eta):
     """Closed-form total diffuse reflectance of the planar dipole, ``int R_d 2 pi r dr``.
 
-    Defined as ``(alpha'/2) (exp(-mu z_r) + exp(-mu z_v))`` (physics.md b), dimensionless and
+    Defined as ``(alpha'/2) (exp(-mu z_r) + exp(-mu z_v))`` (docs/physics.md eq. (16)), dimensionless and
     independent of units. Equals 0.6458266279762992 for alpha' = 1/1.01, eta = 1.3.
     """
     return _total_reflectance(diffusion_params(*check_material(albedo_prime, eta)))
@@ -107,7 +107,7 @@ def dipole_tail_reflectance(r_opt, *, albedo_prime, eta):
     """Reflectance of the planar dipole beyond distance ``r_opt``: ``int_r^inf R_d 2 pi r' dr'``.
 
     Defined as ``(alpha'/2) [z_r exp(-mu d_r)/d_r + z_v exp(-mu d_v)/d_v]`` with ``d = sqrt(r^2 + z^2)``,
-    from ``d/dr [exp(-mu d)/d] = -r g(d)`` (physics.md b). Equals :func:`dipole_total_reflectance` at r = 0.
+    from ``d/dr [exp(-mu d)/d] = -r g(d)`` (docs/physics.md §4.2, eq. (16)). Equals :func:`dipole_total_reflectance` at r = 0.
     """
     return _tail_reflectance(r_opt, diffusion_params(*check_material(albedo_prime, eta)))
 

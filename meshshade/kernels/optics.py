@@ -1,4 +1,4 @@
-"""Diffusion parameters of physics.md section a, in optical units (sigma_t' = 1).
+"""Diffusion parameters of docs/physics.md §2, in optical units (sigma_t' = 1).
 
 Every length below is in units of the transport mean free path 1/sigma_t'; multiply by 1/sigma_t' [mm]
 to get millimetres. The only material inputs the kernels need are the reduced albedo alpha' and eta.
@@ -17,7 +17,7 @@ def fresnel_diffuse_reflectance(eta):
     """F_dr, the diffuse Fresnel reflectance (Groenhuis et al. 1983 fit, as in Jensen et al. 2001 eq. 5).
 
     Defined as ``-1.440/eta**2 + 0.710/eta + 0.668 + 0.0636*eta``. Domain eta > 0 (fit made for eta >= 1);
-    at eta = 1 it gives 0.0016, not 0 (physics.md a).
+    at eta = 1 it gives 0.0016, not 0 (docs/physics.md eq. (6)).
     """
     eta = np.asarray(eta, dtype=np.float64)
     return -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
@@ -50,7 +50,7 @@ def check_material(albedo_prime, eta):
 
 
 class DiffusionParams(NamedTuple):
-    """Dipole parameters in optical units (physics.md a with sigma_t' = 1).
+    """Dipole parameters in optical units (docs/physics.md §2.3, eq. (10)).
 
     albedo_prime : alpha' = sigma_s'/sigma_t'
     D            : diffusion coefficient 1/3
@@ -90,7 +90,7 @@ def diffusion_params(albedo_prime, eta) -> DiffusionParams:
 
 
 def g_func(d, mu):
-    """g(d) = (mu d + 1) exp(-mu d) / d**3 (physics.md notation); d > 0."""
+    """g(d) = (mu d + 1) exp(-mu d) / d**3 (docs/physics.md eq. (10)); d > 0."""
     d = np.asarray(d, dtype=np.float64)
     return (mu * d + 1.0) * np.exp(-mu * d) / d**3
 

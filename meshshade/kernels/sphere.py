@@ -1,9 +1,9 @@
-"""Exact diffusion reflectance of a sphere (physics.md c, d), in optical units.
+"""Exact diffusion reflectance of a sphere (docs/physics.md §5), in optical units.
 
 The medium is the ball ``r < R0``; the fluence vanishes on the extrapolated sphere ``r = R = R0 + z_b``; a
 point source sits on the axis at depth ``delta`` below the entry point, ``r' = R0 - delta`` (``delta = z_r``
 unless the sphere is smaller than one transport length, see below). The reflectance is the outward diffusion
-flux on the *physical* sphere ``r = R0`` (physics.md c):
+flux on the *physical* sphere ``r = R0`` (docs/physics.md eqs. (23)-(24)):
 
     R_sph(theta) = alpha'/(4 pi) [ g(d) (delta + 2 r' sin^2(theta/2))  +  sum_m c_m P_m(cos theta) ],
     d^2 = delta^2 + 4 R0 r' sin^2(theta/2),
@@ -12,15 +12,15 @@ flux on the *physical* sphere ``r = R0`` (physics.md c):
 with ``nu = m + 1/2`` and ``g(d) = (mu d + 1) e^{-mu d}/d^3``. Every length is in transport mean free paths
 (times sigma_t'), so ``z_r = 1`` and the only material inputs are ``albedo_prime`` and ``eta``.
 
-Evaluation (physics.md d, in a form that is also exact at mu = 0)
-------------------------------------------------------------------
+Evaluation (docs/physics.md §5.4, in a form that is also exact at mu = 0)
+-------------------------------------------------------------------------
 I and K are never formed. With ``x1 = mu r'``, ``x0 = mu R0``, ``xR = mu R`` the kernel uses the *scaled*
 ratios
 
     tt_m(x) = I_{nu+1}(x) / (x I_nu(x))      backward:  tt_{m-1} = 1 / ((2m+1) + x^2 tt_m)
     uu_m(x) = x K_{nu+1}(x) / K_nu(x)        forward:   uu_m = x^2 / uu_{m-1} + (2m+1),  uu_0 = 1 + x
 
-(``t = x tt`` and ``u = uu/x`` are physics.md's ``t_nu``, ``u_nu``). Their x -> 0 limits are finite and are
+(``t = x tt`` and ``u = uu/x`` are the ``t_nu``, ``u_nu`` of docs/physics.md eq. (26)). Their x -> 0 limits are finite and are
 reached by the same recurrences without a branch: ``tt_m -> 1/(2m+3)``, ``uu_m -> 2m+1``. The coefficients
 are then
 
@@ -34,7 +34,7 @@ with ``f(x) = (1 - e^{-2x})/(2x)`` (``f(0) = 1``). At mu = 0 this gives ``c_m = 
 image of Laplace's equation, and ``c_0 = 0``: there is no 0/0 anywhere. The ``tt`` tables are built once per
 call by backward recurrence from ``max(M, ceil(xR)) + 64`` (``M`` the term budget), where the error of the
 start guess is damped by at least ``t^2 <= (sqrt 2 - 1)^2 ~ 0.17`` per step, i.e. 1e-49 after 64 steps (a
-tighter start than physics.md's ``M + 60 + 2x``, checked against mpmath). The tables are streamed in blocks
+tighter start than the ``M + 60 + 2x`` of docs/physics.md §5.4, checked against mpmath). The tables are streamed in blocks
 from checkpoints, so memory stays O(M/512) even for 10^7 terms. Legendre polynomials come from the forward
 recurrence rewritten for ``D_m = P_m - P_{m-1}`` with ``y = 2 sin^2(theta/2)``
 (``D_{m+1} = (m D_m - (2m+1) y P_m)/(m+1)``), so angles near 0 are not rounded through ``cos theta``
@@ -72,7 +72,7 @@ Accuracy, domain and policies
   R0 = z_r, and conserves energy (``sphere_total_reflectance`` uses the same delta). Diffusion theory is not
   accurate at such sizes; the policy only guarantees a finite, non-negative, energy-consistent answer.
 * The cost is O(N (1 + n_theta)) with N ~ (R0/z_v) ln(1/rtol) + mu R/2: about 5e3 terms at R0 = 1000 mm of
-  skin and rtol = 1e-10, 5e4 at 1e4 mm. For R0/z_v >~ 50, physics.md d recommends the first-order curvature
+  skin and rtol = 1e-10, 5e4 at 1e4 mm. For R0/z_v >~ 50, docs/physics.md §5.5 recommends the first-order curvature
   kernel as a cheaper approximation.
 """
 from __future__ import annotations
@@ -320,7 +320,7 @@ def _flux_profile(theta, R0, delta, z_b, mu, rtol):
 # public API
 # --------------------------------------------------------------------------------------------------
 def sphere_series_profile(theta, *, R0_opt, albedo_prime, eta, rtol=1e-10):
-    """Exact-sphere diffuse reflectance R_sph(theta) in optical units (physics.md c, stable recipe of d).
+    """Exact-sphere diffuse reflectance R_sph(theta) in optical units (docs/physics.md eq. (23), stable recipe of §5.4).
 
     Defined as ``alpha'/(4 pi) [g(d)(delta + 2 r' sin^2(theta/2)) + sum_m c_m P_m(cos theta)]`` (see the
     module docstring): the outward diffusion flux on the physical sphere r = R0 for a source of strength
@@ -359,7 +359,7 @@ def sphere_series_profile(theta, *, R0_opt, albedo_prime, eta, rtol=1e-10):
 def sphere_series_terms(*, R0_opt, albedo_prime, eta, rtol=1e-10):
     """Number of series terms N (m = 0 .. N-1) that :func:`sphere_series_profile` sums for these parameters.
 
-    Independent of theta. Grows like ``(R0/z_v) ln(1/rtol) + O(mu R)`` (physics.md d); for example about
+    Independent of theta. Grows like ``(R0/z_v) ln(1/rtol) + O(mu R)`` (docs/physics.md eq. (31)); for example about
     5.2e3 for skin (alpha' = 1/1.01, eta = 1.3) at R0 = 1000 mm (R0_opt = 1010) and rtol = 1e-10.
     """
     _, mu, z_r, z_b = _material(albedo_prime, eta)
@@ -368,7 +368,7 @@ def sphere_series_terms(*, R0_opt, albedo_prime, eta, rtol=1e-10):
 
 
 def _energy_T(R0, delta, z_b, mu):
-    """T of physics.md c ('Energy'), exp-scaled; broadcasting arrays. int R_sph dA = alpha' T."""
+    """T of docs/physics.md eq. (33), exp-scaled; broadcasting arrays. int R_sph dA = alpha' T."""
     R0, delta, z_b, mu = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (R0, delta, z_b, mu)))
     a = mu * (R0 - delta)  # mu r'
     b = mu * R0
@@ -393,7 +393,7 @@ def _energy_T(R0, delta, z_b, mu):
 
 
 def sphere_total_reflectance(*, R0_opt, albedo_prime, eta):
-    """Total diffuse reflectance of the exact sphere, ``int R_sph dA = alpha' T`` (physics.md c, 'Energy').
+    """Total diffuse reflectance of the exact sphere, ``int R_sph dA = alpha' T`` (docs/physics.md eq. (33)).
 
     Defined as ``alpha' sinh(mu r')/(mu r') [(mu R0 + 1) e^{-mu R0} + e^{-mu R}(mu R0 cosh mu R0 - sinh mu R0)
     / sinh mu R]`` with ``r' = R0 - delta``, ``R = R0 + z_b``, evaluated in exp-scaled form (no overflow at any
@@ -411,7 +411,7 @@ def sphere_total_reflectance(*, R0_opt, albedo_prime, eta):
 
 
 def sphere_chord_dipole_profile(theta, *, R0_opt, albedo_prime, eta):
-    """Jensen's usage on a sphere: the planar dipole at the chord, ``R_d(2 R0 sin(theta/2))`` (physics.md c).
+    """Jensen's usage on a sphere: the planar dipole at the chord, ``R_d(2 R0 sin(theta/2))`` (docs/physics.md eq. (18)).
 
     theta in [0, pi] as for :func:`sphere_series_profile`; returns ``R_d / sigma_t'**2``, shape of theta.
     """
@@ -423,7 +423,7 @@ def _sphere_fluence(r_opt, theta, *, R0_opt, albedo_prime, eta, rtol=1e-14):
     """Fluence Psi(r, theta) per unit source (S = 1) in optical units, for r' < r <= R (private; for tests).
 
     ``Psi = 1/(4 pi D) [e^{-mu d}/d - sum_m (2m+1) I_nu(mu r') I_nu(mu r) K_nu(mu R)/(I_nu(mu R) sqrt(r r'))
-    P_m]``, ``d^2 = (r - r')^2 + 4 r r' sin^2(theta/2)`` (physics.md c), with the same ratio recurrences as the
+    P_m]``, ``d^2 = (r - r')^2 + 4 r r' sin^2(theta/2)`` (docs/physics.md eq. (22)), with the same ratio recurrences as the
     reflectance. Vanishes on r = R = R0 + z_b. D = 1/3 in optical units.
     """
     _, mu, z_r, z_b = _material(albedo_prime, eta)

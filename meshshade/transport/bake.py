@@ -1,6 +1,6 @@
 """The bake: per-vertex radiant exitance M(x_o) = sum_i Phi_i R(x_o; x_i) over the light's entry samples.
 
-The kernel is expanded at the entry point x_i (physics.md f; pair_kernel.py). Models
+The kernel is expanded at the entry point x_i (docs/physics.md §1.3; pair_kernel.py). Models
 (:data:`meshshade.transport.models.MODELS`):
 
 * ``dipole``: Jensen's usage, R_d(|x_o - x_i|) (chord distance);

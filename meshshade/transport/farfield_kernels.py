@@ -2,7 +2,7 @@
 
 Everything here is float64 on plain arrays. Distances are in mm; the dipole is evaluated in optical units per
 channel (``r_opt = r_mm * sigma_t'``, z_r = 1) and rescaled by ``sigma_t'**2`` to 1/mm^2, exactly as
-:func:`meshshade.kernels.dipole.dipole_profile` does (physics.md b).
+:func:`meshshade.kernels.dipole.dipole_profile` does (docs/physics.md eq. (15)).
 
 Cluster approximation and its error bound (optical units). Write the dipole as a function of t = r^2/2,
 R(r) = G(t), with ``d_z = sqrt(r^2 + z^2)`` for z in {z_r = 1, z_v} and x = mu d:

@@ -1,6 +1,6 @@
 """The kernel R(x_o; x_i) of one model evaluated for arrays of (entry sample, exit vertex) pairs.
 
-The kernel is expanded at the entry point x_i (physics.md f): rho is the geodesic distance from x_i to x_o,
+The kernel is expanded at the entry point x_i (docs/physics.md §1.3): rho is the geodesic distance from x_i to x_o,
 phi the direction of x_o in x_i's tangent plane from x_i's first principal direction, and k1, k2 are x_i's
 principal curvatures (:class:`SourceFrames`). :class:`PairKernel` evaluates the models of
 :data:`meshshade.transport.models.MODELS` per channel; :func:`patch_average_factor` averages the dipole over the

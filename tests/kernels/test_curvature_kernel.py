@@ -1,15 +1,15 @@
 """First-order curvature kernel (meshshade.kernels.curvature) against mpmath references, closed forms,
-physics.md tables and the exact sphere, cylinder and spherical-cavity solutions.
+docs/physics.md §11 tables and the exact sphere, cylinder and spherical-cavity solutions.
 
 References: tests/data/curvature_aux_reference.csv and curvature_coefficients_reference.csv, written offline
-by tools/precompute_curvature_references.py (mpmath quadrature of the t-integrals of physics.md e.2 at 40-50
-digits; provenance in the CSV headers). Tables quoted from physics.md sections c and e.3 (skin test case
+by tools/precompute_curvature_references.py (mpmath quadrature of the t-integrals of docs/physics.md §7.2 at 40-50
+digits; provenance in the CSV headers). Tables quoted from docs/physics.md §11.3, §11.6, §11.7 (skin test case
 sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3: sigma_t' = 1.01 /mm, alpha' = 1/1.01); lengths in mm are
 converted with rho_opt = 1.01 rho_mm and C_mm = C_opt/1.01.
 
 The exact solution for the *concave* side (medium outside a spherical cavity) is not in the package; it is
 implemented here (``_cavity_profile``) from the exterior Green's function, by the ratio recurrences of
-physics.md d, and checked against a brute-force mpmath evaluation of the same series (slow test).
+docs/physics.md §5.4, and checked against a brute-force mpmath evaluation of the same series (slow test).
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ from meshshade.kernels.sphere import sphere_series_profile
 EPS = np.finfo(np.float64).eps
 ST = 1.01
 SKIN = {"albedo_prime": 1.0 / 1.01, "eta": 1.3}
-MATERIALS = {  # (albedo_prime, eta) for sigma_s', sigma_a [1/mm] of Jensen 2001 / physics.md
+MATERIALS = {  # (albedo_prime, eta) for sigma_s', sigma_a [1/mm] of Jensen 2001 / docs/physics.md §11.2
     "skin": (1.0 / 1.01, 1.3),
     "skin_eta1.0": (1.0 / 1.01, 1.0),
     "skin_eta2.0": (1.0 / 1.01, 2.0),
@@ -108,7 +108,7 @@ def test_aux_integral_vectorised_equals_scalar(aux_rows):
 
 
 def test_coefficients_match_mpmath(coef_rows):
-    """A, B and the ratios a, b against the mpmath evaluation of physics.md e.3 (ii). A and B are each
+    """A, B and the ratios a, b against the mpmath evaluation of docs/physics.md eqs. (49)-(50). A and B are each
     compared relative to |A| + |B| (B changes sign near rho ~ 1, so a plain relative error is meaningless
     there). Tolerance 2e-13: the bracket of A + B cancels ~2 digits at rho = 50-200 (g(d_r) - g(d_v))."""
     assert len(coef_rows) >= 70
@@ -192,7 +192,7 @@ def test_aux_integral_edges_are_inf_or_zero_never_nan():
 
 
 def test_aux_integral_height_derivative_is_minus_E():
-    """dI/dh = -E(rho, h) = -exp(-mu d)/d (physics.md e.2), by a central difference."""
+    """dI/dh = -E(rho, h) = -exp(-mu d)/d (docs/physics.md §7.2), by a central difference."""
     rho, h, mu, step = 1.3, 2.0, 0.4, 1e-4
     fd = (aux_integral(rho, h + step, mu) - aux_integral(rho, h - step, mu)) / (2 * step)
     d = math.hypot(rho, h)
@@ -266,7 +266,7 @@ def test_curvature_profile_first_order_matches_coefficients():
 
 
 def test_appendix_setting_laplace_limit():
-    """physics.md e.3 (i) (z_b = 0) at mu -> 0 reproduces the exact Poisson-kernel result of a ball:
+    """docs/physics.md §7.3, eq. (48) (z_b = 0) at mu -> 0 reproduces the exact Poisson-kernel result of a ball:
     A0 + B0 = a^2 (2 rho^2 - a^2)/(4 pi d^5), a = z_r = 1. At mu = 0 the kernel uses mu^2 I = 0 (its limit);
     for small mu > 0 the error is O(mu^2 ln(1/mu))."""
     rho = np.array([0.0, 0.3, 0.7071, 1.0, 2.0, 5.0, 20.0])
@@ -344,10 +344,10 @@ def test_kernel_cosine_matches_numpy():
 
 
 # --------------------------------------------------------------------------------------------------
-# physics.md tables (skin test case, mm)
+# docs/physics.md §11.6 tables (skin test case, mm)
 # --------------------------------------------------------------------------------------------------
 def _digits_tol(quoted: str) -> float:
-    """Half a unit in the last printed digit of a physics.md entry."""
+    """Half a unit in the last printed digit of a docs/physics.md §11 entry."""
     frac = quoted.split(".")[1] if "." in quoted else ""
     return 0.5 * 10.0 ** (-len(frac))
 
@@ -355,21 +355,21 @@ def _digits_tol(quoted: str) -> float:
 @pytest.mark.parametrize("s_mm, quoted", [("0", "0.00148"), ("0.1", "0.0208"), ("1", "1.127"), ("2", "2.231"),
                                           ("5", "3.384"), ("10", "5.807"), ("20", "15.89")])
 def test_relative_coefficient_physics_md_e3_table(s_mm, quoted):
-    """physics.md e.3: C(s) = alpha'(A+B)/R_d in mm, C_mm = C_opt/sigma_t'."""
+    """docs/physics.md §11.6: C(s) = alpha'(A+B)/R_d in mm, C_mm = C_opt/sigma_t'."""
     C = curvature_relative_coefficient(float(s_mm) * ST, **SKIN) / ST
     assert abs(C - float(quoted)) <= _digits_tol(quoted), (s_mm, C)
 
 
 @pytest.mark.parametrize("s_mm, quoted", [(0.1, 0.020787), (1.0, 1.127472), (5.0, 3.383681), (20.0, 15.8856)])
 def test_relative_coefficient_physics_md_c_table(s_mm, quoted):
-    """physics.md c, row "C(s), first-order theory" (6-7 digits)."""
+    """docs/physics.md §11.3, row "C(s), first-order theory" (6-7 digits)."""
     C = curvature_relative_coefficient(s_mm * ST, **SKIN) / ST
     assert abs(C - quoted) <= _digits_tol(repr(quoted))
 
 
 @pytest.mark.parametrize("rho_mm, qa, qb", [(1, "1.129", "-0.0015"), (5, "3.80", "-0.42"), (20, "19.1", "-3.2")])
 def test_ratios_physics_md_e3_table(rho_mm, qa, qb):
-    """physics.md e.3: alpha'A/R_d and alpha'B/R_d in mm."""
+    """docs/physics.md §11.6: alpha'A/R_d and alpha'B/R_d in mm."""
     a, b = curvature_ratios(rho_mm * ST, **SKIN)
     assert abs(a / ST - float(qa)) <= _digits_tol(qa)
     assert abs(b / ST - float(qb)) <= _digits_tol(qb)
@@ -514,7 +514,7 @@ albedo_from_coefficients = st.tuples(
        rho_mm=st.lists(st.floats(0.0, 1e3), min_size=1, max_size=8), phi=st.floats(-7.0, 7.0),
        policy=st.sampled_from(["soft", "exp", "clamp"]))
 def test_curvature_profile_finite_nonnegative(mat, eta, k1, k2, rho_mm, phi, policy):
-    """Physical ranges of physics.md f: curvatures up to +-10/mm, any distance; mm -> optical units."""
+    """Physical ranges of docs/physics.md §1.3: curvatures up to +-10/mm, any distance; mm -> optical units."""
     st_p, a_p = mat
     rho = np.array(rho_mm) * st_p
     R = curvature_profile(rho, phi, k1_opt=k1 / st_p, k2_opt=k2 / st_p, albedo_prime=a_p, eta=eta, policy=policy)
@@ -537,7 +537,7 @@ def _cavity_profile(theta, *, R0_opt, albedo_prime, eta, rtol=1e-14):
         c_m = (2m+1) K_nu(mu r') K_nu(mu R0) I_nu(mu R) / (K_nu(mu R) sqrt(r' R0)) [mu K_{nu+1}/K_nu(mu R0) - m/R0],
 
     (the exterior Green's function e^{-mu d}/d - sum (2m+1) K(mu r') K(mu r) I(mu R)/(K(mu R) sqrt(r r')) P_m,
-    nu = m + 1/2). Evaluated with physics.md d's ratios: Q_m = K(x')K(x0)/K(xR)^2 by forward recurrence of
+    nu = m + 1/2). Evaluated with the ratios of docs/physics.md §5.4: Q_m = K(x')K(x0)/K(xR)^2 by forward recurrence of
     u = K_{nu+1}/K_nu, W_m = I(xR) K(xR) with t = I_{nu+1}/I_nu by backward recurrence; the terms decay like
     (R^2/(r' R0))^m. Needs mu > 0 and R0 > z_b.
     """
@@ -596,7 +596,7 @@ S_MM = np.array([1.0, 2.0, 5.0])
 @pytest.mark.parametrize("policy", ["soft", "exp", "clamp"])
 def test_curved_kernel_converges_like_inverse_square_radius(kind, policy):
     """(exact - curved)/exact ~ 1/R0^2 (fitted slope <= -1.8 over R0 = 50..1000 mm at s = 1, 2, 5 mm) while
-    (exact - dipole)/exact ~ 1/R0 (slope -1 +- 0.1); physics.md e.3 "Validation" (skin case, geodesic s)."""
+    (exact - dipole)/exact ~ 1/R0 (slope -1 +- 0.1); docs/physics.md §11.7 (skin case, geodesic s)."""
     s = S_MM * ST
     d1, d0 = [], []
     for R0 in R0_MM * ST:
@@ -616,7 +616,7 @@ def test_curved_kernel_converges_like_inverse_square_radius(kind, policy):
 
 
 def test_curved_kernel_matches_physics_md_sphere_residuals():
-    """physics.md e.3 table d1 = (R_exact - R_d - R1)/R_d at R0 = 100 mm: 1.6e-5, 9.7e-5, 4.0e-4 (s = 1, 2, 5)."""
+    """docs/physics.md §11.7 table d1 = (R_exact - R_d - R1)/R_d at R0 = 100 mm: 1.6e-5, 9.7e-5, 4.0e-4 (s = 1, 2, 5)."""
     s = S_MM * ST
     R0 = 100 * ST
     exact = _sphere(s / R0, R0)
@@ -628,7 +628,7 @@ def test_curved_kernel_matches_physics_md_sphere_residuals():
 
 def test_curved_kernel_anisotropic_against_exact_cylinder():
     """Exact infinite cylinder (k1 = 1/R0 around, k2 = 0 along): the residual of the curved kernel falls like
-    1/R0^2 around (checks A), along the axis (checks B) and at the entry point (A(0)); physics.md e.3."""
+    1/R0^2 around (checks A), along the axis (checks B) and at the entry point (A(0)); docs/physics.md §11.7."""
     radii = np.array([40.0, 80.0, 160.0, 320.0])
     s = np.array([0.0, 2.0, 2.0, 5.0]) * ST
     phi = np.array([0.0, 0.0, np.pi / 2, np.pi / 2])

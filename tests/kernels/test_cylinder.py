@@ -1,5 +1,5 @@
 """Exact infinite-cylinder reference (meshshade.kernels.cylinder): addition theorem, boundary condition, PDE,
-flux, energy, mpmath references, planar limit and the first-order curvature kernel (physics.md c-e)."""
+flux, energy, mpmath references, planar limit and the first-order curvature kernel (docs/physics.md §5-§7)."""
 from __future__ import annotations
 
 import math
@@ -222,7 +222,7 @@ def test_cylinder_exact_profile_broadcasts():
 
 def test_cylinder_planar_limit_rate_and_first_order_coefficients():
     """R_cyl/R_d - 1 ~ 1/R0 at fixed geodesic distance; R0 (ratio - 1) -> alpha' A/R_d around the cylinder and
-    alpha' B/R_d along it (k1 = 1/R0, k2 = 0), against the physics.md e.3 table (skin, mm)."""
+    alpha' B/R_d along it (k1 = 1/R0, k2 = 0), against the docs/physics.md §11.6 table (skin, mm)."""
     rho_mm = np.array([1.0, 5.0, 20.0])
     rho = rho_mm * SIGMA_T
     Rd = dipole_profile(rho, **SKIN)
@@ -257,7 +257,7 @@ def _skin_residuals(s_mm, phi, radii_mm, A, B):
 @pytest.mark.parametrize("s_mm, phi", [(0.0, 0.0), (2.0, 0.0), (2.0, np.pi / 2)],
                          ids=["s0-checks-A0", "s2-around-checks-A", "s2-along-checks-B"])
 def test_cylinder_vs_first_order_curvature_kernel(s_mm, phi):
-    """physics.md e.3: d1 = (R_exact - R_d - R1)/R_d falls like 1/R0^2 (R0 = 20, 40, 80 mm); d0 like 1/R0."""
+    """docs/physics.md §11.7: d1 = (R_exact - R_d - R1)/R_d falls like 1/R0^2 (R0 = 20, 40, 80 mm); d0 like 1/R0."""
     A, B = curvature_coefficients(s_mm * SIGMA_T, **SKIN)
     radii = np.array([20.0, 40.0, 80.0])
     d0, d1 = _skin_residuals(s_mm, phi, radii, float(A), float(B))

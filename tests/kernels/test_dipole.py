@@ -1,7 +1,7 @@
 """Planar dipole R_d (meshshade.kernels.dipole) against mpmath references, closed forms and invariants.
 
 References: tests/data/dipole_reference.csv, written by tools/precompute_dipole_references.py (an independent
-mpmath implementation at 50 digits; provenance in the CSV header). Formulas: physics.md sections a and b.
+mpmath implementation at 50 digits; provenance in the CSV header). Formulas: docs/physics.md §2 and §4.
 """
 from __future__ import annotations
 
@@ -97,16 +97,16 @@ def test_dipole_total_reflectance_matches_mpmath_quadrature(reference):
 @pytest.mark.parametrize(
     "sigma_s_prime, sigma_a, eta, quoted",
     [
-        (1.0, 0.01, 1.3, 0.6458266279762992),   # physics.md b: skin, eta 1.3
-        (1.0, 0.01, 1.0, 0.7475659848543464),   # physics.md b: eta 1.0
-        (0.55, 0.12, 1.3, 0.2127065470419267),  # physics.md b: potato B
-        # physics.md b quotes 0.8301914562772948 for "marble R" without its eta. The mpmath generator shows it is
+        (1.0, 0.01, 1.3, 0.6458266279762992),   # docs/physics.md §11.2: skin, eta 1.3
+        (1.0, 0.01, 1.0, 0.7475659848543464),   # docs/physics.md §11.2: eta 1.0
+        (0.55, 0.12, 1.3, 0.2127065470419267),  # docs/physics.md §11.2: potato B
+        # the original notes gave 0.8301914562772948 for "marble R" without its eta (docs/physics.md §11.2). The mpmath generator shows it is
         # the eta = 1.5 value (eta = 1.3, the Jensen 2001 preset index, gives 0.866540582666390).
         (2.19, 0.0021, 1.5, 0.8301914562772948),
     ],
 )
 def test_dipole_total_reflectance_physics_md_digits(sigma_s_prime, sigma_a, eta, quoted):
-    """physics.md b's 16 printed digits. They are at exact decimal coefficients; passing the double
+    """The 16 printed digits of docs/physics.md §11.2. They are at exact decimal coefficients; passing the double
     alpha' = s/(s+a) perturbs the result by up to 3.6e-15 (marble: 1 - alpha' ~ 1e-3 amplifies alpha''s
     rounding, checked with mpmath), hence rtol 1e-14 rather than 1e-16."""
     got = dipole_total_reflectance(albedo_prime=sigma_s_prime / (sigma_s_prime + sigma_a), eta=eta)
@@ -114,7 +114,7 @@ def test_dipole_total_reflectance_physics_md_digits(sigma_s_prime, sigma_a, eta,
 
 
 def test_dipole_total_reflectance_marble_eta13_is_not_the_quoted_value():
-    """Guards the note above: the physics.md marble digits do not belong to eta 1.3."""
+    """Guards the note above: the marble digits of docs/physics.md §11.2 do not belong to eta 1.3."""
     got = dipole_total_reflectance(albedo_prime=2.19 / 2.1921, eta=1.3)
     assert abs(got - 0.8301914562772948) > 1e-2
 
@@ -136,7 +136,7 @@ def _scipy_total(albedo_prime, eta):
      (0.03 / 1.48, 1.3), (1.0, 1.3)],
 )
 def test_dipole_profile_quadrature_equals_total_reflectance(albedo_prime, eta):
-    """scipy.integrate.quad of R_d 2 pi r over [0, inf) equals the closed form to 1e-10 (physics.md b)."""
+    """scipy.integrate.quad of R_d 2 pi r over [0, inf) equals the closed form to 1e-10 (docs/physics.md eq. (16))."""
     np.testing.assert_allclose(_scipy_total(albedo_prime, eta),
                                dipole_total_reflectance(albedo_prime=albedo_prime, eta=eta), rtol=1e-10, atol=0)
 
@@ -158,7 +158,7 @@ def test_dipole_profile_positive_and_decreasing(albedo_prime, eta):
 
 
 def test_dipole_profile_albedo_one_has_cubic_tail():
-    """mu = 0: R_d -> alpha'/(4 pi) (z_r + z_v)/r^3 for r >> z_v (physics.md b with g(d) = 1/d^3)."""
+    """mu = 0: R_d -> alpha'/(4 pi) (z_r + z_v)/r^3 for r >> z_v (docs/physics.md §4.2 with g(d) = 1/d^3)."""
     z_v = 1.0 + 4.0 / 3.0 * (1 + 0.444762840237) / (1 - 0.444762840237)
     r = 1e4
     np.testing.assert_allclose(dipole_profile(r, albedo_prime=1.0, eta=1.3), (1 + z_v) / (4 * np.pi) / r**3,
@@ -197,7 +197,7 @@ def test_dipole_total_reflectance_bounded_by_albedo(albedo_prime, eta):
 # --- units: R in mm^-2 = R_opt(r sigma_t') sigma_t'^2 --------------------------------------------------
 
 def _dipole_mm(material: Material, r_mm, ch=0):
-    """physics.md b written directly in millimetres from the Material's dimensional quantities."""
+    """docs/physics.md eq. (15) written directly in millimetres from the Material's dimensional quantities."""
     mu, z_r, z_v, a = (material.sigma_tr[ch], material.z_r[ch], material.z_v[ch], material.albedo_prime[ch])
     d_r, d_v = np.hypot(r_mm, z_r), np.hypot(r_mm, z_v)
     g = lambda d: (mu * d + 1) * np.exp(-mu * d) / d**3  # noqa: E731

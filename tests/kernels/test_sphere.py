@@ -1,8 +1,8 @@
-"""Exact-sphere kernel (meshshade.kernels.sphere) against mpmath references, analytic limits and physics.md tables.
+"""Exact-sphere kernel (meshshade.kernels.sphere) against mpmath references, analytic limits and docs/physics.md §11 tables.
 
 References: tests/data/sphere_reference.csv, written offline by tools/precompute_references.py (the series in
-its original I_nu/K_nu form at 38-193 digits; provenance in the CSV header). Tables quoted from physics.md
-sections c and d (skin test case sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3, i.e. sigma_t' = 1.01 /mm,
+its original I_nu/K_nu form at 38-193 digits; provenance in the CSV header). Tables quoted from docs/physics.md
+§11.3-§11.5 (skin test case sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3, i.e. sigma_t' = 1.01 /mm,
 alpha' = 1/1.01); lengths in mm are converted with R0_opt = 1.01 R0_mm.
 """
 from __future__ import annotations
@@ -145,9 +145,9 @@ def test_sphere_series_profile_small_sphere_policy():
 
 
 # --------------------------------------------------------------------------------------------------
-# planar limit (physics.md c table)
+# planar limit (docs/physics.md §11.3 table)
 # --------------------------------------------------------------------------------------------------
-#: physics.md c: R0 (R_sph/R_d - 1) [mm] at geodesic s [mm], skin case; last row C(s) of first-order theory
+#: docs/physics.md §11.3: R0 (R_sph/R_d - 1) [mm] at geodesic s [mm], skin case; last row C(s) of first-order theory
 PLANAR_TABLE = {
     100.0: (0.019862, 1.129098, 3.423435, 17.5710),
     1000.0: (0.020694, 1.127633, 3.387594, 16.0439),
@@ -165,7 +165,7 @@ def _planar_excess(R0_mm):
 
 @pytest.mark.parametrize("R0_mm", sorted(PLANAR_TABLE))
 def test_sphere_series_profile_planar_limit_table(R0_mm):
-    """Matches physics.md's table to its printed digits (half a unit in the last place)."""
+    """Matches the table of docs/physics.md §11.3 to its printed digits (half a unit in the last place)."""
     got = _planar_excess(R0_mm)
     ref = np.array(PLANAR_TABLE[R0_mm])
     half_ulp = np.array([5e-7, 5e-7, 5e-7, 5e-5])
@@ -197,7 +197,7 @@ def test_sphere_chord_dipole_profile_matches_dipole_reference(reference_csv):
 
 
 def test_sphere_chord_dipole_profile_vs_geodesic_is_second_order():
-    """Chord and geodesic dipoles differ at O(s^3/R0^2) in distance (physics.md c): relative gap ~ R0^-2."""
+    """Chord and geodesic dipoles differ at O(s^3/R0^2) in distance (docs/physics.md §4.3): relative gap ~ R0^-2."""
     s = 5.0
     gaps = []
     radii = np.array([50.0, 100.0, 200.0, 400.0])
@@ -210,9 +210,9 @@ def test_sphere_chord_dipole_profile_vs_geodesic_is_second_order():
 
 
 # --------------------------------------------------------------------------------------------------
-# energy (physics.md c, 'Energy')
+# energy (docs/physics.md eq. (33))
 # --------------------------------------------------------------------------------------------------
-#: physics.md c: alpha' T for the skin case, R0 in mm, printed digits
+#: docs/physics.md §11.4: alpha' T for the skin case, R0 in mm, printed digits
 ENERGY_TABLE = {2.0: (0.9579, 4), 5.0: (0.8943, 4), 20.0: (0.7355, 4), 50.0: (0.6809, 4), 100.0: (0.6632, 4),
                 1000.0: (0.64755, 5), 1e4: (0.64600, 5)}
 
@@ -226,7 +226,7 @@ def test_sphere_total_reflectance_table():
 def test_sphere_total_reflectance_limits():
     a = SKIN["albedo_prime"]
     planar = float(dipole_total_reflectance(**SKIN))
-    assert abs(planar - 0.6458266279762992) < 1e-15  # physics.md b
+    assert abs(planar - 0.6458266279762992) < 1e-15  # docs/physics.md §11.2
     R0 = np.array([1e2, 1e3, 1e4, 1e5, 1e7, 1e12])
     T = sphere_total_reflectance(R0_opt=R0, **SKIN)
     assert np.all(np.isfinite(T)) and np.all(T <= a)
@@ -242,7 +242,7 @@ def test_sphere_total_reflectance_limits():
 
 
 def test_sphere_energy_T_zero_extrapolation_distance():
-    """z_b = 0 reduces to R0/r' sinh(mu r')/sinh(mu R0) (physics.md c), including the exp-scaled branches."""
+    """z_b = 0 reduces to R0/r' sinh(mu r')/sinh(mu R0) (docs/physics.md §5.5), including the exp-scaled branches."""
     for mu in (1e-6, 0.17, 1.0, 3.0):
         for R0 in (1.5, 3.0, 20.0, 200.0):
             rs = R0 - 1.0
@@ -282,7 +282,7 @@ def test_sphere_series_profile_integrates_to_closed_form(R0_opt, albedo_prime, e
 
 
 def test_sphere_series_profile_energy_table_by_quadrature():
-    """physics.md's alpha' T = 0.9579 at R0 = 2 mm (skin) reproduced from the profile itself."""
+    """The alpha' T = 0.9579 of docs/physics.md §11.4 at R0 = 2 mm (skin) reproduced from the profile itself."""
     assert abs(_sphere_integral(2.0 * ST, **SKIN) - 0.9579) < 5e-5
 
 
@@ -323,9 +323,9 @@ def test_sphere_series_profile_is_flux_of_fluence(R0_opt, albedo_prime, eta):
 
 
 # --------------------------------------------------------------------------------------------------
-# truncation rule and term counts (physics.md d)
+# truncation rule and term counts (docs/physics.md §5.5, §11.5)
 # --------------------------------------------------------------------------------------------------
-#: physics.md d, measured counts at s = 0 for relative accuracy 1e-6 / 1e-10 / 1e-14 (skin coefficients)
+#: docs/physics.md §11.5, measured counts at s = 0 for relative accuracy 1e-6 / 1e-10 / 1e-14 (skin coefficients)
 TERMS_TABLE = {
     1.3: {1: (2, 3, 4), 2: (7, 12, 17), 5: (16, 28, 40), 10: (32, 55, 78), 20: (62, 107, 152),
           50: (153, 265, 374), 100: (305, 526, 743), 1000: (3039, 5240, 7384)},
@@ -336,7 +336,7 @@ TERMS_TABLE = {
 
 @pytest.mark.parametrize("eta", sorted(TERMS_TABLE))
 def test_sphere_series_terms_table(eta):
-    """Never fewer terms than physics.md measured for the accuracy (0 <= N - N_ref), at most 2 % + 4 more
+    """Never fewer terms than docs/physics.md §11.5 lists for the accuracy (0 <= N - N_ref), at most 2 % + 4 more
     (the tail test confirms over 3 successive terms); the brief's looser figure was +-15 %."""
     for R0_mm, refs in TERMS_TABLE[eta].items():
         for rtol, ref in zip((1e-6, 1e-10, 1e-14), refs):
@@ -345,7 +345,7 @@ def test_sphere_series_terms_table(eta):
 
 
 def test_sphere_series_terms_geometric_rate():
-    """N ~ ln(1/rtol)/(-ln q): equal steps per decade, and ~5206 at R0 = 1000 mm, 1e-10 (physics.md d)."""
+    """N ~ ln(1/rtol)/(-ln q): equal steps per decade, and ~5206 at R0 = 1000 mm, 1e-10 (docs/physics.md eq. (31))."""
     p = diffusion_params(SKIN["albedo_prime"], SKIN["eta"])
     R0 = 1000.0 * ST
     R = R0 + float(p.z_b)

@@ -90,7 +90,9 @@ def test_run_comparison_with_mc():
     # dipole against MC: total exitance of the dipole bake / MC exit power, reference from one MC run of 400 000
     # photons (seed 11, same mesh and light: exit 173.63, 78.06, 40.14 W with relative stderr 1.0e-3, 1.2e-3,
     # 2.1e-3; dipole 120.56, 64.45, 37.96 W): the dipole loses 31 %, 17 % and 5 % of the light on this 10 mm sphere.
-    # Within 4 combined standard errors of the 4000-photon run and the reference.
+    # Within 4 combined standard errors of the 4000-photon run (its batch estimate, or the reference's scaled to
+    # 4000 photons where larger: 16 batch means scatter by ~20 %) and of the reference.
     ref, ref_rse = np.array([0.69434, 0.82557, 0.94569]), np.array([1.0e-3, 1.2e-3, 2.1e-3])
+    rse = np.maximum(se_mc / exit_mc, ref_rse * np.sqrt(400_000 / 4000))
     ratio = np.array(st["total_exitance_W"]["dipole"]) / exit_mc
-    assert np.all(np.abs(ratio / ref - 1) <= 4 * np.hypot(se_mc / exit_mc, ref_rse)), (ratio, ref, se_mc / exit_mc)
+    assert np.all(np.abs(ratio / ref - 1) <= 4 * np.hypot(rse, ref_rse)), (ratio, ref, rse)

@@ -1,6 +1,6 @@
 """Clustered far-field dipole sum (meshshade/transport/farfield.py, transport/farfield_kernels.py).
 
-References: the dipole and its t-derivatives from an mpmath implementation of Jensen's formula (physics.md b)
+References: the dipole and its t-derivatives from an mpmath implementation of Jensen's formula (docs/physics.md eq. (15))
 differentiated by mpmath; the far-field sums from a brute-force numpy double loop over all pairs with
 kernels/dipole.py:dipole_profile (tiny inputs) and from the cKDTree direct twin (larger inputs, itself checked
 against the brute force). The error bound ``|M - M_exact| <= error_bound <= rel_tol * M_exact`` is the claim
@@ -52,7 +52,7 @@ def assert_within_bound(M, M_exact, stats, rel_tol):
 
 # ---------------------------------------------------------------------------------------------- derivatives
 def _mp_G(t, al, mu, zv):
-    """Jensen's dipole as a function of t = r^2/2, in mpmath (physics.md b, optical units, z_r = 1)."""
+    """Jensen's dipole as a function of t = r^2/2, in mpmath (docs/physics.md eq. (15), optical units, z_r = 1)."""
     tot = 0
     for z in (mp.mpf(1), mp.mpf(zv)):
         d = mp.sqrt(2 * t + z * z)

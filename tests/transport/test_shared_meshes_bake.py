@@ -38,7 +38,7 @@ def check_bake(mesh, material, geodesic="exact", *, min_ratio=2.0, min_sign=0.85
     lo, mid, hi = np.quantile(np.abs(h), [0.25, 0.5, 0.75])
     # the curvature correction is concentrated where the surface is curved ...
     assert np.abs(rel[np.abs(h) >= hi]).mean() > min_ratio * np.abs(rel[np.abs(h) <= lo]).mean()
-    # ... and raises convex, lowers concave regions (physics.md e.3: sign of the normal curvature)
+    # ... and raises convex, lowers concave regions (docs/physics.md §7.4: sign of the normal curvature)
     curved = np.abs(h) >= mid
     assert np.mean(np.sign(rel[curved]) == np.sign(h[curved])) > min_sign
     return rel

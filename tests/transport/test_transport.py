@@ -12,7 +12,7 @@ from meshshade.transport.bake import bake
 from meshshade.transport.gather import cutoff_radii
 from meshshade.transport.pair_kernel import patch_average_factor
 
-SKIN = Material(1.0, 0.01, 1.3, name="skin-like")  # physics.md's test case
+SKIN = Material(1.0, 0.01, 1.3, name="skin-like")  # the skin test case of docs/physics.md §11
 
 
 def sphere_mesh(R, level):
@@ -84,7 +84,7 @@ def test_bake_models_ordering_on_sphere():
     d0 = out["dipole"].radiance[sel, 0] / ref[sel] - 1
     d1 = out["curved"].radiance[sel, 0] / ref[sel] - 1
     assert np.all(d0 < 0)
-    # physics.md e: at R0 = 100 mm the first-order residual is ~1e-4 at s <= 5 mm while the dipole's is
+    # docs/physics.md §11.7: at R0 = 100 mm the first-order residual is ~1e-4 at s <= 5 mm while the dipole's is
     # ~3e-2; at R0 = 50 mm both are ~2x and ~4x larger; mesh discretisation adds < 0.5 %
     assert np.abs(d1).max() < 0.01
     assert np.abs(d1).mean() < 0.25 * np.abs(d0).mean()
@@ -146,7 +146,7 @@ def test_bake_energy_with_edges_much_longer_than_transport_length():
     out = (res.radiance[:, 0] * mesh.vertex_areas).sum()
     entering = res.samples.power.sum()
     assert out <= entering
-    # a unit beam anywhere on the sphere returns alpha' T of its power (physics.md c); uniform light likewise
+    # a unit beam anywhere on the sphere returns alpha' T of its power (docs/physics.md eq. (33)); uniform light likewise
     expect = sphere_total_reflectance(R0_opt=R * 5.02, albedo_prime=5 / 5.02, eta=1.3)
     assert out / entering == pytest.approx(float(expect), rel=0.05)
 

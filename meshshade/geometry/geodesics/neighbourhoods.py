@@ -2,7 +2,7 @@
 
 For each entry sample x_i (a vertex, or a point inside a face given by barycentric weights) the transport needs
 every vertex x_o with geodesic distance rho(x_i, x_o) <= cutoff, the distance itself, the chord |x_o - x_i| and
-the azimuth phi of x_o in x_i's tangent frame (physics.md f).  :class:`GeodesicNeighbourhoods` holds the mesh
+the azimuth phi of x_o in x_i's tangent frame (docs/physics.md §1.3).  :class:`GeodesicNeighbourhoods` holds the mesh
 set-up (half-edge frames, adjacency); :meth:`GeodesicNeighbourhoods.query` returns a CSR :class:`Neighbourhoods`.
 
 Method (``method="window"``, the default): exact polyhedral geodesics
@@ -72,7 +72,7 @@ class Neighbourhoods:
     distance : (nnz,) float64, mm
         Geodesic distance from the source, ``0 <= distance <= cutoff`` of the row.
     chord : (nnz,) float64, mm or None
-        Straight-line distance ``|x_o - x_i|`` (Jensen's dipole argument, physics.md f).
+        Straight-line distance ``|x_o - x_i|`` (Jensen's dipole argument, docs/physics.md §4.3).
     tangent : (nnz, 3) float64 or None
         Unit projection of ``x_o - x_i`` onto the source's tangent plane (zero for x_o = x_i).
     phi : (nnz,) float64, radians in (-pi, pi] or None

@@ -1,8 +1,8 @@
-"""First-order curvature kernel (physics.md e.3 (ii)), in optical units (lengths x sigma_t', curvatures / sigma_t').
+"""First-order curvature kernel (docs/physics.md eqs. (49)-(50)), in optical units (lengths x sigma_t', curvatures / sigma_t').
 
 One concept per module, each importing only the ones above it:
 
-* :mod:`~meshshade.kernels.curvature.auxiliary`: the auxiliary integral I(rho, h) of physics.md e.2 and
+* :mod:`~meshshade.kernels.curvature.auxiliary`: the auxiliary integral I(rho, h) of docs/physics.md §7.2 and
   ``(1/rho) dI/drho`` (compiled Gauss-Legendre quadrature);
 * :mod:`~meshshade.kernels.curvature.coefficients`: the coefficients A, B, the ratios a, b to R_d, C(rho) and
   the validity measure (``VALIDITY_TOL``);

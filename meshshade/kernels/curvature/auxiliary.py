@@ -1,4 +1,4 @@
-"""Auxiliary integral of physics.md e.2 and its rho-derivative, in optical units (lengths x sigma_t').
+"""Auxiliary integral of docs/physics.md §7.2 and its rho-derivative, in optical units (lengths x sigma_t').
 
 The first-order curvature coefficients (:mod:`meshshade.kernels.curvature.coefficients`) need
 
@@ -104,7 +104,7 @@ def _check_nonneg_finite(name, arr):
 
 
 def aux_integral(rho, h, mu):
-    """Auxiliary integral I(rho, h) of physics.md e.2 (optical units).
+    """Auxiliary integral I(rho, h) of docs/physics.md §7.2 (optical units).
 
     Defined as ``int_h^inf exp(-mu s)/s dt`` with ``s = sqrt(rho^2 + t^2)``; equal to
     ``int_0^inf J0(q rho) e^{-h sqrt(q^2+mu^2)} q dq/(q^2+mu^2)``, to ``K0(mu rho)`` at h = 0 and to
@@ -113,7 +113,7 @@ def aux_integral(rho, h, mu):
     Parameters
     ----------
     rho, h, mu : array_like of float, finite and >= 0
-        Lateral distance, height (z + a in physics.md e.1; the kernel uses h = z_v) and
+        Lateral distance, height (z + zeta in docs/physics.md eq. (44); the kernel uses h = z_v) and
         mu = sigma_tr/sigma_t'. Broadcast together.
 
     Returns
@@ -127,7 +127,7 @@ def aux_integral(rho, h, mu):
 
 
 def aux_integral_drho_over_rho(rho, h, mu):
-    """``(1/rho) dI/drho`` of physics.md e.2 (optical units), computed without cancellation.
+    """``(1/rho) dI/drho`` of docs/physics.md §7.2 (optical units), computed without cancellation.
 
     Defined as ``-int_h^inf g(s) dt``, ``g(s) = (mu s + 1) e^{-mu s}/s^3``, ``s = sqrt(rho^2 + t^2)``; equal to
     ``-mu K1(mu rho)/rho`` at h = 0 and to ``-1/(d (d + h))`` at mu = 0 (d = sqrt(rho^2 + h^2)).

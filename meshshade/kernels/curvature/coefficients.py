@@ -1,8 +1,8 @@
-"""First-order curvature coefficients (physics.md e.3 (ii)), optical units (lengths x sigma_t', curvatures / sigma_t').
+"""First-order curvature coefficients (docs/physics.md eqs. (49)-(50)), optical units (lengths x sigma_t', curvatures / sigma_t').
 
 The reflectance of a slightly curved surface, expanded at the entry point, with the exit point at geodesic
 distance ``rho`` in direction ``phi`` from the first principal direction (principal curvatures k1, k2; k > 0
-convex, i.e. outward normals, physics.md f):
+convex, i.e. outward normals, docs/physics.md §1.3):
 
     R(rho, phi) = R_d(rho) + alpha' [ k_n(phi) A(rho) + k_n(phi + pi/2) B(rho) ] + O(k^2),
     k_n(phi) = k1 cos^2 phi + k2 sin^2 phi,
@@ -13,7 +13,7 @@ convex, i.e. outward normals, physics.md f):
     4 pi B     = a [ (1/rho) dI/drho (rho, z_v) + z_b g(d_v) ],        a = z_r + z_b,
 
 with ``g(d) = (mu d + 1) e^{-mu d}/d^3``, ``p(d) = (mu^2 d^2 + 3 mu d + 3) e^{-mu d}/d^5``,
-``d_r = sqrt(rho^2 + z_r^2)``, ``d_v = sqrt(rho^2 + z_v^2)`` and the auxiliary integral I of physics.md e.2
+``d_r = sqrt(rho^2 + z_r^2)``, ``d_v = sqrt(rho^2 + z_v^2)`` and the auxiliary integral I of docs/physics.md §7.2
 (:mod:`meshshade.kernels.curvature.auxiliary`).
 
 Domain edges: only ``mu^2 I ~ mu^2 ln(1/mu) -> 0`` enters A + B, so the coefficients take the limit
@@ -53,7 +53,7 @@ VALIDITY_TOL = 0.25
 
 @numba.njit(cache=True, error_model="numpy")
 def _coeffs_scaled(rho, mu, z_r, z_b):
-    """``4 pi e^{mu rho} (A, B, R_d/alpha')`` at distance rho (physics.md e.3 (ii); z_b = 0 gives (i))."""
+    """``4 pi e^{mu rho} (A, B, R_d/alpha')`` at distance rho (docs/physics.md eq. (50); z_b = 0 gives eq. (48))."""
     z_v = z_r + 2.0 * z_b
     a = z_r + z_b
     r2 = rho * rho
@@ -110,7 +110,7 @@ def _coeff_arrays(rho_opt, albedo_prime, eta):
 
 
 def curvature_coefficients(rho_opt, *, albedo_prime, eta):
-    """First-order curvature coefficients ``(A, B)`` of physics.md e.3 (ii), optical units.
+    """First-order curvature coefficients ``(A, B)`` of docs/physics.md eqs. (49)-(50), optical units.
 
     Defined by ``R = R_d + alpha' [k_n(phi) A + k_n(phi + pi/2) B]`` (module docstring): A multiplies the normal
     curvature along the entry-to-exit direction, B the one across it. Unit-source normalisation (the alpha'
@@ -146,7 +146,7 @@ def curvature_ratios(rho_opt, *, albedo_prime, eta):
 
 
 def curvature_relative_coefficient(rho_opt, *, albedo_prime, eta):
-    """``C(rho) = alpha' (A + B)/R_d`` (physics.md e.3), optical length units.
+    """``C(rho) = alpha' (A + B)/R_d`` (docs/physics.md eq. (51)), optical length units.
 
     For a sphere of radius R0 (k1 = k2 = 1/R0) the first-order kernel is ``R_d (1 + C/R0)``. In mm:
     ``C_mm = C_opt / sigma_t'`` (skin test case: 1.127 mm at s = 1 mm, 15.89 mm at 20 mm).

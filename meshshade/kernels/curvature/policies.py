@@ -1,4 +1,4 @@
-"""Positivity policies of the first-order curvature kernel: the map ``R/R_d = f(delta)`` (physics.md e.3 (ii)).
+"""Positivity policies of the first-order curvature kernel: the map ``R/R_d = f(delta)`` (docs/physics.md §7.6).
 
 The first-order relative correction ``delta = k_n(phi) a(rho) + k_n(phi + pi/2) b(rho)`` (dimensionless;
 :mod:`meshshade.kernels.curvature.coefficients`) is turned into a positive factor of the planar dipole R_d:

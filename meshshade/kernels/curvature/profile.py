@@ -1,4 +1,4 @@
-"""Curved-surface diffuse reflectance, first order in the principal curvatures (physics.md e.3 (ii)), in optical units.
+"""Curved-surface diffuse reflectance, first order in the principal curvatures (docs/physics.md eqs. (49)-(50)), in optical units.
 
 :func:`curvature_profile` returns ``R = R_d(rho) f(delta)``: the planar dipole at geodesic distance ``rho`` times a
 positive function of the first-order relative correction
@@ -28,7 +28,7 @@ it is positive). ``"soft"``, the default, saturates delta before exponentiating 
 
 which bounds |delta| in every direction and adds the ``|k| z_r`` that governs the second-order error near
 the entry point (where a and b are small). Measured maximum relative errors against the exact sphere
-(convex; physics.md c) and the exact spherical cavity (concave, medium outside a sphere; the exterior K-type
+(convex; docs/physics.md §5) and the exact spherical cavity (concave, medium outside a sphere; the exterior K-type
 series in tests/kernels/test_curvature_kernel.py) over 5 materials (skin eta 1.3 and 1.0, marble R, potato B,
 ketchup G), radii 3-1000 mm and geodesic distances 0.25-30 mm (1550 pairs):
 
@@ -68,7 +68,7 @@ _MAX_TABLES_PER_CALL = 8
 
 def curvature_profile(rho_opt, phi=None, *, k1_opt, k2_opt, albedo_prime, eta, cos2phi=None, policy="soft",
                       return_validity=False, tol=VALIDITY_TOL):
-    """Curved-surface diffuse reflectance R in optical units (first order in k, physics.md e.3 (ii)).
+    """Curved-surface diffuse reflectance R in optical units (first order in k, docs/physics.md eqs. (49)-(50)).
 
     Defined as ``R_d(rho) f(delta)`` with ``delta = k_n(phi) a(rho) + k_n(phi + pi/2) b(rho)``,
     ``k_n(phi) = k1 cos^2 phi + k2 sin^2 phi``, i.e. ``delta = H (a + b) + dk cos(2 phi) (a - b)`` with
