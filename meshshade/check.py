@@ -35,6 +35,7 @@ Everything is finite for every valid mesh and material (an infinite radius of cu
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -212,6 +213,4 @@ def _jsonable(x):
 
 def report_to_json(report: dict) -> str:
     """The report as JSON text (non-finite numbers become ``null``)."""
-    import json  # noqa: PLC0415
-
     return json.dumps(_jsonable(report), indent=2, allow_nan=False) + "\n"

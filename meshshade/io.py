@@ -34,6 +34,7 @@ MeshLab) and records the factor as a ``comment meshshade mm_per_unit <f>`` heade
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import secrets
@@ -176,7 +177,7 @@ def _merge_exact_duplicates(V: np.ndarray, F: np.ndarray):
 
 
 def _scene_arrays(scene, path: Path):
-    import trimesh
+    import trimesh  # lazy: ~1 s to import; only non-OBJ meshes are read through it
 
     verts, faces, offset, skipped = [], [], 0, 0
     # trimesh's graph traversal order is not the file's; the geometry dict is in the file's mesh order
@@ -225,7 +226,7 @@ def read_mesh_arrays(path) -> tuple[np.ndarray, np.ndarray]:
             return _read_obj(path)
         except OSError as exc:
             raise MeshValidationError(f"cannot read {path}: {_one_line(exc)}") from exc
-    import trimesh
+    import trimesh  # lazy: ~1 s to import; only non-OBJ meshes are read through it
 
     try:
         loaded = trimesh.load(str(path), file_type=fmt, process=False, maintain_order=True)
@@ -476,7 +477,7 @@ def write_figure(path, figure, *, dpi: int = 150) -> Path:
         with atomic_write(path) as tmp:
             figure.savefig(tmp, format=fmt, dpi=dpi, bbox_inches="tight")
     finally:
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # lazy: heavy plotting library; already loaded by whoever made the figure
 
         plt.close(figure)
     return path
@@ -493,8 +494,6 @@ def write_npz(path, **arrays) -> Path:
 
 def write_json(path, obj) -> Path:
     """Write ``obj`` as indented JSON (UTF-8) atomically."""
-    import json  # noqa: PLC0415
-
     path = Path(path)
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps(obj, indent=2) + "\n", encoding="utf-8")
@@ -504,7 +503,7 @@ def write_json(path, obj) -> Path:
 # ----------------------------------------------------------------------------------------------- images
 def _oiio():
     try:
-        import OpenImageIO as oiio  # noqa: PLC0415
+        import OpenImageIO as oiio  # lazy: ~0.3 s to import; only image outputs need it
     except ImportError as exc:  # pragma: no cover - a required dependency
         raise OutputError(f"OpenImageIO is needed to write images: {_one_line(exc)}") from None
     return oiio

@@ -44,7 +44,7 @@ def _library():
     """The Embree 4 shared library bundled with embreex (None if it cannot be found)."""
     global _LIB
     if _LIB is None:
-        import embreex  # noqa: PLC0415  # lazy: loads Embree; needed only to find the library in its wheel
+        import embreex  # lazy: loads Embree; needed only to find the library in its wheel
 
         root = os.path.dirname(os.path.dirname(embreex.__file__))
         pats = ["embreex.libs/libembree4*.so*", "embreex/.dylibs/libembree4*.dylib", "embreex/embree4*.dll",
