@@ -147,9 +147,9 @@ def mc_work_clock(monkeypatch):
     """``start()`` -> WorkClock: from then on the pooled engine and simulate() (and the CLI's ``mc``) run on it."""
 
     def start() -> WorkClock:
-        # the modules themselves: the package attribute ``simulate`` is the function
+        # imported here, not at the top: test sessions that never run Monte Carlo do not load its engine
         engine = importlib.import_module("meshshade.montecarlo.engine")
-        simulate_module = importlib.import_module("meshshade.montecarlo.simulate")
+        simulate_module = importlib.import_module("meshshade.montecarlo.simulation")
         clock = WorkClock()
         real_round = engine.PoolWalk._round
 

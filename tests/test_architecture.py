@@ -531,3 +531,35 @@ def test_scc_on_a_known_graph():
     deep = {str(i): {str(i + 1)} for i in range(sys.getrecursionlimit() + 10)}
     deep[str(len(deep))] = {"0"}
     assert len(strongly_connected_components(deep)) == 1  # iterative: no recursion limit
+
+
+def shadowed_submodules(root: Path, package: str = PACKAGE) -> list[str]:
+    """Names a package's ``__init__`` binds that are also the names of its own submodules: after the import,
+    ``pkg.name`` is the object, not the module, so ``import pkg.name as m`` and mkdocstrings resolve the wrong one."""
+    out = []
+    for init in sorted((root / package).rglob("__init__.py")):
+        pkg_dir = init.parent
+        subs = {p.stem for p in pkg_dir.glob("*.py") if p.stem != "__init__"}
+        subs |= {p.name for p in pkg_dir.iterdir() if (p / "__init__.py").is_file()}
+        for node in ast.walk(ast.parse(init.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                for alias in node.names:
+                    bound = alias.asname or alias.name
+                    target = f"{node.module}.{alias.name}" if node.module else alias.name
+                    own = ".".join(pkg_dir.relative_to(root).parts) + "." + bound
+                    if bound in subs and target != own:
+                        out.append(f"{init.relative_to(root)}: {bound!r} shadows the submodule {own}")
+    return out
+
+
+def test_no_package_attribute_shadows_a_submodule():
+    assert not shadowed_submodules(ROOT), "\n".join(shadowed_submodules(ROOT))
+
+
+def test_checker_finds_a_shadowed_submodule(tmp_path):
+    (tmp_path / "meshshade" / "transport").mkdir(parents=True)
+    (tmp_path / "meshshade" / "__init__.py").write_text("")
+    (tmp_path / "meshshade" / "transport" / "bake.py").write_text("def bake():\n    pass\n")
+    (tmp_path / "meshshade" / "transport" / "__init__.py").write_text("from meshshade.transport.bake import bake\n")
+    assert shadowed_submodules(tmp_path) == [
+        "meshshade/transport/__init__.py: 'bake' shadows the submodule meshshade.transport.bake"]

@@ -24,7 +24,7 @@ from meshshade.geometry.procedural import icosphere
 from meshshade.io import read_mesh_arrays
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
-from meshshade.transport.bake import bake
+from meshshade.transport.baking import bake
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 

@@ -30,7 +30,7 @@ NO_SERIES = ("dipole", "curved")
 
 
 def bake_defaults() -> dict:
-    """``rtol``, ``cutoff_tol`` and ``geodesic`` defaults of :func:`meshshade.transport.bake.bake` (kept in sync)."""
+    """``rtol``, ``cutoff_tol`` and ``geodesic`` defaults of :func:`meshshade.transport.baking.bake` (kept in sync)."""
     p = inspect.signature(bake).parameters
     return {k: p[k].default for k in ("rtol", "cutoff_tol", "geodesic")}
 

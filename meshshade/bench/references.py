@@ -22,7 +22,7 @@ Three kinds, all per unit light (beam power 1 W, directional irradiance 1 W/mm^2
 * ``exact`` on a long capped cylinder under a beam: the exact infinite-cylinder kernel (kernels/cylinder.py) at
   the vertex's angle and axial offset from the entry point, on side vertices only (caps and rims excluded; the
   cylinder is long enough that the default cutoff never reaches a cap).
-* ``mc``: a Monte Carlo run (meshshade.montecarlo.simulate.simulate, public API only) with its batch-means standard
+* ``mc``: a Monte Carlo run (meshshade.montecarlo.simulation.simulate, public API only) with its batch-means standard
   errors. Per-vertex MC values are too noisy to compare one by one, so errors are taken on *patches*: faces
   grouped by a grid of cell ``patch_mm`` over their centroids; the model's patch power is the integral of its
   linearly interpolated exitance, ``sum_f area_f mean(M at f's corners)``, the reference's is the MC face power

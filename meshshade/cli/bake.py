@@ -1,5 +1,5 @@
 """``meshshade bake``: per-vertex radiance of a translucent mesh, written as a coloured PLY (thin layer over
-:func:`meshshade.transport.bake.bake` and :func:`meshshade.output.bake_file.write_bake`)."""
+:func:`meshshade.transport.baking.bake` and :func:`meshshade.output.bake_file.write_bake`)."""
 from __future__ import annotations
 
 import argparse

@@ -1,5 +1,5 @@
 """``meshshade mc``: Monte Carlo reference random walk inside a mesh (thin layer over
-:func:`meshshade.montecarlo.simulate.simulate` and :func:`meshshade.output.mc_file.write_mc`)."""
+:func:`meshshade.montecarlo.simulation.simulate` and :func:`meshshade.output.mc_file.write_mc`)."""
 from __future__ import annotations
 
 import argparse

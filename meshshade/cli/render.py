@@ -1,5 +1,5 @@
 """``meshshade render``: bake, then render the mesh: linear EXR (with metadata) and tone-mapped PNG (thin layer
-over :func:`meshshade.transport.bake.bake` and :mod:`meshshade.output.render`)."""
+over :func:`meshshade.transport.baking.bake` and :mod:`meshshade.output.render`)."""
 from __future__ import annotations
 
 import argparse

@@ -1,16 +1,13 @@
 """Monte Carlo reference: a random walk inside the same mesh (engine, numba kernels, interior grid, tallies).
 
-Modules: :mod:`~meshshade.montecarlo.simulate` (``simulate``, ``MCResult``), :mod:`~meshshade.montecarlo.tallies`
-(profiles, summary; the files are written by :mod:`meshshade.output.mc_file`), :mod:`~meshshade.montecarlo.sampling` (roulette constants, HG scattering,
-refraction), :mod:`~meshshade.montecarlo.emitter` (photons from the lights), :mod:`~meshshade.montecarlo.engine`
+Modules: :mod:`~meshshade.montecarlo.simulation` (``simulate``, ``MCResult``), :mod:`~meshshade.montecarlo.tallies`
+(profiles, summary; the files are written by :mod:`meshshade.output.mc_file`),
+:mod:`~meshshade.montecarlo.sampling` (roulette constants, HG scattering, refraction), :mod:`~meshshade.montecarlo.emitter` (photons from the lights), :mod:`~meshshade.montecarlo.engine`
 with :mod:`~meshshade.montecarlo.kernels`, :mod:`~meshshade.montecarlo.direct_walk` and
 :mod:`~meshshade.montecarlo.interior` (the pooled engine), :mod:`~meshshade.montecarlo.wavefront_oracle` (the
 numpy baseline, a test and benchmark oracle).
-
-Note: the package attribute ``simulate`` is the function; import the module as
-``from meshshade.montecarlo.simulate import ...``.
 """
-from meshshade.montecarlo.simulate import DEFAULT_BATCHES, TOTAL_KEYS, MCResult, simulate
+from meshshade.montecarlo.simulation import DEFAULT_BATCHES, TOTAL_KEYS, MCResult, simulate
 from meshshade.montecarlo.tallies import beam_radial_power, describe_mc, mc_profile, radial_exitance, summary_dict
 
 __all__ = ["simulate", "MCResult", "TOTAL_KEYS", "DEFAULT_BATCHES", "mc_profile", "radial_exitance",

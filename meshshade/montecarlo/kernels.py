@@ -13,7 +13,7 @@ shifted copies of one Weyl sequence; they share draws only if their keys lie wit
 of each other, a chance of ~N**2 L / 2**64 (N photons of L draws: ~1e-6 for 1e6 photons of 1e4 draws), and then
 only as an uncorrelated-looking reuse of numbers at different points of two different paths.
 
-Physics is that of :mod:`meshshade.montecarlo.simulate` (MCML conventions); the resolution of a boundary test
+Physics is that of :mod:`meshshade.montecarlo.simulation` (MCML conventions); the resolution of a boundary test
 repeats the float64 ray-triangle reconstruction of :meth:`meshshade.raycast.scene._SceneBase._hits_on_faces`
 (Moller & Trumbore 1997, barycentrics clipped onto the triangle) and the ray offsets of
 :meth:`~meshshade.raycast.scene._SceneBase.offset_epsilon`. The fused kernel of the ``direct`` mode, which calls

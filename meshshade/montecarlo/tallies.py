@@ -1,6 +1,6 @@
 """Monte Carlo tallies: radial exitance profiles, beam radial power, the summary (files: output/mc_file.py).
 
-Every estimate comes with its batch-means standard error (:func:`meshshade.montecarlo.simulate.batch_stats`).
+Every estimate comes with its batch-means standard error (:func:`meshshade.montecarlo.simulation.batch_stats`).
 No file I/O here: :func:`meshshade.output.mc_file.write_mc` writes a run's files.
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.light import BeamLight
 from meshshade.materials import Material
-from meshshade.montecarlo.simulate import MCResult, batch_stats, simulate
+from meshshade.montecarlo.simulation import MCResult, batch_stats, simulate
 
 __all__ = ["radial_exitance", "mc_profile", "beam_radial_power", "summary_dict", "describe_mc", "write_mc"]
 

@@ -5,7 +5,7 @@ Not a production path: it is kept only as the simple, independent reference that
 ``tools/bench_mc.py``). All live photons advance together by one free path per iteration; dead photons are
 replaced by new ones from the lights as long as photons remain (a regenerating pool of ``pool`` photons, so the
 long tail of the walk does not starve the Embree batches). Physics and tallies as in
-:mod:`meshshade.montecarlo.simulate`, sampling from :mod:`meshshade.montecarlo.sampling`.
+:mod:`meshshade.montecarlo.simulation`, sampling from :mod:`meshshade.montecarlo.sampling`.
 """
 from __future__ import annotations
 

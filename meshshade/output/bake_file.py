@@ -1,12 +1,12 @@
 """The bake's files: a PLY with the radiance and tone-mapped vertex colours, and optionally an NPZ of its arrays.
 
-Builds the content from a :class:`~meshshade.transport.bake.BakeResult`; :mod:`meshshade.io` writes it.
+Builds the content from a :class:`~meshshade.transport.baking.BakeResult`; :mod:`meshshade.io` writes it.
 """
 from __future__ import annotations
 
 from meshshade import io
 from meshshade.output.tonemap import tonemap
-from meshshade.transport.bake import BakeResult
+from meshshade.transport.baking import BakeResult
 
 
 def write_bake(result: BakeResult, mesh, out, *, npz=None) -> None:

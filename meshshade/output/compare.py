@@ -16,7 +16,7 @@ from meshshade.montecarlo import simulate
 from meshshade.output import render
 from meshshade.output.tonemap import luminance
 from meshshade.raycast import make_scene
-from meshshade.transport.bake import bake
+from meshshade.transport.baking import bake
 
 #: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
 DEFAULT_FLOOR = 1e-3

@@ -1,6 +1,6 @@
 """The Monte Carlo run's files: a PLY with exitance, standard errors and tone-mapped colours, an NPZ, a JSON summary.
 
-Builds the content from a :class:`~meshshade.montecarlo.simulate.MCResult`; :mod:`meshshade.io` writes it.
+Builds the content from a :class:`~meshshade.montecarlo.simulation.MCResult`; :mod:`meshshade.io` writes it.
 """
 from __future__ import annotations
 

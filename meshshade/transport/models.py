@@ -10,5 +10,5 @@ from __future__ import annotations
 #: the kernels ``auto`` chooses between per entry sample, in the order of its plan codes (``AutoPlan.kernel``,
 #: the NPZ's ``auto_kernel``: 0 dipole, 1 curved, 2 exact-sphere)
 KERNEL_NAMES = ("dipole", "curved", "exact-sphere")
-#: every model :func:`meshshade.transport.bake.bake` accepts
+#: every model :func:`meshshade.transport.baking.bake` accepts
 MODELS = KERNEL_NAMES + ("auto",)

@@ -5,7 +5,7 @@ whether the far field is summed by clusters of the dipole. ``exact`` and ``arc``
 with one geodesic method; ``exact_near_arc_far`` and ``exact_near_cluster_far`` use exact geodesics near the
 sample and arc geodesics, or geodesics shared by clusters of samples (clusters.py), beyond;
 ``exact_near``/``arc_near`` gather only to r_near and leave the rest to the clustered dipole (farfield.py).
-transport.bake assigns the zones (:func:`assign_zones`), transport.gather runs them.
+transport.baking assigns the zones (:func:`assign_zones`), transport.gather runs them.
 """
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.light import BeamLight, DirectionalLight
-from meshshade.transport.bake import bake
+from meshshade.transport.baking import bake
 
 
 def test_write_exr_round_trip(tmp_path):

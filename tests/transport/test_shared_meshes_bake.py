@@ -7,7 +7,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.io import read_mesh_arrays
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
-from meshshade.transport.bake import bake
+from meshshade.transport.baking import bake
 
 #: file -> realistic size of its largest extent in mm
 SIZES = {"spot.obj": 120.0, "blub.obj": 150.0, "bob.obj": 100.0, "hand.obj": 180.0, "boot.obj": 280.0,

@@ -8,7 +8,7 @@ from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.kernels.sphere import sphere_series_profile, sphere_total_reflectance
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
-from meshshade.transport.bake import bake
+from meshshade.transport.baking import bake
 from meshshade.transport.gather import cutoff_radii
 from meshshade.transport.pair_kernel import patch_average_factor
 
