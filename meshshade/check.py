@@ -10,7 +10,10 @@
   unreferenced vertices, winding and orientation repairs), the same lines ``load_mesh`` warns about;
 * **curvature**: the principal curvatures ``k1 >= k2`` (1/mm) the bake will use (``principal_curvatures``, same
   default neighbourhood), min/max and percentiles over the vertices that faces use, the fraction of convex,
-  concave and saddle vertices and the smallest radius of curvature;
+  concave and saddle vertices, the smallest radius of curvature, and how many vertices took the fallback
+  curvature (``n_fallback``), of which ``n_no_plane`` have no tangent plane (their normals cancel: a non-manifold
+  bow-tie vertex, faces duplicated with opposite winding, a small symmetric component; libigl would crash there,
+  :mod:`meshshade.geometry.curvature`);
 * **per channel** (with a material): ``z_r`` (depth of the dipole's real source, the kernel's width near the
   entry point), the diffusion length ``1/sigma_tr`` (the width of its tail), the bake's neighbourhood cutoff,
   and two verdicts:
@@ -91,7 +94,8 @@ def check_mesh(mesh, material: Material | None = None, *, curvature_radius_mm: f
         },
         "defects": {
             "closed": bool(d.is_closed), "n_boundary_edges": d.n_boundary_edges,
-            "n_nonmanifold_edges": d.n_nonmanifold_edges, "n_degenerate_faces": d.n_degenerate_faces,
+            "n_nonmanifold_edges": d.n_nonmanifold_edges, "n_nonmanifold_vertices": d.n_nonmanifold_vertices,
+            "n_degenerate_faces": d.n_degenerate_faces,
             "n_components": d.n_components, "n_unreferenced_vertices": d.n_unreferenced_vertices,
             "n_faces_rewound": d.n_faces_rewound, "n_components_flipped": d.n_components_flipped,
             "n_winding_conflicts": d.n_winding_conflicts, "warnings": list(d.warnings), "fixed": list(d.fixed),
@@ -105,7 +109,7 @@ def check_mesh(mesh, material: Material | None = None, *, curvature_radius_mm: f
     scale_k = 1e-9 / max(mesh.scale, 1e-300)  # curvature below this (1/mm) counts as flat
     peak = float(kmax.max())
     report["curvature"] = {
-        "radius_mm": float(curv.radius_mm), "n_fallback": curv.n_fallback,
+        "radius_mm": float(curv.radius_mm), "n_fallback": curv.n_fallback, "n_no_plane": curv.n_no_plane,
         "k1_per_mm": _stats(k1), "k2_per_mm": _stats(k2),
         "min_radius_of_curvature_mm": (1.0 / peak) if peak > 0 else math.inf,
         "fraction_convex": float(np.mean((k2 > scale_k))),
@@ -175,7 +179,9 @@ def format_check(report: dict) -> str:
                  f"{k2['percentiles']['50']:.4g}); smallest radius {_g(c['min_radius_of_curvature_mm'])} mm; "
                  f"convex {100 * c['fraction_convex']:.1f}%, concave {100 * c['fraction_concave']:.1f}%, "
                  f"saddle {100 * c['fraction_saddle']:.1f}%"
-                 + (f"; {c['n_fallback']} vertices filled from neighbours" if c["n_fallback"] else ""))
+                 + (f"; {c['n_fallback']} vertices filled from neighbours" if c["n_fallback"] else "")
+                 + (f" ({c['n_no_plane']} without a tangent plane: the normals cancel there, e.g. a bow-tie vertex; "
+                    "libigl's fit was not run on them)" if c.get("n_no_plane") else ""))
     if "channels" not in report:
         lines.append("material: none given (add --material NAME or --sigma-s-prime/--sigma-a for sizes in "
                      "transport lengths, resolution and first-order validity)")

@@ -5,6 +5,10 @@ class MeshshadeError(Exception):
     """Base class for user-facing errors (bad input, bad parameters, unwritable outputs)."""
 
 
+class ParameterError(MeshshadeError, ValueError):
+    """An argument outside its documented domain (a tolerance, an image size, a photon count, a model name, ...)."""
+
+
 class MaterialError(MeshshadeError, ValueError):
     """Invalid optical coefficients or unknown material preset."""
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshshade.errors import DiffusionValidityWarning, MaterialError
-from meshshade.kernels.optics import diffusion_params
+from meshshade.kernels.optics import ETA_FIT_ACCURATE, ETA_MAX, check_eta, diffusion_params
 
 CHANNELS = ("r", "g", "b")
 
@@ -40,6 +40,10 @@ JENSEN_2001_ETA = 1.3
 #: below this reduced albedo diffusion theory is a poor model (absorption comparable to scattering)
 LOW_ALBEDO_WARNING = 0.5
 
+#: largest sigma_s' and sigma_a [1/mm]: a mean free path of 1 nm, far below the wavelength of light (no transport
+#: theory applies there); beyond ~1e154 /mm sigma_t'**2 overflows float64 and the kernels return inf/NaN
+SIGMA_MAX = 1e6
+
 
 def _rgb(name: str, value) -> np.ndarray:
     try:
@@ -60,11 +64,13 @@ class Material:
     Parameters
     ----------
     sigma_s_prime : float or (3,) float
-        Reduced scattering coefficient sigma_s' = sigma_s (1 - g) [1/mm], per channel; finite and > 0.
+        Reduced scattering coefficient sigma_s' = sigma_s (1 - g) [1/mm], per channel; in (0, 1e6] (``SIGMA_MAX``).
     sigma_a : float or (3,) float
-        Absorption coefficient [1/mm], per channel; finite and >= 0.
+        Absorption coefficient [1/mm], per channel; in [0, 1e6].
     eta : float
-        Relative index of refraction of the medium (inside/outside), > 0.
+        Relative index of refraction of the medium (inside; outside is air, 1), in [1, 2.5]: the range of the
+        Groenhuis fit of F_dr (:func:`meshshade.kernels.optics.check_eta`, docs/physics.md §2.1). Above 2.2 the
+        fit's boundary mismatch A is 1-5 % off the exact Fresnel value: a ``DiffusionValidityWarning``.
     g : float
         Henyey-Greenstein anisotropy in (-1, 1); only Monte Carlo uses it (diffusion sees sigma_s' alone).
     name : str
@@ -80,17 +86,17 @@ class Material:
     def __post_init__(self):
         s = _rgb("sigma_s_prime", self.sigma_s_prime)
         a = _rgb("sigma_a", self.sigma_a)
-        if not np.all(np.isfinite(s)) or np.any(s <= 0):
-            raise MaterialError(f"sigma_s_prime must be finite and > 0 [1/mm], got {s.tolist()}")
-        if not np.all(np.isfinite(a)) or np.any(a < 0):
-            raise MaterialError(f"sigma_a must be finite and >= 0 [1/mm], got {a.tolist()}")
+        top = f"{SIGMA_MAX:.0e}".replace("e+0", "e")
+        if not np.all((s > 0) & (s <= SIGMA_MAX)):  # NaN fails both
+            raise MaterialError(f"sigma_s_prime must be finite and > 0 [1/mm], at most {top}, got {s.tolist()}")
+        if not np.all((a >= 0) & (a <= SIGMA_MAX)):
+            raise MaterialError(f"sigma_a must be finite and >= 0 [1/mm], at most {top}, got {a.tolist()}")
         try:
             eta = float(self.eta)
             g = float(self.g)
         except (TypeError, ValueError):
             raise MaterialError(f"eta and g must be numbers, got eta={self.eta!r}, g={self.g!r}") from None
-        if not math.isfinite(eta) or eta <= 0:
-            raise MaterialError(f"eta must be finite and > 0, got {self.eta!r}")
+        check_eta(eta)  # the one domain of eta, shared with every kernel: [1, 2.5]
         if not math.isfinite(g) or not -1.0 < g < 1.0:
             raise MaterialError(f"g must lie in (-1, 1), got {self.g!r}")
         s.flags.writeable = False
@@ -99,6 +105,11 @@ class Material:
         object.__setattr__(self, "sigma_a", a)
         object.__setattr__(self, "eta", eta)
         object.__setattr__(self, "g", g)
+        if eta > ETA_FIT_ACCURATE:
+            warnings.warn(
+                f"material {self.name!r}: eta = {eta:g} is above {ETA_FIT_ACCURATE:g}, where the F_dr fit's "
+                f"boundary mismatch A is 1-5 % off the exact Fresnel value (allowed up to {ETA_MAX:g}; "
+                "docs/physics.md §2.1)", DiffusionValidityWarning, stacklevel=3)
         low = self.albedo_prime < LOW_ALBEDO_WARNING
         if np.any(low):
             chans = ",".join(c for c, flag in zip(CHANNELS, low) if flag)

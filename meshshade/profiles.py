@@ -18,21 +18,31 @@ point      (--k1, --k2)        R_d(s)                                 (none)    
 """
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from meshshade.errors import MeshshadeError
+from meshshade.errors import ParameterError
 from meshshade.kernels.curvature import curvature_profile
 from meshshade.kernels.cylinder import cylinder_exact_profile
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import CHANNELS, Material
 from meshshade.montecarlo import mc_profile
+from meshshade.transport.baking import RTOL_RANGE
 
 SHAPES = ("plane", "sphere", "cylinder", "saddle", "point")
 MODELS = ("dipole", "exact", "curved", "mc")
+
+
+def _real(value) -> float:
+    """``value`` as a float; NaN when it is not a real number (every range check below then refuses it)."""
+    try:
+        return float(value) if not isinstance(value, (bool, str)) else math.nan
+    except (TypeError, ValueError):
+        return math.nan
 
 
 @dataclass(frozen=True)
@@ -48,29 +58,87 @@ class Shape:
     def make(cls, kind: str, radius_mm: float | None = None, k1: float | None = None, k2: float | None = None):
         kind = kind.lower()
         if kind not in SHAPES:
-            raise MeshshadeError(f"unknown shape {kind!r}; choose one of {', '.join(SHAPES)}")
+            raise ParameterError(f"unknown shape {kind!r}; choose one of {', '.join(SHAPES)}")
         if kind == "plane":
             return cls("plane")
         if kind == "point":
             if k1 is None or k2 is None:
-                raise MeshshadeError("a curvature point needs both --k1 and --k2 (1/mm)")
-            if not (np.isfinite(k1) and np.isfinite(k2)):
-                raise MeshshadeError(f"curvatures must be finite, got k1={k1}, k2={k2}")
-            return cls("point", None, float(max(k1, k2)), float(min(k1, k2)))
+                raise ParameterError("a curvature point needs both --k1 and --k2 (1/mm)")
+            if not (math.isfinite(_real(k1)) and math.isfinite(_real(k2))):
+                raise ParameterError(f"curvatures k1, k2 must be finite numbers [1/mm], got k1={k1!r}, k2={k2!r}")
+            k1, k2 = _real(k1), _real(k2)
+            return cls("point", None, max(k1, k2), min(k1, k2))
         if radius_mm is None:
-            raise MeshshadeError(f"--shape {kind} needs --radius MM")
-        if not np.isfinite(radius_mm) or radius_mm <= 0:
-            raise MeshshadeError(f"radius must be finite and > 0 mm, got {radius_mm}")
-        R = float(radius_mm)
+            raise ParameterError(f"--shape {kind} needs --radius MM")
+        R = _real(radius_mm)
+        if not 0.0 < R < math.inf:
+            raise ParameterError(f"radius must be finite and > 0 mm, got {radius_mm!r}")
         k = {"sphere": (1 / R, 1 / R), "cylinder": (1 / R, 0.0), "saddle": (1 / R, -1 / R)}[kind]
         return cls(kind, R, *k)
 
 
 def _check_distances(distances_mm) -> np.ndarray:
-    s = np.asarray(distances_mm, dtype=np.float64).reshape(-1)
-    if s.size == 0 or not np.all(np.isfinite(s)) or np.any(s < 0):
-        raise MeshshadeError("distances must be finite and >= 0 mm")
+    """(n,) float64 geodesic distances, at least one, each finite and >= 0 mm; MeshshadeError otherwise."""
+    try:
+        s = np.asarray(distances_mm, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ParameterError(f"distances must be numbers (mm), got {distances_mm!r}") from None
+    if s.size == 0:
+        raise ParameterError("distances: give at least one distance (mm)")
+    bad = ~((s >= 0.0) & (s < np.inf))
+    if np.any(bad):
+        raise ParameterError(f"distances must be finite and >= 0 mm, got {float(s[bad][0])!r}")
     return s
+
+
+def _check_azimuth(azimuth_deg) -> float:
+    phi = _real(azimuth_deg)
+    if not math.isfinite(phi):
+        raise ParameterError(f"azimuth must be a finite number of degrees, got {azimuth_deg!r}")
+    return phi
+
+
+def _check_rtol(rtol) -> float:
+    x = _real(rtol)
+    if not RTOL_RANGE[0] <= x <= RTOL_RANGE[1]:
+        raise ParameterError(f"rtol (relative tolerance of the exact series) must lie in [{RTOL_RANGE[0]:g}, "
+                             f"{RTOL_RANGE[1]:g}], got {rtol!r}")
+    return x
+
+
+def _check_models(models) -> list[str]:
+    """A non-empty list of distinct known model names (lower-cased); MeshshadeError otherwise."""
+    if isinstance(models, str):
+        models = [models]
+    models = [str(m).strip().lower() for m in models]
+    if not models:
+        raise ParameterError(f"models: give at least one of {', '.join(MODELS)}")
+    for m in models:
+        if m not in MODELS:
+            raise ParameterError(f"unknown model {m!r}; choose among {', '.join(MODELS)}")
+    dup = sorted({m for m in models if models.count(m) > 1})
+    if dup:
+        raise ParameterError(f"models: {', '.join(dup)} given twice; each model once")
+    return models
+
+
+#: most distances of one profile (a CSV line and a kernel evaluation each)
+MAX_PROFILE_SAMPLES = 1_000_000
+
+
+def profile_distances(max_distance_mm=20.0, samples=41) -> np.ndarray:
+    """``samples`` evenly spaced geodesic distances from 0 to ``max_distance_mm`` (the CLI's ``--max-distance``
+    and ``--samples``): ``max_distance_mm`` finite and > 0, ``samples`` an integer in [2, ``MAX_PROFILE_SAMPLES``]
+    (MeshshadeError otherwise)."""
+    top = _real(max_distance_mm)
+    if not 0.0 < top < math.inf:
+        raise ParameterError(f"max distance must be finite and > 0 mm, got {max_distance_mm!r}")
+    ok = not isinstance(samples, (bool, str)) and isinstance(samples, (int, float, np.integer, np.floating))
+    if ok and not isinstance(samples, (int, np.integer)):
+        ok = math.isfinite(samples) and float(samples).is_integer()
+    if not ok or not 2 <= int(samples) <= MAX_PROFILE_SAMPLES:
+        raise ParameterError(f"samples must be an integer in [2, {MAX_PROFILE_SAMPLES}], got {samples!r}")
+    return np.linspace(0.0, top, int(samples))
 
 
 def reflectance_profile(material: Material, distances_mm, *, model: str = "dipole", shape: Shape | None = None,
@@ -80,20 +148,25 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     Parameters
     ----------
     material : Material
-    distances_mm : (n,) float, >= 0 — geodesic distance from the entry point [mm]
+    distances_mm : (n,) float, finite and >= 0 — geodesic distance from the entry point [mm] (at least one)
     model : "dipole" | "exact" | "curved" | "mc" (see the module table)
     shape : Shape (default: plane)
-    azimuth_deg : angle of the exit direction from the first principal direction [degrees]
-    rtol : relative tolerance of the exact series
+    azimuth_deg : angle of the exit direction from the first principal direction [degrees], finite
+    rtol : relative tolerance of the exact series, in [1e-15, 0.1] (``RTOL_RANGE``)
+
+    Every argument is checked first (MeshshadeError, one line naming it, its value and the allowed range).
     """
     shape = shape or Shape("plane")
+    if not isinstance(shape, Shape):
+        raise ParameterError(f"shape must be a Shape (Shape.make), got {type(shape).__name__}")
+    if not isinstance(material, Material):
+        raise ParameterError(f"material must be a Material, got {type(material).__name__}")
     s = _check_distances(distances_mm)
-    model = model.lower()
-    if model not in MODELS:
-        raise MeshshadeError(f"unknown model {model!r}; choose among {', '.join(MODELS)}")
+    (model,) = _check_models([model])
+    phi = np.deg2rad(_check_azimuth(azimuth_deg))
+    rtol = _check_rtol(rtol)
     if model == "mc":
         return mc_profile(material, s, shape=shape)
-    phi = np.deg2rad(float(azimuth_deg))
     out = np.empty((3, s.size))
     done: dict = {}
     for c in range(3):
@@ -117,7 +190,7 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
     if shape.kind == "sphere":
         theta = r / R0
         if np.any(theta > np.pi):
-            raise MeshshadeError(f"distances beyond half the circumference ({np.pi * shape.radius_mm:.6g} mm) "
+            raise ParameterError(f"distances beyond half the circumference ({np.pi * shape.radius_mm:.6g} mm) "
                                  "do not exist on this sphere")
         if model == "dipole":
             return dipole_profile(2.0 * R0 * np.sin(0.5 * theta), **par)
@@ -131,12 +204,27 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
         # far out (mu s > ~30) the series' absolute error (~1e-14 R(0)) exceeds the value: clamp that noise at 0
         return np.maximum(cylinder_exact_profile(np.abs(theta), np.abs(along), R0_opt=R0, rtol=max(rtol, 1e-13),
                                                  **par), 0.0)
-    raise MeshshadeError(f"no exact solution for shape {shape.kind!r}; use --models dipole,curved")
+    raise ParameterError(f"no exact solution for shape {shape.kind!r}; use --models dipole,curved")
 
 
 def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_deg=(0.0,), rtol=1e-10):
-    """All (model, radius, azimuth, channel) curves as rows of dicts, for the CSV, table and plot."""
+    """All (model, radius, azimuth, channel) curves as rows of dicts, for the CSV, table and plot.
+
+    ``models``: a non-empty list of distinct names among ``MODELS``; ``shapes``: a non-empty list of
+    :class:`Shape`; ``azimuths_deg``: a non-empty list of finite angles; ``distances_mm`` and ``rtol`` as
+    :func:`reflectance_profile`. All checked before any curve is computed (MeshshadeError, one line).
+    """
     s_all = _check_distances(distances_mm)
+    models = _check_models(models)
+    shapes = list(shapes) if not isinstance(shapes, Shape) else [shapes]
+    if not shapes or not all(isinstance(sh, Shape) for sh in shapes):
+        raise ParameterError(f"shapes must be a non-empty list of Shape (Shape.make), got {shapes!r}")
+    azimuths_deg = [_check_azimuth(a) for a in np.atleast_1d(np.asarray(azimuths_deg, dtype=object))]
+    if not azimuths_deg:
+        raise ParameterError("azimuths: give at least one angle in degrees")
+    rtol = _check_rtol(rtol)
+    if not isinstance(material, Material):
+        raise ParameterError(f"material must be a Material, got {type(material).__name__}")
     rows = []
     for shape in shapes:
         s = s_all
@@ -145,7 +233,7 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
             warnings.warn(f"sphere of radius {shape.radius_mm:g} mm: distances beyond {np.pi * shape.radius_mm:.4g} mm "
                           "(half the circumference) are left out of its curves", stacklevel=2)
             if s.size == 0:
-                raise MeshshadeError(f"no requested distance lies on the sphere of radius {shape.radius_mm:g} mm")
+                raise ParameterError(f"no requested distance lies on the sphere of radius {shape.radius_mm:g} mm")
         for az in azimuths_deg:
             for model in models:
                 R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol)

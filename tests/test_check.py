@@ -105,3 +105,25 @@ def test_check_cli_defects_in_report_not_warnings(tmp_path, capsys):
     cap = capsys.readouterr()
     assert "open boundary" in cap.out and "NOT closed" in cap.out
     assert "open boundary" not in cap.err
+
+
+def test_check_reports_bowtie_vertex_and_fallback(tmp_path, capsys):
+    """Two tetrahedra mirrored through a shared vertex: the vertex's normals cancel, libigl would crash there;
+    check names the non-manifold vertex and the vertex left out of the curvature fit. The CLI runs in a child
+    (a regression would be a segmentation fault)."""
+    import subprocess
+    import sys
+
+    T = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    Ft = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    V = np.vstack([T, -T[1:]])
+    F = np.vstack([Ft, np.array([0, 4, 5, 6])[Ft][:, [0, 2, 1]]])
+    p = write_ply(tmp_path / "bowtie.ply", V, F)
+    out = tmp_path / "report.json"
+    proc = subprocess.run([sys.executable, "-m", "meshshade.cli", "check", str(p), "--json", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-500:])
+    assert "bow-tie" in proc.stdout and "1 without a tangent plane" in proc.stdout
+    rep = json.loads(out.read_text())
+    assert rep["defects"]["n_nonmanifold_vertices"] == 1
+    assert rep["curvature"]["n_no_plane"] == 1 and rep["curvature"]["n_fallback"] == 7

@@ -438,3 +438,249 @@ def test_write_ply_header_layout_is_exact(tmp_path):
     assert len(body) == 3 * 16 + 13
     assert struct.unpack("<4f", body[:16]) == (1.0, 0.0, 0.0, 1.0)
     assert struct.unpack("<B3i", body[48:]) == (3, 0, 1, 2)
+
+
+# ------------------------------------------------------------------ reading: encodings, declared counts, polygons
+
+def _obj(V, F) -> str:
+    return "".join(f"v {float(x)!r} {float(y)!r} {float(z)!r}\n" for x, y, z in np.asarray(V, float)) + \
+        "".join("f " + " ".join(str(int(i) + 1) for i in f) + "\n" for f in F)
+
+
+def _ply_text(V, polys, nv=None, nf=None, vprops="property float x\nproperty float y\nproperty float z\n") -> str:
+    head = (f"ply\nformat ascii 1.0\nelement vertex {len(V) if nv is None else nv}\n{vprops}"
+            f"element face {len(polys) if nf is None else nf}\nproperty list uchar int vertex_indices\nend_header\n")
+    return head + "".join(" ".join(repr(float(x)) for x in v) + "\n" for v in np.asarray(V, np.float32)) + \
+        "".join(f"{len(p)} " + " ".join(map(str, p)) + "\n" for p in polys)
+
+
+def _off_text(V, polys, nv=None, nf=None) -> str:
+    return (f"OFF\n{len(V) if nv is None else nv} {len(polys) if nf is None else nf} 0\n"
+            + "".join(" ".join(repr(float(x)) for x in v) + "\n" for v in np.asarray(V, float))
+            + "".join(f"{len(p)} " + " ".join(map(str, p)) + "\n" for p in polys))
+
+
+def _binary_ply(V, polys, fmt="binary_little_endian", extra=b"") -> bytes:
+    e = "<" if fmt == "binary_little_endian" else ">"
+    head = (f"ply\nformat {fmt} 1.0\nelement vertex {len(V)}\nproperty float x\nproperty float y\n"
+            f"property float z\nelement face {len(polys)}\nproperty list uchar int vertex_indices\nend_header\n")
+    body = np.asarray(V, e + "f4").tobytes()
+    body += b"".join(np.uint8(len(p)).tobytes() + np.asarray(p, e + "i4").tobytes() for p in polys)
+    return head.encode() + body + extra
+
+
+@pytest.mark.parametrize("last_vertex_used", [True, False])
+def test_obj_utf8_bom_does_not_hide_the_first_vertex(tmp_path, shape, last_vertex_used):
+    """The BOM glued to the first ``v`` made the fast reader skip that vertex: every face then pointed one vertex
+    off (an out-of-range error when the last vertex is used, silently wrong faces when it is not)."""
+    V, F = shape
+    if not last_vertex_used:
+        V = np.vstack([V, [[9.0, 9.0, 9.0]]])
+    text = _obj(V, F)
+    plain, bom = tmp_path / "plain.obj", tmp_path / "bom.obj"
+    plain.write_text(text, encoding="utf-8")
+    bom.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    from meshshade.io import _read_obj, _read_obj_lines
+
+    for reader in (_read_obj, _read_obj_lines, read_mesh_arrays):
+        Vb, Fb = reader(bom)
+        np.testing.assert_array_equal(Vb, V)
+        np.testing.assert_array_equal(Fb, F)
+
+
+def test_obj_utf16_with_bom_is_decoded(tmp_path, shape):
+    V, F = shape
+    path = tmp_path / "notepad.obj"
+    path.write_bytes(b"\xff\xfe" + _obj(V, F).encode("utf-16-le"))
+    Vb, Fb = read_mesh_arrays(path)
+    np.testing.assert_array_equal(Vb, V)
+    np.testing.assert_array_equal(Fb, F)
+
+
+@pytest.mark.parametrize("ext", ["ply", "off"])
+def test_text_formats_with_a_utf8_bom(tmp_path, shape, ext):
+    V, F = shape
+    text = _ply_text(V, F) if ext == "ply" else _off_text(V, F)
+    path = tmp_path / f"bom.{ext}"
+    path.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    Vb, Fb = read_mesh_arrays(path)
+    np.testing.assert_allclose(Vb, V, rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(Fb, F)
+
+
+# (declared vertices, declared faces): more or fewer rows than the file holds, and counts that add up but put
+# face rows among the vertices
+COUNT_CASES = {"more_vertices": (20, 0), "fewer_vertices": (-20, 0), "more_faces": (0, 20), "fewer_faces": (0, -20),
+               "shifted": (20, -20)}
+
+
+@pytest.mark.parametrize("case", sorted(COUNT_CASES))
+@pytest.mark.parametrize("ext", ["ply", "off"])
+def test_declared_counts_must_match_the_rows(tmp_path, shape, case, ext):
+    V, F = shape
+    dv, df = COUNT_CASES[case]
+    nv, nf = len(V) + dv, len(F) + df
+    path = tmp_path / f"counts.{ext}"
+    path.write_text(_ply_text(V, F, nv, nf) if ext == "ply" else _off_text(V, F, nv, nf))
+    if case == "shifted":
+        needle = "vertex 128 has 4 values" if ext == "ply" else "vertex rows differ in length .* in vertex 128"
+        message = _one_line_error(path, needle)
+    else:
+        message = _one_line_error(path, f"declares {nv} vertices and {nf} faces .*holds {len(V) + len(F)} rows")
+    assert str(path) in message
+
+
+@pytest.mark.parametrize("cut", ["vertex", "face", "long"])
+@pytest.mark.parametrize("mixed", [False, True])
+def test_binary_ply_truncated_or_too_long(tmp_path, shape, cut, mixed):
+    V, F = shape
+    polys = [list(f) for f in F]
+    if mixed:  # rows of different sizes: the row-by-row scan
+        polys[3] = [0, 1, 2, 3]
+    data = _binary_ply(V, polys)
+    body = data.index(b"end_header\n") + 11
+    data = {"vertex": data[:body + 100], "face": data[:-3], "long": data + b"\0\0"}[cut]
+    path = tmp_path / "cut.ply"
+    path.write_bytes(data)
+    needle = "too many" if cut == "long" else f"ends inside .*{cut}"
+    message = _one_line_error(path, needle)
+    assert f"declares {len(V)} vertices and {len(F)} faces" in message
+
+
+@pytest.mark.parametrize("writer", ["ply_ascii", "ply_binary", "ply_big_endian", "off", "obj"])
+def test_polygons_fan_triangulated_in_place_with_a_warning(tmp_path, writer):
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 1.5, 0], [2, 0, 0]], float)
+    polys = [[0, 1, 2], [0, 1, 2, 3], [1, 5, 2], [0, 1, 2, 4, 3], [1, 5, 2, 4]]
+    expected = [[0, 1, 2], [0, 1, 2], [0, 2, 3], [1, 5, 2], [0, 1, 2], [0, 2, 4], [0, 4, 3], [1, 5, 2], [1, 2, 4]]
+    path = tmp_path / f"poly.{writer.split('_')[0]}"
+    if writer == "ply_ascii":
+        path.write_text(_ply_text(V, polys))
+    elif writer in ("ply_binary", "ply_big_endian"):
+        path.write_bytes(_binary_ply(V, polys, "binary_little_endian" if writer == "ply_binary" else
+                                     "binary_big_endian"))
+    elif writer == "off":
+        path.write_text(_off_text(V, polys))
+    else:
+        path.write_text(_obj(V, polys))
+    with pytest.warns(MeshDefectWarning, match="3 polygons with more than 3 corners were fan-triangulated"):
+        Vr, Fr = read_mesh_arrays(path)
+    np.testing.assert_array_equal(Fr, expected)
+    np.testing.assert_array_equal(Vr, V)
+
+
+def test_triangle_only_ply_and_off_do_not_warn(tmp_path, shape):
+    for ext in ("ply", "off"):
+        path = _export(tmp_path, shape, ext)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            read_mesh_arrays(path)
+
+
+def test_ply_variants_agree_with_trimesh(tmp_path, shape):
+    """Big-endian doubles with normals and colours, a 'vertex_index' list of uint, a texcoord list and a scalar
+    after the indices, an extra element; ASCII floats rounded to their declared float32 as trimesh does."""
+    V, F = shape
+    e = ">"
+    vert = np.zeros(len(V), [("x", e + "f8"), ("y", e + "f8"), ("z", e + "f8"), ("nx", e + "f4"), ("ny", e + "f4"),
+                             ("nz", e + "f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")])
+    vert["x"], vert["y"], vert["z"] = V.T
+    face = np.zeros(len(F), [("n", "u1"), ("i", e + "u4", (3,)), ("m", "u1"), ("t", e + "f4", (6,)),
+                             ("flags", e + "i4")])
+    face["n"], face["i"], face["m"] = 3, F, 6
+    head = ("ply\nformat binary_big_endian 1.0\ncomment variants\nobj_info made by a test\n"
+            f"element vertex {len(V)}\nproperty double x\nproperty double y\nproperty double z\n"
+            "property float nx\nproperty float ny\nproperty float nz\nproperty uchar red\nproperty uchar green\n"
+            f"property uchar blue\nelement face {len(F)}\nproperty list uchar uint vertex_index\n"
+            "property list uchar float texcoord\nproperty int flags\nelement edge 2\nproperty int vertex1\n"
+            "property int vertex2\nend_header\n")
+    path = tmp_path / "variants.ply"
+    path.write_bytes(head.encode() + vert.tobytes() + face.tobytes() + np.zeros(4, ">i4").tobytes())
+    Vr, Fr = read_mesh_arrays(path)
+    np.testing.assert_array_equal(Vr, V)
+    np.testing.assert_array_equal(Fr, F)
+    ascii_path = tmp_path / "ascii.ply"
+    trimesh.Trimesh(V, F, process=False).export(ascii_path, encoding="ascii")
+    Va, Fa = read_mesh_arrays(ascii_path)
+    raw = trimesh.load(ascii_path, process=False, maintain_order=True)
+    np.testing.assert_array_equal(Va, raw.vertices)
+    np.testing.assert_array_equal(Fa, raw.faces)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("ply\nformat ascii 2.0 x\nend_header\n", "unsupported PLY format"),
+    ("ply\nformat ascii 1.0\nelement vertex three\nend_header\n", "malformed element line"),
+    ("ply\nformat ascii 1.0\nproperty float x\nend_header\n", "property before any element"),
+    ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n0 0\n",
+     "no x, y, z properties"),
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n",
+     "no end_header"),
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+     "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2.5\n",
+     "not all integers"),
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+     "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 one 0\n3 0 1 2\n",
+     "malformed number in the vertex rows"),
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+     "end_header\n0 0 0\n1 0 0\n0 1 0\n", "no triangles found"),
+    ("OFF BINARY\n", "binary OFF is not supported"),
+    ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n", "declares 4 corners but lists 3"),
+])
+def test_ply_and_off_malformed_one_line(tmp_path, text, match):
+    path = tmp_path / ("bad.off" if text.startswith("OFF") else "bad.ply")
+    path.write_text(text)
+    assert str(path) in _one_line_error(path, match)
+
+
+def test_binary_ply_with_mixed_polygons_is_read(tmp_path, shape):
+    """Blender writes n-gons as lists of varying length; each polygon's triangles stay where it was."""
+    V, F = shape
+    polys = [list(F[0]) + [F[1][2]]] + [list(f) for f in F[2:]]
+    path = tmp_path / "blender.ply"
+    path.write_bytes(_binary_ply(V, polys))
+    with pytest.warns(MeshDefectWarning, match="1 polygons"):
+        Vr, Fr = read_mesh_arrays(path)
+    np.testing.assert_array_equal(Fr[:2], [F[0], [F[0][0], F[0][2], F[1][2]]])
+    np.testing.assert_array_equal(Fr[2:], F[2:])
+    np.testing.assert_allclose(Vr, V, rtol=1e-6, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------- baked PLY
+
+def test_read_baked_ply_round_trip(tmp_path, shape, rng):
+    from meshshade.io import read_baked_ply
+
+    V, F = shape
+    src = tmp_path / "in.obj"
+    src.write_text(_obj(V, F))
+    mesh = load_mesh(src, units="cm")
+    M = rng.random((mesh.n_vertices, 3)) * 1e-3
+    out = write_mesh_ply(tmp_path / "baked.ply", mesh, {"radiance_r": M[:, 0], "radiance_g": M[:, 1],
+                                                        "radiance_b": M[:, 2]},
+                         comments=["meshshade model curved",
+                                   "meshshade material skin1: sigma_s'=[0.74,0.88,1.01] sigma_a=[0.032,0.17,0.48] "
+                                   "1/mm, eta=1.44, g=0"])
+    again, radiance, info = read_baked_ply(out)  # the recorded cm, not the default mm
+    np.testing.assert_allclose(again.vertices, mesh.vertices, rtol=1e-6, atol=1e-5)
+    np.testing.assert_array_equal(again.faces, mesh.faces)
+    np.testing.assert_array_equal(radiance, M.astype(np.float32))
+    assert info["mm_per_unit"] == 10.0 and info["eta"] == 1.44 and info["model"] == "curved"
+    assert info["material"].startswith("skin1") and info["source"] == str(src)
+    assert read_baked_ply(src) is None and read_baked_ply(write_ply(tmp_path / "plain.ply", V, F)) is None
+
+
+def test_read_baked_ply_refuses_damaged_radiance(tmp_path, shape):
+    from meshshade.io import read_baked_ply
+
+    V, F = shape
+    vert = np.zeros(len(V), [(name, "<f4") for name in ("x", "y", "z", "radiance_r", "radiance_g", "radiance_b")])
+    vert["x"], vert["y"], vert["z"] = V.T
+    vert["radiance_g"][4], vert["radiance_b"][7] = np.nan, -1.0  # write_ply refuses such values: built by hand
+    face = np.zeros(len(F), [("n", "u1"), ("i", "<i4", (3,))])
+    face["n"], face["i"] = 3, F
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(V)}\n"
+            + "".join(f"property float {name}\n" for name in vert.dtype.names)
+            + f"element face {len(F)}\nproperty list uchar int vertex_indices\nend_header\n")
+    path = tmp_path / "damaged.ply"
+    path.write_bytes(head.encode() + vert.tobytes() + face.tobytes())
+    with pytest.raises(MeshValidationError, match="damaged.ply: 2 vertices have radiance_r/g/b that are not"):
+        read_baked_ply(path)

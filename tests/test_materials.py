@@ -161,13 +161,14 @@ def test_material_equality_and_hash_are_by_value():
 
 # --- validation -----------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, -1.0, 0.0, (1.0, 0.0, 1.0), (1.0, math.nan, 1.0)])
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, -1.0, 0.0, (1.0, 0.0, 1.0), (1.0, math.nan, 1.0),
+                                 1e200, (1.0, 2e6, 1.0)])
 def test_material_rejects_bad_sigma_s_prime(bad):
     with pytest.raises(MaterialError, match=r"sigma_s_prime must be finite and > 0 \[1/mm\]"):
         Material(bad, 0.01)
 
 
-@pytest.mark.parametrize("bad", [math.nan, -0.01, math.inf, (0.01, -1e-9, 0.01)])
+@pytest.mark.parametrize("bad", [math.nan, -0.01, math.inf, (0.01, -1e-9, 0.01), 1e200])
 def test_material_rejects_bad_sigma_a(bad):
     with pytest.raises(MaterialError, match=r"sigma_a must be finite and >= 0 \[1/mm\]"):
         Material(1.0, bad)
@@ -177,10 +178,44 @@ def test_material_accepts_zero_sigma_a():
     assert np.all(Material(1.0, 0.0).albedo_prime == 1.0)
 
 
-@pytest.mark.parametrize("bad", [0.0, -1.3, math.nan, math.inf])
-def test_material_rejects_bad_eta(bad):
-    with pytest.raises(MaterialError, match=r"eta must be finite and > 0"):
+def test_material_coefficient_bounds_are_inclusive():
+    m = Material(1e6, 1e6)  # a mean free path of 0.5 nm: the largest allowed (SIGMA_MAX)
+    assert np.all(np.isfinite(m.z_v))
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.3, math.nan, math.inf, 0.999, 2.5000001, 60.0, 100.0])
+def test_material_rejects_eta_outside_the_fit_domain(bad):
+    """eta outside [1, 2.5]: below 1 F_dr < 0, above ~3.9 F_dr > 1 and A < 0 (negative reflectance at eta 100)."""
+    with pytest.raises(MaterialError, match=r"eta \(relative index of refraction\) must be finite and lie in "
+                                            r"\[1, 2\.5\].*got"):
         Material(1.0, 0.01, bad)
+    with pytest.raises(MaterialError, match=r"lie in \[1, 2\.5\]"):
+        Material.preset("skin1", eta=bad)
+
+
+@pytest.mark.parametrize("eta", [1.0, 1.3, 2.2])
+def test_material_accepts_eta_in_the_domain_without_warning(eta):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = Material(1.0, 0.01, eta)
+    assert 0.0 <= m.F_dr < 1.0 and m.A >= 1.0
+
+
+@pytest.mark.parametrize("eta", [2.21, 2.5])
+def test_material_warns_in_the_grey_zone_of_the_fit(eta):
+    """2.2 < eta <= 2.5: allowed, but the fit's A is 1-5 % off the exact Fresnel value (docs/physics.md §2.1)."""
+    with pytest.warns(DiffusionValidityWarning, match=r"eta = 2\.[25]\d* is above 2\.2"):
+        m = Material(1.0, 0.01, eta)
+    assert 0.0 < m.F_dr < 1.0
+
+
+def test_fdr_fit_stays_a_reflectance_on_the_whole_domain():
+    """The reason for the domain: F_dr in [0, 1) (so A >= 1 and z_v > z_r) on [1, 2.5], not outside."""
+    from meshshade.kernels.optics import ETA_MAX, ETA_MIN, fresnel_diffuse_reflectance
+    eta = np.linspace(ETA_MIN, ETA_MAX, 2001)
+    F = fresnel_diffuse_reflectance(eta)
+    assert np.all((F >= 0.0) & (F < 1.0))
+    assert fresnel_diffuse_reflectance(0.99) < 0.0 and fresnel_diffuse_reflectance(4.0) > 1.0
 
 
 def test_material_rejects_non_numeric_eta():

@@ -21,7 +21,7 @@ import inspect
 from dataclasses import dataclass, field
 
 from meshshade.bench.scenes import SCENES, Scene
-from meshshade.errors import MeshshadeError
+from meshshade.errors import ParameterError
 from meshshade.transport import MODELS, bake
 
 KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons")
@@ -114,13 +114,13 @@ def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchCo
     models = tuple(MODELS) if models is None else tuple(models)
     bad = [m for m in models if m not in MODELS]
     if bad:
-        raise MeshshadeError(f"unknown model {bad[0]!r}; choose among {', '.join(MODELS)}")
+        raise ParameterError(f"unknown model {bad[0]!r}; choose among {', '.join(MODELS)}")
     picked = cfg.scenes if scenes is None else tuple(scenes)
     for n in picked:
         if not isinstance(n, Scene) and n not in SCENES:
-            raise MeshshadeError(f"unknown scene {n!r}; choose among {', '.join(SCENES)}")
+            raise ParameterError(f"unknown scene {n!r}; choose among {', '.join(SCENES)}")
     if not picked:
-        raise MeshshadeError("no scene chosen")
+        raise ParameterError("no scene chosen")
     d = bake_defaults()
     runs = []
     for sc in (n if isinstance(n, Scene) else SCENES[n] for n in picked):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshshade.errors import MeshshadeError
+from meshshade.errors import ParameterError
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import capped_cylinder, icosphere, torus
 from meshshade.io import read_mesh_arrays
@@ -65,12 +65,12 @@ class Scene:
         elif self.shape == "mesh":
             path = shared_meshes_dir() / self.mesh_file
             if not path.exists():
-                raise MeshshadeError(f"scene {self.name}: {path} not found (../shared/meshes is only in the "
+                raise ParameterError(f"scene {self.name}: {path} not found (../shared/meshes is only in the "
                                      "developers' workspace)")
             V, F = read_mesh_arrays(path)
             V = (V - 0.5 * (V.min(axis=0) + V.max(axis=0))) * (self.size_mm / np.ptp(V, axis=0).max())
         else:
-            raise MeshshadeError(f"unknown scene shape {self.shape!r}")
+            raise ParameterError(f"unknown scene shape {self.shape!r}")
         return Mesh.from_arrays(V, F, source=f"bench:{self.name}:L{L}")
 
     def make_light(self, mesh):

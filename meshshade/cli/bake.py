@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 
 from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args,
-                                   add_mesh_args, add_model_arg, lights_from_args, mesh_and_material)
+                                   add_mesh_args, add_model_arg, lights_from_args, mesh_and_material, number)
 from meshshade.io import check_output_path
 from meshshade.output.bake_file import write_bake
 from meshshade.transport import bake, describe_result
+from meshshade.transport.baking import check_bake_options
 
 HELP = "per-vertex radiance of a translucent mesh, written as a coloured PLY"
 
@@ -18,9 +19,9 @@ def add_bake_args(p: argparse.ArgumentParser) -> None:
     add_material_args(p)
     add_light_arg(p)
     add_model_arg(p)
-    p.add_argument("--cutoff-tol", type=float, default=1e-4,
+    p.add_argument("--cutoff-tol", type=number, default=1e-4,
                    help="neighbourhood radius: reflectance beyond it below this fraction (default 1e-4)")
-    p.add_argument("--curvature-radius", type=float, default=None, metavar="MM",
+    p.add_argument("--curvature-radius", type=number, default=None, metavar="MM",
                    help="neighbourhood for the curvature fit [mm] (default 2 mean edge lengths)")
     add_geodesic_arg(p)
     add_far_field_arg(p)
@@ -30,11 +31,13 @@ def add_bake_args(p: argparse.ArgumentParser) -> None:
 
 
 def run_bake(args) -> int:
-    check_output_path(args.out, [args.mesh])
+    check_output_path(args.out, [args.mesh], suffixes=(".ply",))
     if args.npz:
-        check_output_path(args.npz, [args.mesh, args.out])
+        check_output_path(args.npz, [args.mesh, args.out], suffixes=(".npz",), option="--npz")
+    check_bake_options(args.model, args.cutoff_tol, args.curvature_radius, args.geodesic, args.far_field)
+    lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
-    result = bake(mesh, material, lights_from_args(args, mesh), model=args.model, cutoff_tol=args.cutoff_tol,
+    result = bake(mesh, material, lights, model=args.model, cutoff_tol=args.cutoff_tol,
                   curvature_radius_mm=args.curvature_radius, progress=not args.quiet, geodesic=args.geodesic,
                   far_field=args.far_field)
     write_bake(result, mesh, args.out, npz=args.npz)

@@ -7,7 +7,7 @@ import sys
 from meshshade.bench.plan import bench_plan
 from meshshade.bench.report import write_bench
 from meshshade.bench.runner import run_bench as run_benchmark
-from meshshade.cli.options import parse_names
+from meshshade.cli.options import integer, parse_names
 from meshshade.io import output_dir
 from meshshade.errors import MeshshadeError
 
@@ -19,10 +19,10 @@ def add_bench_args(p: argparse.ArgumentParser) -> None:
                    help="output folder (created): accuracy_vs_time.csv, pareto.png, table.md, metadata.json")
     p.add_argument("--quick", action="store_true",
                    help="fewer scenes and knob values, coarser meshes, fewer photons (under 3 min on 2 idle cores)")
-    p.add_argument("--seed", type=int, default=0, help="seed of every Monte Carlo run (default 0)")
+    p.add_argument("--seed", type=integer(0), default=0, help="seed of every Monte Carlo run (default 0)")
     p.add_argument("--scenes", metavar="LIST", help="comma list of scene names (default: the mode's set)")
     p.add_argument("--models", metavar="LIST", help="comma list of models (default: every model of the bake)")
-    p.add_argument("--mc-photons", type=int, default=None, metavar="N",
+    p.add_argument("--mc-photons", type=integer(16), default=None, metavar="N",
                    help="photons of each Monte Carlo reference (default 1000000 quick, 4000000 full)")
 
 

@@ -9,7 +9,7 @@ import argparse
 import warnings
 
 from meshshade.check import check_mesh, format_check, report_to_json
-from meshshade.cli.options import add_material_args, add_mesh_args, material_from_args, material_given
+from meshshade.cli.options import add_material_args, add_mesh_args, material_from_args, material_given, number
 from meshshade.errors import MeshshadeError
 from meshshade.geometry.mesh import MeshDefectWarning
 from meshshade.io import check_output_path, load_mesh, write_text
@@ -21,14 +21,14 @@ HELP = ("what the pipeline will make of a mesh: size in mm and transport lengths
 def add_check_args(p: argparse.ArgumentParser) -> None:
     add_mesh_args(p)
     add_material_args(p)
-    p.add_argument("--curvature-radius", type=float, default=None, metavar="MM",
+    p.add_argument("--curvature-radius", type=number, default=None, metavar="MM",
                    help="neighbourhood for the curvature fit [mm] (default 2 mean edge lengths, as bake)")
     p.add_argument("--json", metavar="FILE", help="also write the full report as JSON")
 
 
 def run_check(args) -> int:
     if args.json:
-        check_output_path(args.json, [args.mesh])
+        check_output_path(args.json, [args.mesh], suffixes=(".json",), option="--json")
     cr = args.curvature_radius
     if cr is not None and not (cr > 0 and cr < float("inf")):
         raise MeshshadeError(f"--curvature-radius must be a positive number of mm, got {cr}")

@@ -6,10 +6,11 @@ from __future__ import annotations
 import argparse
 import json
 
-from meshshade.cli.options import add_image_args, image_scene_from_args
+from meshshade.cli.options import add_image_args, image_scene_from_args, integer, number
 from meshshade.io import output_dir
-from meshshade.errors import MeshshadeError
-from meshshade.output.compare import run_comparison, save_comparison
+from meshshade.output.compare import check_floor, check_models, run_comparison, save_comparison
+from meshshade.output.render import check_image_size
+from meshshade.output.tonemap import check_tonemap_options
 from meshshade.transport import MODELS
 
 HELP = "two models, same camera and lights: split image, relative-difference heat map, stats.json"
@@ -19,21 +20,22 @@ def add_compare_args(p: argparse.ArgumentParser) -> None:
     add_image_args(p)
     p.add_argument("--models", default="curved,dipole",
                    help=f"two models A,B among {', '.join((*MODELS, 'mc'))} (default curved,dipole)")
-    p.add_argument("--floor", type=float, default=1e-3, help="relative radiance floor for the ratios")
-    p.add_argument("--photons", type=int, default=100_000, help="photons when one model is mc (default 1e5)")
+    p.add_argument("--floor", type=number, default=1e-3, help="relative radiance floor for the ratios")
+    p.add_argument("--photons", type=integer(16), default=100_000, help="photons when one model is mc (default 1e5)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
 
 
 def run_compare(args) -> int:
-    models = tuple(m.strip() for m in args.models.split(",") if m.strip())
-    if len(models) != 2:
-        raise MeshshadeError(f"--models needs two models A,B, got {args.models!r}")
+    models = check_models(tuple(m.strip() for m in args.models.split(",") if m.strip()))
+    check_floor(args.floor)
+    check_image_size(args.width, args.height, args.spp)
+    check_tonemap_options(args.tonemap, args.bias)
     scene = image_scene_from_args(args)
     out = output_dir(args.out)
     cmp = run_comparison(scene.mesh, scene.material, scene.lights, models, camera=scene.camera, width=args.width,
                          height=args.height, spp=args.spp, per_pixel=args.per_pixel, cutoff_tol=args.cutoff_tol,
                          floor=args.floor, mc_photons=args.photons, geodesic=args.geodesic,
-                         far_field=args.far_field)
+                         far_field=args.far_field, progress=False if args.quiet else "compare")
     for p in save_comparison(cmp, out, models=models, metadata=scene.metadata, operator=args.tonemap,
                              bias=args.bias, background=scene.background):
         print(f"wrote {p}")

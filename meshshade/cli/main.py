@@ -1,20 +1,36 @@
 """Command-line interface: a thin layer over the Python API (meshio pattern).
 
 ``main(argv=None) -> int``; one module per subcommand with an ``add_<cmd>_args`` / ``run_<cmd>`` pair and its
-one-line ``HELP`` (:data:`COMMANDS`), shared options in :mod:`meshshade.cli.options`. Only
-:class:`~meshshade.errors.MeshshadeError` is caught: one line on stderr and exit code 2; warnings are one line
-each (``meshshade: warning: ...``); Ctrl-C is one line and exit code 130.
+one-line ``HELP`` (:data:`COMMANDS`), shared options in :mod:`meshshade.cli.options`.
+
+What a user sees when something goes wrong, and the exit codes:
+
+* a mistake (:class:`~meshshade.errors.MeshshadeError`, a malformed option, out of memory, standard output that
+  cannot be written): one line ``meshshade: error: ...`` on stderr and exit code 2; warnings are one line each
+  (``meshshade: warning: ...``);
+* Ctrl-C (SIGINT), SIGTERM and SIGHUP: one line ``meshshade: interrupted ...`` and exit code 128 + the signal's
+  number (130, 143, 129);
+* standard output closed by its reader (``meshshade profile ... | head -1``): silence and exit code 141, as a
+  program killed by SIGPIPE.
+
+Every command runs inside one :func:`meshshade.io.output_transaction`: its output files appear together when it
+succeeds, and none of them (nor a folder it created) when it fails or is interrupted.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import re
+import signal
 import sys
+import threading
 import warnings
 
 from meshshade import __version__
 from meshshade.cli import bake, bench, check, compare, demo, mc, profile, render
 from meshshade.errors import MeshshadeError
+from meshshade.io import discard_stdout, output_transaction
 
 #: subcommand name -> (add_<cmd>_args, run_<cmd>, one-line help), in the order ``meshshade --help`` lists them
 COMMANDS = {
@@ -28,9 +44,29 @@ COMMANDS = {
     "bench": (bench.add_bench_args, bench.run_bench, bench.HELP),
 }
 
+#: signals that stop a run like Ctrl-C does (temporary files removed, exit code 128 + number)
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+class Interrupted(KeyboardInterrupt):
+    """Raised by the CLI's handler of SIGTERM and SIGHUP (a KeyboardInterrupt, so every clean-up that handles
+    Ctrl-C handles them too)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (``meshshade: error: bake: ...``) instead of the usage block."""
+
+    def error(self, message):  # noqa: D401 - argparse's hook
+        command = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        self.exit(2, f"meshshade: error: {command}{message} (see {self.prog} --help)\n")
+
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="meshshade",
         description="Curvature-aware diffusion shading of translucent meshes (lengths in mm, coefficients 1/mm).")
     parser.add_argument("--verbose", "-v", action="store_true", help="log what is computed and chosen")
@@ -43,13 +79,102 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
+
+
+def join_negative_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """``--azimuth -90,0,90`` -> ``--azimuth=-90,0,90`` for every option of the chosen subcommand that takes one
+    value: argparse would take a value that starts with ``-`` and is not a single number for an option."""
+    sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+    name = next((a for a in argv if a in COMMANDS), None)
+    if sub is None or name is None:
+        return list(argv)
+    takes_value = {opt for action in sub.choices[name]._actions if action.nargs is None and action.option_strings
+                   for opt in action.option_strings}
+    out, i = [], 0
+    while i < len(argv):
+        arg = argv[i]
+        if arg in takes_value and i + 1 < len(argv) and _NEGATIVE_VALUE.match(argv[i + 1]):
+            out.append(f"{arg}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(arg)
+            i += 1
+    return out
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):
     print(f"meshshade: warning: {message}", file=sys.stderr)
 
 
+def _raise_interrupted(signum, frame):
+    raise Interrupted(signum)
+
+
+@contextlib.contextmanager
+def _stop_signals_interrupt():
+    """While a command runs, SIGTERM and SIGHUP raise :class:`Interrupted` as Ctrl-C raises KeyboardInterrupt
+    (only in the main thread, where Python delivers signals; the previous handlers are restored)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    for sig in STOP_SIGNALS:
+        if sig != signal.SIGINT:
+            previous[sig] = signal.signal(sig, _raise_interrupted)
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+class StdoutError(MeshshadeError):
+    """Standard output cannot be written (a full device, an I/O error)."""
+
+
+class _GuardedStdout:
+    """``sys.stdout`` while a command runs: a failed write or flush becomes :class:`StdoutError` (one line, exit
+    code 2); a closed pipe stays BrokenPipeError (quiet exit 141)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _guard(self, method, *args):
+        try:
+            return method(*args)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise StdoutError(f"cannot write to standard output: {exc.strerror or exc}") from None
+
+    def write(self, text):
+        return self._guard(self._stream.write, text)
+
+    def flush(self):
+        return self._guard(self._stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _guarded_stdout():
+    original = sys.stdout
+    sys.stdout = _GuardedStdout(original)
+    try:
+        yield
+    finally:
+        sys.stdout = original
+
+
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = parser.parse_args(join_negative_values(parser, argv))
+    except SystemExit as exc:  # --help, --version, or the one-line error of Parser.error: a code, not an exit
+        return exc.code if isinstance(exc.code, int) else 2
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="meshshade: %(message)s")
     if args.command is None:
         parser.print_help()
@@ -58,13 +183,30 @@ def main(argv=None) -> int:
     with warnings.catch_warnings():
         warnings.showwarning = _one_line_warning
         try:
-            return run(args)
+            with _stop_signals_interrupt(), _guarded_stdout():
+                with output_transaction():
+                    code = run(args)
+                sys.stdout.flush()  # a full device or a closed pipe fails here, inside the handlers below
+            return code
         except MeshshadeError as exc:
+            if isinstance(exc, StdoutError):
+                discard_stdout()
             print(f"meshshade: error: {exc}", file=sys.stderr)
             return 2
+        except Interrupted as exc:
+            name = signal.Signals(exc.signum).name
+            print(f"meshshade: interrupted by {name}; no partial output was left", file=sys.stderr)
+            return 128 + exc.signum
         except KeyboardInterrupt:
             print("meshshade: interrupted; no partial output was left", file=sys.stderr)
             return 130
+        except BrokenPipeError:  # the reader of stdout went away (| head): stop quietly, as `cat` would
+            discard_stdout()
+            return 141
+        except MemoryError as exc:
+            detail = str(exc).strip() or "the job needs more memory than the machine has"
+            print(f"meshshade: error: out of memory: {detail}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

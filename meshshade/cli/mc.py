@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 
-from meshshade.cli.options import (add_light_arg, add_material_args, add_mesh_args, lights_from_args,
-                                   mesh_and_material)
-from meshshade.errors import MeshshadeError
+from meshshade.cli.options import (add_light_arg, add_material_args, add_mesh_args, integer, lights_from_args,
+                                   mesh_and_material, number)
 from meshshade.io import check_output_path
 from meshshade.montecarlo import describe_mc, simulate
+from meshshade.montecarlo.simulation import check_mc_options
 from meshshade.output.mc_file import write_mc
 
 HELP = "Monte Carlo reference: random walk inside the mesh, exitance with standard errors"
@@ -18,14 +18,15 @@ def add_mc_args(p: argparse.ArgumentParser) -> None:
     add_mesh_args(p)
     add_material_args(p, with_g=True)
     add_light_arg(p)
-    p.add_argument("--photons", type=int, default=None, metavar="N", help="photons per channel (default 100000)")
-    p.add_argument("--time-budget", type=float, default=None, metavar="SECONDS",
+    p.add_argument("--photons", type=integer(16), default=None, metavar="N",
+                   help="photons per channel (default 100000; 1e5 or 100_000 notation accepted)")
+    p.add_argument("--time-budget", type=number, default=None, metavar="SECONDS",
                    help="wall-clock budget (with --photons: whichever comes first): emission stops when the photons "
                         "in flight are predicted to finish in time; at 1.25x the budget the rest are cut off and "
                         "reported as 'lost'")
-    p.add_argument("--pool", type=int, default=None, metavar="N",
+    p.add_argument("--pool", type=integer(1), default=None, metavar="N",
                    help="photons walked together (default 262144; results do not depend on it beyond rounding)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same result)")
+    p.add_argument("--seed", type=integer(0), default=0, help="random seed (same seed, same result)")
     p.add_argument("--out", required=True, metavar="OUT.ply",
                    help="PLY with radiance_r/g/b (W/mm^2), stderr_r/g/b and tone-mapped red/green/blue")
     p.add_argument("--npz", metavar="OUT.npz", help="also save face/vertex powers, stderrs, beam distance")
@@ -33,21 +34,18 @@ def add_mc_args(p: argparse.ArgumentParser) -> None:
 
 
 def run_mc(args) -> int:
-    outs = [o for o in (args.out, args.npz, args.summary) if o]
-    for i, o in enumerate(outs):
-        check_output_path(o, [args.mesh, *outs[:i]])
+    outs = [(o, option, suffix) for o, option, suffix in
+            ((args.out, "--out", ".ply"), (args.npz, "--npz", ".npz"), (args.summary, "--summary", ".json")) if o]
+    for i, (o, option, suffix) in enumerate(outs):
+        check_output_path(o, [args.mesh, *(x for x, _, _ in outs[:i])], suffixes=(suffix,), option=option)
     photons = args.photons if args.photons is not None else (None if args.time_budget else 100_000)
-    if (photons is not None and photons < 16) or (args.time_budget is not None and args.time_budget <= 0):
-        raise MeshshadeError("--photons must be >= 16 and --time-budget > 0")
-    if args.pool is not None and args.pool < 1:
-        raise MeshshadeError(f"--pool must be >= 1, got {args.pool}")
-    if args.seed < 0:
-        raise MeshshadeError(f"--seed must be >= 0, got {args.seed}")
+    check_mc_options(photons, seed=args.seed, time_budget=args.time_budget, pool=args.pool)
+    lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
-    result = simulate(mesh, material, lights_from_args(args, mesh), photons=photons, seed=args.seed,
+    result = simulate(mesh, material, lights, photons=photons, seed=args.seed,
                       time_budget=args.time_budget, pool=args.pool, progress=not args.quiet)
     write_mc(result, mesh, args.out, npz=args.npz, summary=args.summary)
     if not args.quiet:
         print(describe_mc(result))
-        print("wrote " + ", ".join(outs))
+        print("wrote " + ", ".join(o for o, _, _ in outs))
     return 0

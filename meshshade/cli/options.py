@@ -7,6 +7,8 @@ the parsed options into the objects of the Python API. Directories and files are
 from __future__ import annotations
 
 import argparse
+import decimal
+import math
 from dataclasses import dataclass
 
 from meshshade.errors import MeshshadeError
@@ -16,20 +18,56 @@ from meshshade.light import parse_light_spec
 from meshshade.materials import JENSEN_2001_PRESETS, Material, material_from_options
 from meshshade.output.render import Camera, parse_camera
 from meshshade.transport import MODELS, describe_scale
+from meshshade.units import mm_per_unit
 
 LIGHT_HELP = ("light SPEC (repeatable), positions in the mesh's units: beam:ox,oy,oz:dx,dy,dz[:power W[:radius]] | "
               "directional:dx,dy,dz[:irradiance W/mm^2] | point:x,y,z[:intensity W/sr]")
 
 
 # --- numbers ---------------------------------------------------------------------------------------------
+def number(text: str) -> float:
+    """argparse type: a finite real number (``nan`` and ``inf`` are refused; the option's own range is checked by
+    the Python API, which names it)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def integer(minimum: int | None = None):
+    """argparse type factory: a whole number, written as digits (``100000``, ``100_000``) or in exponent notation
+    when that is exact (``1e5``, ``2.5e6``), and at least ``minimum``."""
+    def parse(text: str) -> int:
+        try:
+            value = decimal.Decimal(str(text).strip().replace("_", ""))
+        except decimal.InvalidOperation:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if not value.is_finite() or value != value.to_integral_value():
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}")
+        if abs(value.adjusted()) > 4300:  # beyond Python's int-to-text limit: no count or seed is that large
+            raise argparse.ArgumentTypeError(f"{text!r} is too large")
+        if minimum is not None and value < minimum:
+            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {text!r}")
+        return int(value)
+
+    parse.__name__ = "integer" if minimum is None else f"integer >= {minimum}"
+    return parse
+
+
 def parse_floats(text: str, what: str, n: tuple[int, ...] | None = None) -> list[float]:
-    """Comma-separated numbers of option ``what``; ``n``: the allowed counts (default: any, at least one)."""
+    """Comma-separated finite numbers of option ``what``; ``n``: the allowed counts (default: any, at least
+    one)."""
     try:
         vals = [float(x) for x in str(text).split(",") if x.strip() != ""]
     except ValueError:
         raise MeshshadeError(f"{what}: expected comma-separated numbers, got {text!r}") from None
     if not vals or (n is not None and len(vals) not in n):
         raise MeshshadeError(f"{what}: expected {' or '.join(map(str, n or (1,)))} value(s), got {text!r}")
+    if not all(map(math.isfinite, vals)):
+        raise MeshshadeError(f"{what}: expected finite numbers, got {text!r}")
     return vals
 
 
@@ -45,9 +83,9 @@ def add_material_args(p: argparse.ArgumentParser, *, with_g: bool = False) -> No
                    help="measured preset of Jensen et al. 2001: " + ", ".join(sorted(JENSEN_2001_PRESETS)))
     g.add_argument("--sigma-s-prime", metavar="S", help="reduced scattering [1/mm]: one value or R,G,B")
     g.add_argument("--sigma-a", metavar="A", help="absorption [1/mm]: one value or R,G,B")
-    g.add_argument("--eta", type=float, help="relative index of refraction (default 1.3)")
+    g.add_argument("--eta", type=number, help="relative index of refraction (default 1.3)")
     if with_g:
-        g.add_argument("--g", type=float, default=0.0, help="Henyey-Greenstein anisotropy (Monte Carlo only)")
+        g.add_argument("--g", type=number, default=0.0, help="Henyey-Greenstein anisotropy (Monte Carlo only)")
 
 
 def material_given(args) -> bool:
@@ -80,12 +118,17 @@ def mesh_and_material(args) -> tuple[Mesh, Material]:
 
 
 def add_light_arg(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--light", action="append", required=True, metavar="SPEC", help=LIGHT_HELP)
+    p.add_argument("--light", action="append", default=[], metavar="SPEC", help=LIGHT_HELP)
 
 
-def lights_from_args(args, mesh: Mesh) -> list:
-    """The ``--light`` specs as light objects, positions converted from the mesh's units to mm."""
-    return [parse_light_spec(s, mm_per_unit=mesh.mm_per_unit) for s in args.light]
+def lights_from_args(args, mesh: Mesh | None = None) -> list:
+    """The ``--light`` specs as light objects, positions converted from the mesh's units (``--units``) to mm.
+
+    Needs no mesh, so commands check their lights before any work."""
+    if not args.light:
+        raise MeshshadeError("give at least one light: --light SPEC (" + LIGHT_HELP.split(": ", 1)[1] + ")")
+    scale = mesh.mm_per_unit if mesh is not None else mm_per_unit(args.units)
+    return [parse_light_spec(s, mm_per_unit=scale) for s in args.light]
 
 
 # --- transport -----------------------------------------------------------------------------------------
@@ -114,15 +157,15 @@ def add_image_args(p: argparse.ArgumentParser) -> None:
     add_mesh_args(p)
     add_material_args(p)
     add_light_arg(p)
-    p.add_argument("--cutoff-tol", type=float, default=1e-4, help="neighbourhood tolerance (default 1e-4)")
-    p.add_argument("--width", type=int, default=512)
-    p.add_argument("--height", type=int, default=512)
-    p.add_argument("--spp", type=int, default=4, help="samples per pixel, jittered strata (default 4)")
+    p.add_argument("--cutoff-tol", type=number, default=1e-4, help="neighbourhood tolerance (default 1e-4)")
+    p.add_argument("--width", type=integer(1), default=512, help="image width in pixels (default 512)")
+    p.add_argument("--height", type=integer(1), default=512, help="image height in pixels (default 512)")
+    p.add_argument("--spp", type=integer(1), default=4, help="samples per pixel, jittered strata (default 4)")
     p.add_argument("--camera", default="auto", help="auto[:dx,dy,dz] (default, view along -z) | "
                    "persp:ex,ey,ez:tx,ty,tz:ux,uy,uz:FOV_DEG | ortho:eye:target:up:HEIGHT (mesh units)")
     p.add_argument("--background", default="transparent", help="transparent (PNG alpha) or R,G,B in [0, 1]")
     p.add_argument("--tonemap", default="drago", choices=["drago", "exposure"], help="PNG tone mapping")
-    p.add_argument("--bias", type=float, default=0.85, help="Drago bias (default 0.85)")
+    p.add_argument("--bias", type=number, default=0.85, help="Drago bias (default 0.85)")
     add_geodesic_arg(p)
     add_far_field_arg(p)
     p.add_argument("--per-pixel", action="store_true",
@@ -142,11 +185,21 @@ class ImageScene:
     metadata: dict
 
 
+def background_from_args(args) -> list | None:
+    """``--background``: None (transparent) or three numbers in [0, 1]."""
+    if args.background == "transparent":
+        return None
+    rgb = parse_floats(args.background, "--background", (3,))
+    if not all(0.0 <= x <= 1.0 for x in rgb):
+        raise MeshshadeError(f"--background: expected transparent or R,G,B in [0, 1], got {args.background!r}")
+    return rgb
+
+
 def image_scene_from_args(args) -> ImageScene:
+    lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
-    lights = lights_from_args(args, mesh)
     camera = parse_camera(args.camera, mesh, mesh.mm_per_unit)
-    bg = None if args.background == "transparent" else parse_floats(args.background, "--background", (3,))
+    bg = background_from_args(args)
     meta = {"material": material.describe(), "lights": "; ".join(args.light), "camera": camera.describe(),
             "units": "radiance W/(mm^2 sr) per unit light power/irradiance/intensity; lengths mm",
             "mesh": str(args.mesh)}

@@ -6,11 +6,10 @@ import argparse
 
 import numpy as np
 
-from meshshade.cli.options import add_material_args, material_from_args, parse_floats
-from meshshade.errors import MeshshadeError
-from meshshade.io import write_figure, write_text
+from meshshade.cli.options import add_material_args, integer, material_from_args, number, parse_floats
+from meshshade.io import check_output_path, write_figure, write_text
 from meshshade.output.report import format_profile_table, profile_csv_text, profile_figure
-from meshshade.profiles import Shape, profile_rows
+from meshshade.profiles import Shape, profile_distances, profile_rows
 
 HELP = "reflectance vs geodesic distance on a plane, sphere, cylinder, saddle or curvature pair"
 
@@ -20,30 +19,31 @@ def add_profile_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--shape", default="plane", choices=["plane", "sphere", "cylinder", "saddle"],
                    help="surface the profile lives on (default plane); --k1/--k2 give any curvature pair")
     p.add_argument("--radius", metavar="MM", help="radius of sphere/cylinder/saddle [mm]; several: 5,10,50")
-    p.add_argument("--k1", type=float, help="first principal curvature at the entry point [1/mm] (with --k2)")
-    p.add_argument("--k2", type=float, help="second principal curvature [1/mm]; k > 0 is convex")
+    p.add_argument("--k1", type=number, help="first principal curvature at the entry point [1/mm] (with --k2)")
+    p.add_argument("--k2", type=number, help="second principal curvature [1/mm]; k > 0 is convex")
     p.add_argument("--azimuth", default="0", metavar="DEG",
                    help="exit direction from the first principal direction [deg]; several: 0,45,90")
     p.add_argument("--models", default="dipole,exact",
                    help="comma list among dipole,exact,curved,mc (default dipole,exact)")
     p.add_argument("--distances", metavar="LIST", help="geodesic distances [mm], e.g. 0.1,0.5,1")
-    p.add_argument("--max-distance", type=float, default=None, metavar="MM",
+    p.add_argument("--max-distance", type=number, default=None, metavar="MM",
                    help="with --samples: evenly spaced distances 0..MM (default 20 mm)")
-    p.add_argument("--samples", type=int, default=41, metavar="N", help="number of distances (default 41)")
-    p.add_argument("--rtol", type=float, default=1e-10, help="relative tolerance of the exact series")
+    p.add_argument("--samples", type=integer(2), default=41, metavar="N", help="number of distances (default 41)")
+    p.add_argument("--rtol", type=number, default=1e-10, help="relative tolerance of the exact series")
     p.add_argument("--csv", metavar="FILE", help="write model,channel,distance_mm,reflectance_per_mm2 rows")
     p.add_argument("--plot", metavar="FILE.png", help="plot log reflectance vs geodesic distance")
 
 
 def run_profile(args) -> int:
+    for path, option in ((args.csv, "--csv"), (args.plot, "--plot")):
+        if path:
+            check_output_path(path, option=option)
     material = material_from_args(args)
     models = [m.strip().lower() for m in args.models.split(",") if m.strip()]
     if args.distances is not None:
         distances = np.array(parse_floats(args.distances, "--distances"))
     else:
-        if args.samples < 2:
-            raise MeshshadeError("--samples must be at least 2")
-        distances = np.linspace(0.0, 20.0 if args.max_distance is None else args.max_distance, args.samples)
+        distances = profile_distances(20.0 if args.max_distance is None else args.max_distance, args.samples)
     azimuths = parse_floats(args.azimuth, "--azimuth")
     if args.k1 is not None or args.k2 is not None:
         shapes = [Shape.make("point", k1=args.k1, k2=args.k2)]

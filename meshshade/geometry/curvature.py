@@ -20,7 +20,23 @@ Conventions (docs/physics.md §1.3)
 Robustness
 ----------
 libigl is called on the non-degenerate faces and the vertices they use only (it crashes on unreferenced
-vertices and NaN-normal faces). A vertex where it fails gets the median ``k1``, ``k2`` of its valid neighbours
+vertices and NaN-normal faces), and never where its fit plane is undefined. libigl takes the plane of a vertex's
+fit from the sum of the unit vertex normals over the vertex's neighbourhood (``getProjPlane``). Two ways that
+fails, found by experiment on libigl 2.6 (``tests/geometry/test_curvature_odd_meshes.py``): (1) a vertex whose
+area-weighted normal is exactly zero gets a NaN normal (libigl normalises the rows without a check), and every
+neighbourhood that contains it makes ``rotateForward`` recurse without end: a certain segmentation fault, exit 139
+(a "bow-tie": two tetrahedra mirrored through a shared vertex; faces duplicated with the opposite winding); (2) a
+neighbourhood whose normals sum to zero divides 0 by 0 and reads an uninitialised index (``chooseMax``): garbage,
+or a crash, depending on what the stack holds (a small closed symmetric component, e.g. an octahedron or a cube
+smaller than the fit radius, or a thin symmetric rod). ``_fit_plane_undefined`` repeats libigl's neighbourhood
+search exactly (``getSphere``: vertices reachable through vertices closer than ``radius`` mean edge lengths,
+topped up to six by the nearest further ones) and flags every vertex whose normal, or whose neighbourhood's sum of
+normals, cancels to ``PLANE_CANCEL_TOL`` (a tolerance, so that rounding differences from libigl's own sums cannot
+matter); the faces around flagged vertices are left out of libigl's input (repeated until nothing is flagged) and
+those vertices take the fallback below, counted in ``n_no_plane``. Unreferenced vertices and degenerate faces are
+removed beforehand (see above); isolated triangles and components of fewer than six vertices are reported bad by
+libigl before it looks for a plane; these take the fallback as well.
+A vertex where it fails gets the median ``k1``, ``k2`` of its valid neighbours
 (up to ``FALLBACK_RINGS`` rings out) and a neighbour's first direction projected onto its tangent plane; a vertex
 with no valid vertex within those rings gets the umbilic value ``k1 = k2 = H`` of the cotangent Laplacian.
 Failure means: reported bad by libigl, non-finite, in a component too small to fit a quadric, or an outlier with
@@ -49,12 +65,14 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import sparse
 
 from meshshade.geometry.mesh import MeshDefectWarning, face_geometry
 from meshshade.geometry.topology import vertex_adjacency
 
-__all__ = ["PrincipalCurvatures", "principal_curvatures", "DEFAULT_RADIUS_EDGES", "FALLBACK_RINGS", "OUTLIER_KH"]
+__all__ = ["PrincipalCurvatures", "principal_curvatures", "DEFAULT_RADIUS_EDGES", "FALLBACK_RINGS", "OUTLIER_KH",
+           "PLANE_CANCEL_TOL"]
 
 #: default neighbourhood radius, in mean edge lengths (libigl's minimum; the most accurate on smooth meshes)
 DEFAULT_RADIUS_EDGES = 2.0
@@ -63,6 +81,13 @@ FALLBACK_RINGS = 3
 #: |k| * (mean incident edge length) above this is treated as a failed fit (a circle through vertices spaced h
 #: apart has |k| <= 2 / h, so 4 / h is beyond anything the mesh can represent)
 OUTLIER_KH = 4.0
+#: a vertex's fit plane is undefined (libigl would crash) when its area-weighted normal, or the sum of the unit
+#: normals over its fit neighbourhood, is no longer than this fraction of what cancelled (see Robustness)
+PLANE_CANCEL_TOL = 1e-9
+#: rounds of leaving faces out of libigl's input before giving up on the fit altogether (each round removes faces)
+MAX_EXCLUSION_ROUNDS = 32
+#: libigl's minimum neighbourhood size (``getSphere(..., min=6)``; fewer vertices: reported bad, no plane)
+_LIBIGL_MIN_NEIGHBOURS = 6
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,8 +100,10 @@ class PrincipalCurvatures:
     d1, d2 : (n, 3) float64, unit principal directions, ``(d1, d2, normal)`` right-handed
     normals : (n, 3) float64, the area-weighted unit vertex normals used for the frames (0 if unreferenced)
     radius_mm : float, neighbourhood radius actually used (an integer multiple of the mean half-edge length)
-    fallback : (n,) bool, vertices whose values were filled in because libigl failed there
+    fallback : (n,) bool, vertices whose values were filled in because libigl failed there (or was not asked)
     n_unreferenced : int, vertices used by no non-degenerate face (k = 0, arbitrary frame)
+    n_no_plane : int, fallback vertices left out of libigl's fit because the normals cancel there (bow-tie
+        vertices, double-sided faces, small symmetric components; see the module docstring)
     """
 
     k1: np.ndarray
@@ -87,6 +114,7 @@ class PrincipalCurvatures:
     radius_mm: float
     fallback: np.ndarray
     n_unreferenced: int = 0
+    n_no_plane: int = 0
 
     def __iter__(self):
         return iter((self.k1, self.k2, self.d1, self.d2))
@@ -108,7 +136,8 @@ class PrincipalCurvatures:
     def __repr__(self) -> str:
         return (f"PrincipalCurvatures({self.k1.size} vertices, radius_mm={self.radius_mm:.4g}, "
                 f"k1 in [{self.k1.min():.4g}, {self.k1.max():.4g}], k2 in [{self.k2.min():.4g}, "
-                f"{self.k2.max():.4g}], {self.n_fallback} fallback, {self.n_unreferenced} unreferenced)")
+                f"{self.k2.max():.4g}], {self.n_fallback} fallback ({self.n_no_plane} without a fit plane), "
+                f"{self.n_unreferenced} unreferenced)")
 
 
 def _any_tangent(n: np.ndarray) -> np.ndarray:
@@ -148,6 +177,164 @@ def _cotan_mean_curvature(V, F, normals):
     return np.where(np.isfinite(H), H, 0.0)
 
 
+@njit(cache=True)
+def _heap_push(hd, hv, size, d, v):
+    """libstdc++'s ``push_heap`` on (hd, hv)[:size] with libigl's comparer (a min-heap on distance)."""
+    hole = size
+    parent = (hole - 1) // 2
+    while hole > 0 and hd[parent] > d:
+        hd[hole], hv[hole] = hd[parent], hv[parent]
+        hole = parent
+        parent = (hole - 1) // 2
+    hd[hole], hv[hole] = d, v
+    return size + 1
+
+
+@njit(cache=True)
+def _heap_pop(hd, hv, size):
+    """libstdc++'s ``pop_heap`` (``__adjust_heap``, then ``__push_heap``): the top (nearest) pair is removed."""
+    last = size - 1
+    d, v = hd[last], hv[last]
+    n = last                      # the heap's new length
+    hole = 0
+    child = 0
+    while child < (n - 1) // 2:
+        child = 2 * (child + 1)
+        if hd[child] > hd[child - 1]:   # comp(first[child], first[child - 1])
+            child -= 1
+        hd[hole], hv[hole] = hd[child], hv[child]
+        hole = child
+    if (n & 1) == 0 and child == (n - 2) // 2 and n > 0:
+        child = 2 * (child + 1)
+        hd[hole], hv[hole] = hd[child - 1], hv[child - 1]
+        hole = child - 1
+    parent = (hole - 1) // 2
+    while hole > 0 and hd[parent] > d:
+        hd[hole], hv[hole] = hd[parent], hv[parent]
+        hole = parent
+        parent = (hole - 1) // 2
+    if n > 0:
+        hd[hole], hv[hole] = d, v
+    return n
+
+
+@njit(cache=True)
+def _fit_plane_undefined(V, F, indptr, indices, normals, radius, tol):
+    """(n,) bool: vertices where libigl's fit plane is undefined (the sum of unit normals over the neighbourhood
+    cancels to ``tol`` times its size), for libigl's input ``V``, ``F`` (vertices used by no face: False).
+
+    Repeats ``CurvatureCalculator::getSphere`` (libigl 2.6): breadth-first from the vertex through neighbours
+    (``indptr``/``indices``: sorted unique neighbours, as ``igl::adjacency_list``) closer than
+    ``radius * mean half-edge length`` (the mean over the face corners, in face order); while fewer than six
+    vertices were taken, farther neighbours are remembered and then taken nearest first (the same binary heap,
+    so ties break alike). Then the sum of ``normals`` over them in that order, as ``getProjPlane``.
+    """
+    n = V.shape[0]
+    m = F.shape[0]
+    total = 0.0
+    for f in range(m):
+        for j in range(3):
+            a, b = F[f, j], F[f, (j + 1) % 3]
+            dx, dy, dz = V[a, 0] - V[b, 0], V[a, 1] - V[b, 1], V[a, 2] - V[b, 2]
+            total += np.sqrt(dx * dx + dy * dy + dz * dz)
+    r = total / (3 * m) * radius if m > 0 else 0.0
+    out = np.zeros(n, dtype=np.bool_)
+    stamp = np.full(n, -1, dtype=np.int64)
+    vv = np.empty(n, dtype=np.int64)
+    hd = np.empty(n, dtype=np.float64)
+    hv = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        if indptr[i + 1] == indptr[i]:
+            continue
+        x, y, z = V[i, 0], V[i, 1], V[i, 2]
+        head = 0
+        tail = 1
+        vv[0] = i
+        stamp[i] = i
+        hs = 0
+        while head < tail:           # the queue is vv itself: popped in order, appended in order
+            t = vv[head]
+            head += 1
+            for k in range(indptr[t], indptr[t + 1]):
+                nb = indices[k]
+                if stamp[nb] != i:
+                    dx, dy, dz = x - V[nb, 0], y - V[nb, 1], z - V[nb, 2]
+                    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                    if d < r:
+                        vv[tail] = nb
+                        tail += 1
+                    elif head < _LIBIGL_MIN_NEIGHBOURS:
+                        hs = _heap_push(hd, hv, hs, d, nb)
+                    stamp[nb] = i
+        while hs > 0 and tail < _LIBIGL_MIN_NEIGHBOURS:
+            c = hv[0]
+            hs = _heap_pop(hd, hv, hs)
+            vv[tail] = c
+            tail += 1
+            for k in range(indptr[c], indptr[c + 1]):
+                nb = indices[k]
+                if stamp[nb] != i:
+                    dx, dy, dz = x - V[nb, 0], y - V[nb, 1], z - V[nb, 2]
+                    hs = _heap_push(hd, hv, hs, np.sqrt(dx * dx + dy * dy + dz * dz), nb)
+                    stamp[nb] = i
+        if tail < _LIBIGL_MIN_NEIGHBOURS:
+            continue                 # libigl reports the vertex bad before it looks for a plane
+        sa = sb = sc = 0.0
+        for q in range(tail):
+            j = vv[q]
+            sa += normals[j, 0]
+            sb += normals[j, 1]
+            sc += normals[j, 2]
+        size = sa * sa + sb * sb + sc * sc
+        if not (np.isfinite(size) and size > (tol * tail) ** 2):
+            out[i] = True
+    return out
+
+
+def _area_weighted_normals(V, F, n, cross=None):
+    """(n, 3) unit area-weighted vertex normals of faces F (as libigl's ``per_vertex_normals``), and (n,) bool where
+    the incident faces' normals cancel (zero, or below ``PLANE_CANCEL_TOL`` of their summed lengths; True where no
+    face is incident). ``cross``: the faces' ``(v1 - v0) x (v2 - v0)`` if already known."""
+    if cross is None:
+        cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    idx = F.reshape(-1)
+    rep = np.repeat(cross, 3, axis=0)
+    acc = np.stack([np.bincount(idx, weights=rep[:, j], minlength=n) for j in range(3)], 1)
+    mag = np.bincount(idx, weights=np.repeat(np.linalg.norm(cross, axis=1), 3), minlength=n)
+    nn = np.linalg.norm(acc, axis=1)
+    cancel = ~(nn > PLANE_CANCEL_TOL * mag)
+    unit = np.divide(acc, nn[:, None], out=np.zeros_like(acc), where=~cancel[:, None])
+    return unit, cancel
+
+
+def _faces_for_libigl(V, F, r_int: int, cross, adjacency):
+    """The faces of (V, F) that libigl can fit safely: F without the faces around vertices whose fit plane is
+    undefined (their normals cancel, ``_fit_plane_undefined``), repeated until no vertex is flagged (leaving faces
+    out changes the neighbourhoods and the mean edge length). ``cross`` and ``adjacency`` (``vertex_adjacency``)
+    are those of F. Returns (faces, no_plane (n,) bool); the faces are F itself when nothing was flagged."""
+    n = V.shape[0]
+    no_plane = np.zeros(n, bool)
+    Fl = F
+    for _ in range(MAX_EXCLUSION_ROUNDS):
+        if Fl.shape[0] == 0:
+            return Fl, no_plane
+        first = Fl is F
+        unit, cancel = _area_weighted_normals(V, Fl, n, cross if first else None)
+        referenced = np.zeros(n, bool)
+        referenced[Fl.reshape(-1)] = True
+        bad = cancel & referenced
+        if not bad.any():
+            indptr, indices = adjacency if first else vertex_adjacency(n, Fl)
+            bad = _fit_plane_undefined(V, Fl, indptr, indices, unit, float(r_int), PLANE_CANCEL_TOL)
+            if not bad.any():
+                return Fl, no_plane
+        no_plane |= bad
+        Fl = Fl[~bad[Fl].any(axis=1)]
+    # pathological: still flagged after MAX_EXCLUSION_ROUNDS rounds; no fit at all (every vertex falls back)
+    no_plane[F.reshape(-1)] = True
+    return F[:0], no_plane
+
+
 def principal_curvatures(vertices, faces, *, radius_mm: float | None = None) -> PrincipalCurvatures:
     """Principal curvatures ``k1 >= k2`` (1/mm) and unit tangent directions at every vertex.
 
@@ -173,7 +360,7 @@ def principal_curvatures(vertices, faces, *, radius_mm: float | None = None) -> 
     cross, degenerate = face_geometry(V, F)
     keep = ~degenerate
     Fg, cross = F[keep], cross[keep]
-    used = np.unique(Fg)
+    used = np.flatnonzero(np.bincount(Fg.reshape(-1), minlength=n))  # (np.unique: 30x slower on numpy 2.4)
     if used.size == 0:
         raise ValueError("no non-degenerate faces")
     remap = np.full(n, -1, np.int64)
@@ -194,11 +381,27 @@ def principal_curvatures(vertices, faces, *, radius_mm: float | None = None) -> 
         raise ValueError(f"radius_mm must be positive, got {radius_mm!r}")
     r_int = max(2, int(round(radius_mm / h)))
 
-    d1, d2, k1, k2, bad = igl.principal_curvature(Vc, Fc, r_int, False)
-    d1, d2 = np.asarray(d1, np.float64), np.asarray(d2, np.float64)
-    k1, k2 = np.asarray(k1, np.float64).reshape(-1), np.asarray(k2, np.float64).reshape(-1)
+    # libigl only where its fit plane is defined (it would crash elsewhere; see Robustness); NaN = not fitted
+    adjacency = vertex_adjacency(used.size, Fc)
+    Fl, _ = _faces_for_libigl(Vc, Fc, r_int, cross, adjacency)
+    in_fit = np.zeros(used.size, bool)
+    in_fit[Fl.reshape(-1)] = True
+    k1, k2 = np.full(used.size, np.nan), np.full(used.size, np.nan)
+    d1, d2 = np.full((used.size, 3), np.nan), np.full((used.size, 3), np.nan)
+    bad = np.zeros(0, np.int64)
+    if Fl.shape[0]:
+        fit = np.flatnonzero(in_fit)
+        local = np.full(used.size, -1, np.int64)
+        local[fit] = np.arange(fit.size)
+        whole = fit.size == used.size and Fl is Fc  # the usual case: libigl gets the whole mesh
+        Vf = Vc if whole else np.ascontiguousarray(Vc[fit])
+        Ff = Fc if whole else np.ascontiguousarray(local[Fl])
+        e1, e2, c1, c2, bad = igl.principal_curvature(Vf, Ff, r_int, False)
+        d1[fit], d2[fit] = np.asarray(e1, np.float64), np.asarray(e2, np.float64)
+        k1[fit], k2[fit] = np.asarray(c1, np.float64).reshape(-1), np.asarray(c2, np.float64).reshape(-1)
+        bad = fit[np.asarray(bad, dtype=np.int64)]
     failed = ~(np.isfinite(k1) & np.isfinite(k2) & np.isfinite(d1).all(axis=1) & np.isfinite(d2).all(axis=1))
-    failed[np.asarray(bad, dtype=np.int64)] = True
+    failed[bad] = True
     failed |= ~(nn[:, 0] > 0)
     # a curvature radius far below the local edge length cannot come from the vertex positions: fit failure
     a, b = Fc.reshape(-1), np.roll(Fc, -1, axis=1).reshape(-1)
@@ -211,7 +414,7 @@ def principal_curvatures(vertices, faces, *, radius_mm: float | None = None) -> 
     d1[failed], d2[failed] = 0.0, 0.0
 
     if failed.any():
-        k1, k2, d1, unresolved = _fill_from_neighbours(Fc, k1, k2, d1, failed)
+        k1, k2, d1, unresolved = _fill_from_neighbours(adjacency, k1, k2, d1, failed)
         if unresolved.any():
             H = _cotan_mean_curvature(Vc, Fc, normals)
             k1[unresolved] = k2[unresolved] = H[unresolved]
@@ -238,20 +441,29 @@ def principal_curvatures(vertices, faces, *, radius_mm: float | None = None) -> 
         out["d2"][unref] = np.eye(3)[1]
     fallback = np.zeros(n, bool)
     fallback[used] = failed
+    n_no_plane = int(used.size - in_fit.sum())
     if failed.any():
-        warnings.warn(f"principal_curvatures: libigl failed at {int(failed.sum())} vertices (no fit, or |k| above "
-                      f"{OUTLIER_KH:g} / local edge length); filled from neighbours' median", MeshDefectWarning,
-                      stacklevel=2)
+        n_libigl = int(failed.sum()) - n_no_plane
+        parts = ([f"libigl failed at {n_libigl} vertices (no fit, or |k| above {OUTLIER_KH:g} / local edge "
+                  "length)"] if n_libigl else [])
+        if n_no_plane:
+            parts.append(f"{n_no_plane} vertices have no tangent plane (the surface normals cancel within the fit "
+                         "neighbourhood: a non-manifold 'bow-tie' vertex, faces duplicated with opposite winding or "
+                         "a small symmetric component) and were left out of libigl's fit")
+        warnings.warn(f"principal_curvatures: {'; '.join(parts)}; filled from neighbours' median (or the "
+                      "cotangent mean curvature where no neighbour was fitted)", MeshDefectWarning, stacklevel=2)
     for a in (K1, K2, *out.values(), fallback):
         a.setflags(write=False)
     return PrincipalCurvatures(k1=K1, k2=K2, d1=out["d1"], d2=out["d2"], normals=out["normals"],
-                               radius_mm=float(r_int * h), fallback=fallback, n_unreferenced=int(unref.size))
+                               radius_mm=float(r_int * h), fallback=fallback, n_unreferenced=int(unref.size),
+                               n_no_plane=n_no_plane)
 
 
-def _fill_from_neighbours(F, k1, k2, d1, failed):
-    """Median k1, k2 (and the first valid neighbour's d1) of valid vertices within FALLBACK_RINGS rings."""
+def _fill_from_neighbours(adjacency, k1, k2, d1, failed):
+    """Median k1, k2 (and the first valid neighbour's d1) of valid vertices within FALLBACK_RINGS rings
+    (``adjacency``: ``vertex_adjacency`` of the fitted mesh)."""
     nv = k1.size
-    indptr, indices = vertex_adjacency(nv, F)
+    indptr, indices = adjacency
     adj = sparse.csr_matrix((np.ones(indices.size, bool), indices, indptr), shape=(nv, nv))
     valid = ~failed
     todo = np.flatnonzero(failed)

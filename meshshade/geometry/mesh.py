@@ -7,7 +7,10 @@ vertices not (n, 3), faces not triangles, non-integer, negative or out-of-range 
 faces are all degenerate.
 
 Reported (``MeshDefectWarning`` via ``warnings.warn`` plus a line in ``MeshReport.warnings``): open boundary
-edges, non-manifold edges, degenerate faces, several connected components, unreferenced vertices.
+edges, non-manifold edges, non-manifold vertices (several fans of faces that meet only at the vertex: two solids
+touching at a point, a "bow-tie"; where their normals cancel the vertex has no tangent plane and takes the
+fallback curvature, :mod:`meshshade.geometry.curvature`), degenerate faces, several connected components,
+unreferenced vertices.
 
 Repaired (and reported in ``MeshReport.fixed``): inconsistent winding (breadth-first walk over face adjacency)
 and inward orientation of closed components (negative signed volume). A repair only permutes the corners of a
@@ -26,13 +29,15 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+from scipy import sparse
+from scipy.sparse import csgraph
 
 from meshshade.errors import MeshValidationError
 from meshshade.units import mm_per_unit as _mm_per_unit
 from meshshade.geometry import topology
 
 __all__ = ["Mesh", "MeshReport", "MeshDefectWarning", "validate_mesh", "face_geometry", "face_normals",
-           "DEGENERATE_REL_TOL"]
+           "nonmanifold_vertices", "DEGENERATE_REL_TOL"]
 
 #: a face is degenerate when |cross(e1, e2)| <= DEGENERATE_REL_TOL * (longest edge)**2 (scale-free)
 DEGENERATE_REL_TOL = 1e-12
@@ -51,6 +56,7 @@ class MeshReport:
     n_vertices, n_faces : int
     n_boundary_edges : int, edges used by one face only (0 for a closed mesh)
     n_nonmanifold_edges : int, edges used by three or more faces
+    n_nonmanifold_vertices : int, vertices where several fans of faces meet only at the vertex (bow-ties)
     n_degenerate_faces : int, zero-area faces (kept in the face list, excluded from geometry)
     n_components : int, connected components (by shared vertices)
     n_unreferenced_vertices : int, vertices used by no face (kept)
@@ -72,6 +78,7 @@ class MeshReport:
     n_faces_rewound: int = 0
     n_components_flipped: int = 0
     n_winding_conflicts: int = 0
+    n_nonmanifold_vertices: int = 0
     warnings: tuple = ()
     fixed: tuple = ()
     faces: np.ndarray = field(default=None, repr=False)
@@ -181,6 +188,35 @@ def _as_faces(faces, n_vertices: int) -> np.ndarray:
     return F
 
 
+def nonmanifold_vertices(n_vertices: int, faces, topo=None) -> np.ndarray:
+    """(n,) bool: vertices where several fans of faces meet only at the vertex (a "bow-tie").
+
+    The corners of the faces around a vertex form one fan when they are linked through shared edges at that
+    vertex; a manifold vertex (interior or on a boundary) has one fan, a vertex where two solids touch has two.
+    Faces with a repeated index are ignored. ``topo``: ``topology.edge_topology(faces)`` if already built.
+    """
+    F = np.asarray(faces, dtype=np.int64)
+    topo = topo if topo is not None else topology.edge_topology(F)
+    Ft = F[topo.topo_faces]
+    corners = 3 * Ft.shape[0]
+    if corners == 0:
+        return np.zeros(n_vertices, bool)
+    he_edge = topo.halfedge_edge.reshape(-1)
+    start = np.arange(corners)  # half-edge k of face f runs from corner 3f + k to corner 3f + (k + 1) % 3
+    end = start - start % 3 + (start % 3 + 1) % 3
+    fwd = topo.halfedge_forward.reshape(-1)
+    low, high = np.where(fwd, start, end), np.where(fwd, end, start)  # the corners at the edge's lower/higher vertex
+    order = np.argsort(he_edge, kind="stable")
+    first = np.r_[True, he_edge[order][1:] != he_edge[order][:-1]]
+    head = order[np.maximum.accumulate(np.where(first, np.arange(order.size), 0))]  # each edge's first half-edge
+    rows, cols = np.r_[low[order], high[order]], np.r_[low[head], high[head]]
+    graph = sparse.coo_matrix((np.ones(rows.size, np.int8), (rows, cols)), shape=(corners, corners))
+    _, fan = csgraph.connected_components(graph, directed=False)
+    key = np.sort(Ft.reshape(-1) * np.int64(corners) + fan)
+    distinct = key[np.r_[True, key[1:] != key[:-1]]] // corners
+    return np.bincount(distinct, minlength=n_vertices) > 1
+
+
 def validate_mesh(vertices, faces, *, emit_warnings: bool = True) -> MeshReport:
     """Check a triangle mesh, repair its winding and orientation, and report its defects.
 
@@ -213,6 +249,10 @@ def validate_mesh(vertices, faces, *, emit_warnings: bool = True) -> MeshReport:
         warn.append(f"open boundary: {n_boundary} edges are used by one face only (mesh is not closed)")
     if n_nonmanifold:
         warn.append(f"non-manifold: {n_nonmanifold} edges are shared by more than two faces")
+    n_bowtie = int(nonmanifold_vertices(n, F, topo).sum())
+    if n_bowtie:
+        warn.append(f"non-manifold: {n_bowtie} vertices join fans of faces that meet only at the vertex (a "
+                    "'bow-tie', e.g. two solids touching at a point)")
     if n_degen:
         warn.append(f"{n_degen} degenerate (zero-area) faces kept in the face list but excluded from "
                     "areas, normals, curvature and ray casting")
@@ -243,7 +283,7 @@ def validate_mesh(vertices, faces, *, emit_warnings: bool = True) -> MeshReport:
     return MeshReport(n_vertices=n, n_faces=m, n_boundary_edges=n_boundary, n_nonmanifold_edges=n_nonmanifold,
                       n_degenerate_faces=n_degen, n_components=n_comp, n_unreferenced_vertices=n_unref,
                       n_faces_rewound=n_rewound, n_components_flipped=n_flipped, n_winding_conflicts=n_conflicts,
-                      warnings=tuple(warn), fixed=tuple(fixed), faces=F)
+                      n_nonmanifold_vertices=n_bowtie, warnings=tuple(warn), fixed=tuple(fixed), faces=F)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:

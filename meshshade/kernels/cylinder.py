@@ -63,7 +63,7 @@ import numba
 import numpy as np
 from scipy import special
 
-from meshshade.errors import MaterialError, MeshshadeError
+from meshshade.errors import MaterialError, MeshshadeError, ParameterError
 from meshshade.kernels.optics import check_material, diffusion_params, g_func
 
 __all__ = ["cylinder_exact_profile", "cylinder_exact_profile_geodesic"]
@@ -251,7 +251,7 @@ def _regular_part(theta, z, *, r_src, r_e, R, mu, flux, eps):
         _accumulate(k, w, q, z, Q0, W0, u0, r_src, r_e, R, flux, q_lim, eps, n_guess,
                     theta, out, fabs, nused)
         if np.any(nused < 0):
-            raise MeshshadeError("cylinder series did not converge within %d terms" % _MAX_TERMS)
+            raise ParameterError("cylinder series did not converge within %d terms" % _MAX_TERMS)
         total_abs += float(np.dot(w, fabs))
         tail = float(np.max(fabs[-len(_GL_NODES):])) * 2.0 / a_decay
         if tail <= eps * total_abs or total_abs == 0.0:
@@ -334,7 +334,7 @@ def cylinder_exact_profile(theta, z, *, R0_opt, albedo_prime, eta, rtol=1e-8, fu
     th = th.ravel()
     zz = np.abs(zz.ravel())
     if not (np.all(np.isfinite(th)) and np.all(np.isfinite(zz))):
-        raise MeshshadeError("theta and z must be finite")
+        raise ParameterError("theta and z must be finite")
     R = R0 + z_b
     r_src = R0 - z_r
     if r_src >= 0.0:

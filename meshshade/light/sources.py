@@ -2,8 +2,15 @@
 
 Positions are in mm, directions are unit vectors stored as tuples (normalised on construction), powers in W,
 irradiance in W/mm^2, intensity in W/sr. A light that exists is valid: its constructor rejects non-finite or
-malformed vectors, zero directions and negative or non-finite powers with a :class:`~meshshade.errors.LightError`.
-What depends on the mesh (a beam or point light inside it) is checked by :func:`check_outside_mesh`.
+malformed vectors, zero directions, and a power/irradiance/intensity that is not a finite number in
+(0, ``MAX_LIGHT_STRENGTH``] = (0, 1e20], with a :class:`~meshshade.errors.LightError`. What depends on the mesh
+(a beam or point light inside it) is checked by :func:`check_outside_mesh`.
+
+Why 1e20: no physical source comes near it in any of the three units (the Sun emits 3.8e26 W in all directions,
+i.e. 3e25 W/sr; the most intense focused lasers reach ~1e21 W/mm^2 for femtoseconds), and it keeps every result
+finite: exitance is at most the entering power times the largest kernel value, ~sigma_t'^2 <= 1e12 /mm^2 for the
+coefficients materials allow (``materials.SIGMA_MAX``), so radiance stays below ~1e32, within float32 (3.4e38) of
+the PLY and EXR outputs. Zero is refused: a light that carries nothing would give an all-zero result.
 """
 from __future__ import annotations
 
@@ -16,8 +23,11 @@ import numpy as np
 from meshshade.errors import LightError
 from meshshade.geometry.topology import winding_number
 
-__all__ = ["BEAM_SAMPLES", "BeamLight", "DirectionalLight", "PointLight", "Light", "LIGHT_TYPES", "light_list",
-           "check_outside_mesh"]
+__all__ = ["BEAM_SAMPLES", "MAX_LIGHT_STRENGTH", "BeamLight", "DirectionalLight", "PointLight", "Light",
+           "LIGHT_TYPES", "light_list", "check_outside_mesh", "describe_light"]
+
+#: upper bound of a light's power [W], irradiance [W/mm^2] or intensity [W/sr] (module docstring)
+MAX_LIGHT_STRENGTH = 1e20
 
 
 def _vec3(value, what: str) -> tuple[float, float, float]:
@@ -43,15 +53,31 @@ def _direction(value, what: str = "direction") -> tuple[float, float, float]:
     return tuple(float(x) for x in d / norm)
 
 
-def _nonnegative(value, what: str) -> float:
+def _number(value, what: str) -> float:
+    if isinstance(value, bool):
+        raise LightError(f"{what} must be a number, got {value!r}")
     try:
         x = float(value)
     except (TypeError, ValueError):
         raise LightError(f"{what} must be a number, got {value!r}") from None
     if not math.isfinite(x):
         raise LightError(f"{what} must be finite, got {x!r}")
+    return x
+
+
+def _nonnegative(value, what: str) -> float:
+    x = _number(value, what)
     if x < 0.0:
         raise LightError(f"{what} must be >= 0, got {x!r}")
+    return x
+
+
+def _strength(value, what: str, unit: str) -> float:
+    """A power, irradiance or intensity: a finite number in (0, MAX_LIGHT_STRENGTH]."""
+    x = _number(value, what)
+    if not 0.0 < x <= MAX_LIGHT_STRENGTH:
+        raise LightError(f"{what} must be > 0 and at most {MAX_LIGHT_STRENGTH:.0e} {unit}, got {x!r}"
+                         .replace("e+", "e"))
     return x
 
 
@@ -65,7 +91,10 @@ class BeamLight:
 
     ``radius`` = 0 (default) is a pencil beam: one entry point. ``radius`` > 0 [mm] is a collimated beam of uniform
     power over a disc: ``BEAM_SAMPLES`` parallel rays on a sunflower (Vogel) pattern, each carrying an equal share
-    of the power; rays that miss the mesh carry their share away.
+    of the power; rays that miss the mesh carry their share away. When more mesh vertices than rays lie lit in its
+    cylinder (a beam wide compared with the mesh), the bake samples it at those vertices instead, with irradiance
+    ``power / (pi radius^2)`` (:func:`meshshade.light.samples.beam_footprint`); Monte Carlo draws its photons
+    uniformly over the disc. ``power`` in (0, 1e20] W; ``radius`` finite and >= 0.
     """
 
     origin: tuple[float, float, float]
@@ -76,18 +105,22 @@ class BeamLight:
     def __post_init__(self):
         object.__setattr__(self, "origin", _vec3(self.origin, "beam origin"))
         object.__setattr__(self, "direction", _direction(self.direction, "beam direction"))
-        object.__setattr__(self, "power", _nonnegative(self.power, "beam power"))
+        object.__setattr__(self, "power", _strength(self.power, "beam power", "W"))
         object.__setattr__(self, "radius", _nonnegative(self.radius, "beam radius"))
+
+    def disc_basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v): orthonormal (3,) vectors spanning the beam's start plane (perpendicular to ``direction``)."""
+        d = np.array(self.direction)
+        u = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+        return u, np.cross(d, u)
 
     def ray_origins(self) -> np.ndarray:
         """(k, 3) mm: one origin for a pencil beam, ``BEAM_SAMPLES`` over the disc otherwise."""
         o = np.array(self.origin)
         if self.radius == 0.0:
             return o[None, :]
-        d = np.array(self.direction)
-        u = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
-        u /= np.linalg.norm(u)
-        v = np.cross(d, u)
+        u, v = self.disc_basis()
         j = np.arange(BEAM_SAMPLES)
         r = self.radius * np.sqrt((j + 0.5) / BEAM_SAMPLES)  # equal-area rings
         a = j * np.pi * (3.0 - np.sqrt(5.0))  # golden angle
@@ -103,7 +136,7 @@ class DirectionalLight:
 
     def __post_init__(self):
         object.__setattr__(self, "direction", _direction(self.direction, "directional light direction"))
-        object.__setattr__(self, "irradiance", _nonnegative(self.irradiance, "directional irradiance"))
+        object.__setattr__(self, "irradiance", _strength(self.irradiance, "directional irradiance", "W/mm^2"))
 
 
 @dataclass(frozen=True)
@@ -115,7 +148,7 @@ class PointLight:
 
     def __post_init__(self):
         object.__setattr__(self, "position", _vec3(self.position, "point light position"))
-        object.__setattr__(self, "intensity", _nonnegative(self.intensity, "point light intensity"))
+        object.__setattr__(self, "intensity", _strength(self.intensity, "point light intensity", "W/sr"))
 
 
 Light = Union[BeamLight, DirectionalLight, PointLight]
@@ -141,6 +174,23 @@ def light_list(lights) -> list[Light]:
         if not isinstance(light, LIGHT_TYPES):
             raise LightError(f"light {i} is not a BeamLight, DirectionalLight or PointLight: {light!r}")
     return out
+
+
+def _fmt_vec(v) -> str:
+    return "(" + ", ".join(f"{float(x):.6g}" for x in v) + ")"
+
+
+def describe_light(light: Light, index: int) -> str:
+    """Short one-line name of light ``index`` for messages, e.g. ``directional light 0 (travelling along (0, 0, 1),
+    irradiance 1 W/mm^2)``."""
+    if isinstance(light, BeamLight):
+        width = f", radius {light.radius:.6g} mm" if light.radius > 0 else ""
+        return (f"beam light {index} (from {_fmt_vec(light.origin)} mm along {_fmt_vec(light.direction)}, "
+                f"power {light.power:.6g} W{width})")
+    if isinstance(light, DirectionalLight):
+        return (f"directional light {index} (travelling along {_fmt_vec(light.direction)}, "
+                f"irradiance {light.irradiance:.6g} W/mm^2)")
+    return f"point light {index} (at {_fmt_vec(light.position)} mm, intensity {light.intensity:.6g} W/sr)"
 
 
 def check_outside_mesh(light: Light, index: int, vertices, faces) -> None:

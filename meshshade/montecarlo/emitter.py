@@ -1,9 +1,11 @@
 """The Monte Carlo photon emitter: photons drawn from the lights, Fresnel-split and refracted into the medium.
 
 At entry the unpolarised Fresnel reflectance F(cos) (index 1 outside, ``eta`` inside) is split off
-deterministically as specular power and the rest is refracted (Snell) into the medium. A beam enters at its
-first hit (float64); directional and point lights are sampled over the faces in proportion to the incident
-power at the face centroids (point lights then carry an importance weight), and shadowed photons carry no power.
+deterministically as specular power and the rest is refracted (Snell) into the medium. A pencil beam enters at its
+first hit (float64), a beam of radius R > 0 uniformly over its disc; directional and point lights are sampled over
+the faces in proportion to the incident power at the face centroids (point lights then carry an importance
+weight), and shadowed photons carry no power. Which lights reach the mesh is the bake's decision
+(:func:`meshshade.light.samples.entry_samples`).
 """
 from __future__ import annotations
 
@@ -11,7 +13,8 @@ import numpy as np
 
 from meshshade.errors import LightError
 from meshshade.kernels.fresnel import fresnel_reflectance
-from meshshade.light.sources import BeamLight, DirectionalLight, PointLight, check_outside_mesh, light_list
+from meshshade.light.samples import entry_samples
+from meshshade.light.sources import BeamLight, DirectionalLight, PointLight, light_list
 from meshshade.montecarlo.sampling import refract_in
 
 __all__ = ["Emitter"]
@@ -21,7 +24,16 @@ class Emitter:
     """Draws photons from the lights: entry point (face, bary), inward direction, weight (W), specular part.
 
     Every photon carries ``P_total / N`` W times a correction for point lights; shadowed directional/point
-    photons carry no incident power (weight 0).
+    photons, and photons of a wide beam that pass beside the mesh, carry no incident power (weight 0).
+
+    Whether each light reaches the mesh is decided by the bake's own rule,
+    :func:`meshshade.light.samples.entry_samples` (so ``mc`` and ``bake`` accept and refuse the same scenes): a
+    beam that misses and a scene where no light reaches the mesh are errors, a light among several that reaches
+    nothing is a warning (and emits nothing).
+
+    Beams: a pencil beam enters at its first hit (float64); a beam of radius R > 0 is uniform over its disc: each
+    photon starts at a uniform point of the part of the disc that can meet the mesh (the disc's square clipped to
+    the mesh's projected bounding box; points outside the disc carry nothing) and enters where its ray first hits.
 
     Parameters
     ----------
@@ -35,7 +47,7 @@ class Emitter:
     ------
     LightError
         No light; not a light; a beam or point light inside the mesh; a beam that misses the mesh or reaches the
-        back of a face; a directional or point light that faces no part of the mesh.
+        back of a face; no light reaching the mesh.
     """
 
     def __init__(self, V, F, normals, areas, lights, scene, eta):
@@ -43,41 +55,49 @@ class Emitter:
         self.lights = light_list(lights)
         if not self.lights:
             raise LightError("Monte Carlo needs at least one light")
+        # the bake's rule for what reaches the mesh (errors and warnings), on the same vertex normals and areas
+        vn, va = _vertex_normals_areas(V, F, normals, areas)
+        reach = entry_samples(V, F, vn, va, self.lights, scene, eta)
+        reached = np.bincount(reach.light_index, minlength=len(self.lights)) > 0
         self.parts = []
         power = []
+        c = V[F].mean(axis=1)
         for i, light in enumerate(self.lights):
-            check_outside_mesh(light, i, V, F)
             if isinstance(light, BeamLight):
                 o, d = np.array(light.origin), np.array(light.direction)
                 hits = scene.first_hit(o, d, exact=True)
-                f = int(hits.face[0])
-                if f < 0 or float(normals[f] @ d) >= 0.0:
-                    raise LightError(f"beam light {i} from {light.origin} mm along {light.direction} misses "
-                                     "the mesh (or reaches the back of a face)")
-                self.parts.append(("beam", f, hits.bary[0], d))
-                power.append(light.power)
-            else:
-                c = V[F].mean(axis=1)
-                if isinstance(light, DirectionalLight):
-                    cos = normals @ (-np.array(light.direction))
-                    w = light.irradiance * np.clip(cos, 0.0, None) * areas
+                f, bary = int(hits.face[0]), hits.bary[0]
+                if f < 0 or float(normals[f] @ d) >= 0.0:   # a wide beam whose axis misses: its nearest entry
+                    f, bary = _representative_entry(reach, i, o, d, F)
+                if light.radius == 0.0:
+                    self.parts.append(("beam", f, bary, d))
+                    power.append(light.power)
                 else:
-                    pos = np.array(light.position)
-                    delta = pos - c
-                    r2 = np.einsum("ij,ij->i", delta, delta)
-                    cos = np.einsum("ij,ij->i", normals, delta) / np.sqrt(r2)
-                    w = light.intensity * np.clip(cos, 0.0, None) * areas / r2
-                total = float(w.sum())
-                if not total > 0.0:
-                    raise LightError(f"light {i} ({light!r}) faces no part of the mesh")
-                self.parts.append(("area", np.cumsum(w) / total, w, light))
-                power.append(total)
+                    rect = _disc_rect(light, V)
+                    self.parts.append(("disc", f, bary, d, light, rect))
+                    power.append(light.power * rect[4] / (np.pi * light.radius ** 2))
+                continue
+            if isinstance(light, DirectionalLight):
+                cos = normals @ (-np.array(light.direction))
+                w = light.irradiance * np.clip(cos, 0.0, None) * areas
+            else:
+                pos = np.array(light.position)
+                delta = pos - c
+                r2 = np.einsum("ij,ij->i", delta, delta)
+                cos = np.einsum("ij,ij->i", normals, delta) / np.sqrt(r2)
+                w = light.intensity * np.clip(cos, 0.0, None) * areas / r2
+            total = float(w.sum())
+            if not (reached[i] and total > 0.0):   # warned about by entry_samples: it emits nothing
+                w, total = np.zeros_like(w), 0.0
+            self.parts.append(("area", np.cumsum(w) / total if total > 0.0 else w, w, light))
+            power.append(total)
         self.light_power = np.array(power, dtype=np.float64)   # W (for area lights: centroid estimate)
         self.total_power = float(self.light_power.sum())
+        if not (self.total_power > 0.0 and np.isfinite(self.total_power)):
+            raise LightError("no light reaches the mesh's faces (the Monte Carlo result would be all zeros)")
         self.light_cdf = np.cumsum(self.light_power) / self.total_power
         # faces whose normal faces each light (diffuse reflectance vs transmittance)
         self.facing = np.zeros((len(self.lights), F.shape[0]), dtype=bool)
-        c = V[F].mean(axis=1)
         for i, light in enumerate(self.lights):
             if isinstance(light, PointLight):
                 self.facing[i] = np.einsum("ij,ij->i", normals, np.array(light.position) - c) > 0.0
@@ -104,6 +124,9 @@ class Emitter:
                 p1, d1, F1 = self._enter(np.array([f]), np.asarray(b, dtype=np.float64)[None], np.asarray(d)[None])
                 face[sel], points[sel], dirs[sel], Fr[sel] = f, p1[0], d1[0], F1[0]
                 continue
+            if part[0] == "disc":
+                self._emit_disc(part, sel, rng, face, points, dirs, Fr, weight)
+                continue
             _, cdf, w_face, lt = part
             f = np.minimum(np.searchsorted(cdf, rng.random(sel.size), side="right"), cdf.size - 1)
             r1, r2 = np.sqrt(rng.random(sel.size)), rng.random(sel.size)
@@ -127,6 +150,30 @@ class Emitter:
             points[sel], dirs[sel], Fr[sel] = self._enter(f, b, d)
         return light, face, points, dirs, weight * (1.0 - Fr), weight * Fr, weight.copy()
 
+    def _emit_disc(self, part, sel, rng, face, points, dirs, Fr, weight):
+        """Photons ``sel`` of a beam of radius > 0: uniform over the clipped square of its disc, cast along the
+        beam; those outside the disc or passing beside the mesh carry nothing (they hold face 0, weight 0)."""
+        _, _, _, d, lt, (u, v, lo, hi, _area) = part
+        ab = lo + (hi - lo) * np.stack([rng.random(sel.size), rng.random(sel.size)], axis=1)
+        inside = np.einsum("ij,ij->i", ab, ab) <= lt.radius ** 2
+        origins = np.array(lt.origin) + ab[:, :1] * u + ab[:, 1:] * v
+        hit = np.zeros(sel.size, dtype=bool)
+        f = np.zeros(sel.size, dtype=np.int64)
+        bary = np.zeros((sel.size, 3))
+        cast = np.flatnonzero(inside)
+        if cast.size:
+            h = self.scene.first_hit(origins[cast], np.broadcast_to(d, (cast.size, 3)))
+            ok = h.face >= 0
+            ok[ok] = self.N[h.face[ok]] @ d < 0.0
+            hit[cast[ok]] = True
+            f[cast[ok]], bary[cast[ok]] = h.face[ok], h.bary[ok]
+        weight[sel[~hit]] = 0.0
+        face[sel] = f
+        if np.any(hit):
+            idx = np.flatnonzero(hit)
+            p1, d1, F1 = self._enter(f[idx], bary[idx], np.broadcast_to(d, (idx.size, 3)))
+            points[sel[idx]], dirs[sel[idx]], Fr[sel[idx]] = p1, d1, F1
+
     def _enter(self, face, bary, d_out):
         """Entry of photons arriving along d_out (n, 3) at (face, bary): (point just inside, refracted direction,
         Fresnel reflectance F(cos_i) from index 1 into eta)."""
@@ -135,3 +182,42 @@ class Emitter:
         cos_i = np.clip(-np.einsum("ij,ij->i", d_out, n), 0.0, 1.0)
         Fr = fresnel_reflectance(cos_i, 1.0, self.eta)
         return self.scene.offset_origins(points, n, sign=-1.0), refract_in(d_out, n, self.eta), Fr
+
+
+def _vertex_normals_areas(V, F, face_normals, face_areas):
+    """Area-weighted unit vertex normals and barycentric vertex areas (a third of each incident face), as
+    :class:`~meshshade.geometry.mesh.Mesh` defines them, from the face normals and areas the emitter is given."""
+    idx = F.reshape(-1)
+    w = np.repeat(face_areas, 3)
+    acc = np.stack([np.bincount(idx, weights=np.repeat(face_normals[:, j], 3) * w, minlength=V.shape[0])
+                    for j in range(3)], axis=1)
+    norm = np.linalg.norm(acc, axis=1, keepdims=True)
+    vn = np.divide(acc, norm, out=np.zeros_like(acc), where=norm > 0)
+    return vn, np.bincount(idx, weights=w / 3.0, minlength=V.shape[0])
+
+
+def _representative_entry(samples, i, o, d, F):
+    """(face, bary) of light ``i``'s entry sample nearest its axis (a wide beam whose axis passes beside the
+    mesh): the reference point of the beam's radial tallies."""
+    j = np.flatnonzero(samples.light_index == i)
+    rel = samples.positions[j] - o
+    perp = rel - np.outer(rel @ d, d)
+    j = int(j[np.argmin(np.einsum("ij,ij->i", perp, perp))])
+    if samples.face[j] >= 0:
+        return int(samples.face[j]), samples.bary[j]
+    v = int(samples.vertex[j])
+    f = int(np.flatnonzero(np.any(F == v, axis=1))[0])
+    return f, (F[f] == v).astype(np.float64)
+
+
+def _disc_rect(light, V):
+    """Where photons of a wide beam start: ``(u, v, lo, hi, area)``, the beam's plane basis and the square
+    [-R, R]^2 of its disc clipped to the bounding box of the mesh's projection on that plane (no photon is drawn
+    where no ray can meet the mesh); ``area`` in mm^2."""
+    u, v = light.disc_basis()
+    rel = V - np.array(light.origin)
+    ab = np.stack([rel @ u, rel @ v], axis=1)
+    lo = np.maximum(ab.min(axis=0), -light.radius)
+    hi = np.minimum(ab.max(axis=0), light.radius)
+    hi = np.maximum(hi, lo)
+    return u, v, lo, hi, float(np.prod(hi - lo))

@@ -37,14 +37,15 @@ Pure computation, no file I/O (results are written by :func:`meshshade.output.mc
 """
 from __future__ import annotations
 
+import math
+import os
 import time
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from tqdm import tqdm
 
-from meshshade.errors import MeshshadeError
+from meshshade.errors import MaterialError, MeshshadeError
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 from meshshade.light import BeamLight
 from meshshade.materials import Material
@@ -52,10 +53,11 @@ from meshshade.montecarlo.emitter import Emitter
 from meshshade.montecarlo.engine import PoolWalk
 from meshshade.montecarlo.interior import SafeDistanceGrid
 from meshshade.montecarlo.wavefront_oracle import WavefrontWalk
+from meshshade.progress import Progress
 from meshshade.raycast import make_scene
 from meshshade.raycast.embree_direct import DirectEmbreeScene
 
-__all__ = ["DEFAULT_BATCHES", "TOTAL_KEYS", "MCResult", "batch_stats", "simulate"]
+__all__ = ["DEFAULT_BATCHES", "TOTAL_KEYS", "MCResult", "batch_stats", "check_mc_options", "simulate"]
 
 DEFAULT_BATCHES = 16
 TOTAL_KEYS = ("specular_reflectance", "diffuse_reflectance", "transmittance", "absorbed")
@@ -115,10 +117,87 @@ def batch_stats(per_batch):
     return total, stderr
 
 
+#: most photons per channel group: photon indices key the per-photon random streams and are counted in int64
+#: (a time-budget run without a photon count uses this as its unbounded count)
+MAX_PHOTONS = 1 << 62
+#: optimistic throughput for the run-time estimate: 2.5e7 events/s per core, 1.6x the best measured (30.7 M
+#: events/s on 2 cores, MCML semi-infinite case, docs/benchmarks.md); every photon costs at least one event
+MAX_EVENTS_PER_SECOND_PER_CORE = 2.5e7
+#: runs estimated (at that optimistic rate) above this are refused unless a time budget bounds them: 1 day
+MAX_RUN_SECONDS = 86400.0
+#: most batches (per-batch tallies hold n_batches x faces floats) and photons walked together (~200 bytes each)
+MAX_BATCHES = 256
+MAX_POOL = 1 << 22
+
+
+def _count(value, name: str, lo: int, hi: int | None, hi_text: str = "") -> int:
+    """An integer count in [lo, hi] (hi None: no upper bound; an integral float such as 1e5 is accepted);
+    MeshshadeError naming ``name``, the value and the range otherwise."""
+    ok = not isinstance(value, (bool, str)) and isinstance(value, (int, float, np.integer, np.floating))
+    if ok and not isinstance(value, (int, np.integer)):
+        ok = math.isfinite(value) and float(value).is_integer()
+    if not ok or int(value) < lo or (hi is not None and int(value) > hi):
+        rng = f"[{lo}, {hi_text or hi}]" if hi is not None else f">= {lo}"
+        raise MeshshadeError(f"{name} must be an integer {'in ' if hi is not None else ''}{rng}, got {value!r}")
+    return int(value)
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("hours", 3600), ("minutes", 60)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
+
+
+def check_mc_options(photons=100_000, *, seed=0, time_budget=None, n_batches=DEFAULT_BATCHES, pool=None,
+                     engine="auto", groups=1) -> tuple:
+    """Validate :func:`simulate`'s arguments before any work; returns ``(photons, seed, time_budget, n_batches,
+    pool)`` normalised (ints, floats). One-line MeshshadeError naming the argument, its value and what is allowed:
+
+    * ``photons``: None (only with a time budget) or an integer in [n_batches, ``MAX_PHOTONS`` = 2^62]; without a
+      ``time_budget``, also refused when even at the optimistic ``MAX_EVENTS_PER_SECOND_PER_CORE`` on every core
+      (one event per photon, ``groups`` channel groups) the run would exceed ``MAX_RUN_SECONDS`` (1 day): the
+      message gives the estimate and how to proceed (fewer photons, or a time budget);
+    * ``seed``: an integer in [0, 2^64); ``time_budget``: None or a finite number of seconds > 0;
+    * ``n_batches``: an integer in [2, ``MAX_BATCHES``]; ``pool``: None or an integer in [1, ``MAX_POOL``];
+    * ``engine``: "auto", "direct" or "batched".
+    """
+    if time_budget is not None:
+        t = float(time_budget) if isinstance(time_budget, (int, float, np.number)) and \
+            not isinstance(time_budget, bool) else math.nan
+        if not (0.0 < t < math.inf):
+            raise MeshshadeError(f"time_budget must be a finite number of seconds > 0, got {time_budget!r}")
+        time_budget = t
+    n_batches = _count(n_batches, "n_batches (batches for the standard errors)", 2, MAX_BATCHES)
+    if photons is None:
+        if time_budget is None:
+            raise MeshshadeError("give a photon count or a time budget")
+    else:
+        photons = _count(photons, "photons", n_batches, None)
+    seed = _count(seed, "seed", 0, (1 << 64) - 1, "2^64 - 1")
+    if pool is not None:
+        pool = _count(pool, "pool (photons walked together)", 1, MAX_POOL)
+    if engine not in ("auto", "direct", "batched"):
+        raise MeshshadeError(f"engine must be 'auto', 'direct' or 'batched', got {engine!r}")
+    if photons is not None:
+        cores = os.cpu_count() or 1
+        least = photons * groups / (MAX_EVENTS_PER_SECOND_PER_CORE * cores)
+        estimate = (f"would take at least {_duration(least)} ({groups} channel group(s), one event per photon at "
+                    f"{MAX_EVENTS_PER_SECOND_PER_CORE:.2g} events/s on each of {cores} cores)").replace("e+0", "e")
+        if photons > MAX_PHOTONS:
+            raise MeshshadeError(f"photons = {photons:.3g} exceeds 2^62 = {MAX_PHOTONS:.3g}, the most that the "
+                                 f"per-photon random streams and int64 counters support, and {estimate}")
+        if time_budget is None and least > MAX_RUN_SECONDS:
+            raise MeshshadeError(
+                f"photons = {photons:.3g} {estimate}, beyond the {MAX_RUN_SECONDS / 86400:g}-day limit: use fewer "
+                "photons, or a time budget (--time-budget SECONDS; time_budget= in Python) to stop in time")
+    return photons, seed, time_budget, n_batches, pool
+
+
 def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000, seed: int = 0,
              time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int | None = None,
              keep_beam_exits: bool = True, beam_distances: bool = True, fast_interior: bool = True,
-             engine: str = "auto", progress: bool = False) -> MCResult:
+             engine: str = "auto", progress: bool | str = False) -> MCResult:
     """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
 
     Parameters
@@ -143,19 +222,27 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     engine : pooled engine's Embree calls: "direct" (rtcIntersect1 from the numba threads,
         :mod:`meshshade.raycast.embree_direct`), "batched" (one embreex call per round) or "auto" (direct when the
         Embree library can be bound, else batched). Both give the same photon paths up to float32 ties.
+    progress : False, True or the task named in the progress lines (default "mc"): photons emitted, as a bar on
+        a terminal and as periodic lines otherwise (:class:`meshshade.progress.Progress`)
 
     Returns
     -------
     MCResult
+
+    Raises
+    ------
+    MeshshadeError
+        An argument outside its domain (:func:`check_mc_options`), checked before any work, including a photon
+        count that cannot finish (more than ``MAX_PHOTONS``, or, without a time budget, a run estimated at more
+        than ``MAX_RUN_SECONDS``).
+    LightError
+        No light, a beam that misses, no light reaching the mesh (as the bake: :class:`Emitter`).
     """
-    if photons is None and time_budget is None:
-        raise MeshshadeError("give a photon count or a time budget")
-    if photons is not None and photons < n_batches:
-        raise MeshshadeError(f"need at least {n_batches} photons (one per batch), got {photons}")
-    if n_batches < 2:
-        raise MeshshadeError("n_batches must be at least 2 for a standard error")
-    if int(seed) < 0:
-        raise MeshshadeError(f"seed must be a non-negative integer, got {seed}")
+    if not isinstance(material, Material):
+        raise MaterialError(f"Monte Carlo needs a Material, got {type(material).__name__}")
+    photons, seed, time_budget, n_batches, pool = check_mc_options(
+        photons, seed=seed, time_budget=time_budget, n_batches=n_batches, pool=pool, engine=engine,
+        groups=len({(a, b) for a, b in zip(material.sigma_s_prime.tolist(), material.sigma_a.tolist())}))
     t_start = time.perf_counter()
     n_photons = int(photons) if photons is not None else 1 << 62
     V, F = mesh.vertices, mesh.faces
@@ -190,10 +277,9 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     events = boundary = rays = 0
     emitted_max = 0
     exits = [None] * 3
-    bar = None
-    if progress:
-        bar = tqdm(total=None if photons is None else n_photons * len(groups), desc="mc", unit="photon",
-                   leave=False)
+    # photons emitted: a bar on a terminal, periodic lines otherwise (meshshade.progress)
+    bar = Progress(progress if isinstance(progress, str) else "mc",
+                   None if photons is None else n_photons * len(groups), "photons", enabled=bool(progress))
     try:
         for gi, (((ss, sa), chans), child) in enumerate(zip(groups.items(), children)):
             common = dict(sigma_s=ss, sigma_a=sa, g=g, eta=material.eta, n_batches=n_batches,
@@ -233,9 +319,8 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
                     exits[c] = group_exits   # channels of one group share the (read-only) arrays
             events += walk.events
             boundary += walk.boundary
-    finally:
-        if bar is not None:
-            bar.close()
+    finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
+        bar.close()
     seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
     va = mesh.vertex_areas
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -7,14 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshshade.errors import MeshshadeError
+from meshshade.errors import ParameterError
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.light import BeamLight
 from meshshade.materials import Material
 from meshshade.montecarlo.simulation import MCResult, batch_stats, simulate
 
-__all__ = ["radial_exitance", "mc_profile", "beam_radial_power", "summary_dict", "describe_mc", "write_mc"]
+__all__ = ["radial_exitance", "mc_profile", "beam_radial_power", "summary_dict", "describe_mc"]
 
 
 def radial_exitance(exit_distance, weight, batch, distances_mm, *, halfwidth_mm, annulus_area, n_batches,
@@ -45,7 +45,7 @@ def mc_profile(material: Material, distances_mm, *, shape, photons: int = 200_00
     distance from the pole in annuli of half-width max(0.1 s, 0.05/sigma_t'_min) (exact spherical annulus area).
     """
     if shape is None or shape.kind != "sphere":
-        raise MeshshadeError("the Monte Carlo profile is implemented for --shape sphere only "
+        raise ParameterError("the Monte Carlo profile is implemented for --shape sphere only "
                              "(use `meshshade mc` on a mesh for other geometry)")
     R = float(shape.radius_mm)
     s = np.asarray(distances_mm, dtype=np.float64)
@@ -82,7 +82,7 @@ def beam_radial_power(result: MCResult, mesh, edges_mm):
     edges = np.asarray(edges_mm, dtype=np.float64)
     out, err = np.zeros((3, edges.size - 1)), np.zeros((3, edges.size - 1))
     if result.beam_distance is None:
-        raise MeshshadeError("no beam light (or beam_distances=False): no geodesic distance tally")
+        raise ParameterError("no beam light (or beam_distances=False): no geodesic distance tally")
     for c, ex in enumerate(result.beam_exits):
         if ex is None:
             continue

@@ -6,24 +6,64 @@ above ``floor`` times B's maximum (default 1e-3): far below the peak the ratio i
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
 from meshshade import io
+from meshshade.errors import MaterialError, ParameterError
+from meshshade.geometry.mesh import Mesh
+from meshshade.light.sources import light_list
+from meshshade.materials import Material
 from meshshade.montecarlo import simulate
+from meshshade.montecarlo.simulation import check_mc_options
 from meshshade.output import render
 from meshshade.output.tonemap import luminance
 from meshshade.raycast import make_scene
-from meshshade.transport.baking import bake
+from meshshade.transport.baking import bake, check_bake_options
+from meshshade.transport.models import MODELS
 
 #: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
 DEFAULT_FLOOR = 1e-3
+#: what ``run_comparison`` can compare: every bake model and Monte Carlo
+COMPARE_MODELS = (*MODELS, "mc")
+
+
+def check_floor(floor) -> float:
+    """The relative floor as a float in (0, 1) (a fraction of B's maximum luminance); MeshshadeError otherwise
+    (NaN would make every ratio invalid and the statistics null)."""
+    try:
+        x = float(floor) if not isinstance(floor, (bool, str)) else math.nan
+    except (TypeError, ValueError):
+        x = math.nan
+    if not 0.0 < x < 1.0:
+        raise ParameterError(f"floor must lie in (0, 1) (a fraction of B's maximum luminance; default "
+                             f"{DEFAULT_FLOOR:g}), got {floor!r}")
+    return x
+
+
+def check_models(models) -> tuple:
+    """Exactly two different model names among ``COMPARE_MODELS``; MeshshadeError otherwise."""
+    if isinstance(models, str) or not all(isinstance(m, str) for m in models):
+        raise ParameterError(f"models must be two model names A,B, got {models!r}")
+    models = tuple(models)
+    if len(models) != 2:
+        raise ParameterError(f"compare needs exactly two models A,B among {', '.join(COMPARE_MODELS)}, "
+                             f"got {len(models)}: {', '.join(models) or 'none'}")
+    for m in models:
+        if m not in COMPARE_MODELS:
+            raise ParameterError(f"unknown model {m!r}; choose two among {', '.join(COMPARE_MODELS)}")
+    if models[0] == models[1]:
+        raise ParameterError(f"compare needs two different models, got {models[0]!r} twice")
+    return models
 
 
 def relative_difference(a, b, *, floor: float = DEFAULT_FLOOR, mask=None):
-    """Signed (A - B)/B of luminance for (..., 3) radiance arrays; NaN where B is below the floor or ~mask."""
+    """Signed (A - B)/B of luminance for (..., 3) radiance arrays; NaN where B is below the floor or ~mask.
+    ``floor`` in (0, 1) (:func:`check_floor`)."""
+    floor = check_floor(floor)
     La, Lb = luminance(a), luminance(b)
     valid = Lb > floor * (Lb[mask].max() if mask is not None and np.any(mask) else Lb.max(initial=0.0))
     if mask is not None:
@@ -50,7 +90,9 @@ def compare_stats(vertex_a, vertex_b, *, pixel_a=None, pixel_b=None, pixel_mask=
     Returns ``{"models", "floor", "vertices": {max_rel_diff, mean_rel_diff, p95_rel_diff, ...}, "pixels": {...},
     "max_rel_diff", "mean_rel_diff", "p95_rel_diff" (the vertex values), "total_exitance_W": {A: [r, g, b], ...}}``.
     Total exitance is sum M * vertex area (W, per unit light) when ``vertex_areas`` is given, else sum M.
+    ``floor`` in (0, 1) (:func:`check_floor`).
     """
+    floor = check_floor(floor)
     va, vb = np.asarray(vertex_a, float), np.asarray(vertex_b, float)
     w = np.ones(len(va)) if vertex_areas is None else np.asarray(vertex_areas, float)
     out = {"models": list(names), "floor": floor, "definition": "(A - B)/B of luminance where B > floor * max B"}
@@ -94,25 +136,49 @@ def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
 
 def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camera=None, width=256, height=256,
                    spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
-                   seed: int = 0, geodesic: str = "exact", far_field: str | None = None) -> dict:
+                   seed: int = 0, geodesic: str = "exact", far_field: str | None = None,
+                   progress: bool | str = False) -> dict:
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
     ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
     rendered by interpolation. Returns ``{"camera", "bakes": [BakeResult, BakeResult],
     "images": [(rgb, alpha), (rgb, alpha)],
     "split": (rgb, alpha), "rel": (H, W) signed relative difference, "stats": dict}`` (arrays only, no files).
+
+    Every argument is checked before any work (MeshshadeError, one line): ``models`` two different names among
+    ``COMPARE_MODELS``; ``floor`` in (0, 1); the bake options as :func:`~meshshade.transport.baking.bake`
+    (``cutoff_tol``, ``geodesic``, ``far_field``); ``width``, ``height``, ``spp`` as
+    :func:`~meshshade.output.render.check_image_size`; with ``mc``, ``mc_photons`` and ``seed`` as
+    :func:`~meshshade.montecarlo.simulation.check_mc_options`; ``camera`` a Camera or None; the lights.
+    ``progress`` (False, True or a task name, default "compare") is passed to each bake and Monte Carlo run.
     """
-    if len(models) != 2:
-        raise ValueError("compare needs exactly two models")
+    models = check_models(models)
+    floor = check_floor(floor)
+    if not isinstance(mesh, Mesh):
+        raise ParameterError(f"run_comparison needs a meshshade Mesh (mm), got {type(mesh).__name__}")
+    if not isinstance(material, Material):
+        raise MaterialError(f"run_comparison needs a Material, got {type(material).__name__}")
+    lights = light_list(lights)
+    for m in models:
+        if m != "mc":
+            check_bake_options(m, cutoff_tol, None, geodesic, far_field)
+    if "mc" in models:
+        groups = len(set(zip(material.sigma_s_prime.tolist(), material.sigma_a.tolist())))
+        mc_photons, seed = check_mc_options(mc_photons, seed=seed, groups=groups)[:2]
+    width, height, spp = render.check_image_size(width, height, spp)
+    if camera is not None and not isinstance(camera, render.Camera):
+        raise ParameterError(f"camera must be a Camera or None, got {type(camera).__name__}")
     camera = camera or render.auto_camera(mesh)
     scene = make_scene(mesh.vertices, mesh.faces)
+    task = (progress if isinstance(progress, str) else "compare") if progress else False
     bakes, images = [], []
     for m in models:
         if m == "mc":  # Monte Carlo reference: per-vertex exitance (per-pixel gathering does not apply)
-            mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed)
+            mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed, progress=task)
             res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
         else:
-            res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field)
+            res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field,
+                       progress=task)
             ex = render.PixelGather(mesh, res) if per_pixel else None
         images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
                                              exitance_at=ex, scene=scene))

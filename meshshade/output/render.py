@@ -23,6 +23,8 @@ Per-vertex vs per-pixel
 """
 from __future__ import annotations
 
+import math
+import os
 from dataclasses import dataclass
 from types import SimpleNamespace
 
@@ -52,15 +54,32 @@ class Camera:
     def __post_init__(self):
         if self.kind not in ("perspective", "orthographic"):
             raise MeshshadeError(f"camera kind must be perspective or orthographic, got {self.kind!r}")
-        f = np.asarray(self.target, float) - np.asarray(self.eye, float)
-        if not np.all(np.isfinite(f)) or np.linalg.norm(f) == 0:
-            raise MeshshadeError("camera eye and target must differ")
-        if np.linalg.norm(np.cross(f, np.asarray(self.up, float))) < 1e-9 * np.linalg.norm(f):
-            raise MeshshadeError("camera up vector is parallel to the view direction")
-        if self.kind == "perspective" and not (0 < self.fov_deg < 180):
-            raise MeshshadeError(f"fov must lie in (0, 180) degrees, got {self.fov_deg}")
-        if self.kind == "orthographic" and not self.ortho_height > 0:
-            raise MeshshadeError("orthographic height must be > 0")
+        for name in ("eye", "target", "up"):
+            object.__setattr__(self, name, _camera_vec3(getattr(self, name), f"camera {name}"))
+        with np.errstate(over="ignore", invalid="ignore"):
+            f = np.subtract(self.target, self.eye)
+        if not np.any(f != 0.0):
+            raise MeshshadeError(f"camera eye and target must differ, both are {_fmt3(self.eye)}")
+        if not np.all(np.isfinite(f)):
+            raise MeshshadeError(f"camera eye {_fmt3(self.eye)} and target {_fmt3(self.target)} are too far apart")
+        up = np.asarray(self.up)
+        if not np.any(up != 0.0):
+            raise MeshshadeError("camera up vector must be non-zero, got (0, 0, 0)")
+        f, up = f / np.max(np.abs(f)), up / np.max(np.abs(up))   # scaled first: no overflow in the norms
+        if np.linalg.norm(np.cross(f, up)) < 1e-9 * np.linalg.norm(f) * np.linalg.norm(up):
+            raise MeshshadeError(f"camera up vector {_fmt3(self.up)} is parallel to the view direction "
+                                 f"{_fmt3(f / np.linalg.norm(f))}")
+        if self.kind == "perspective":
+            fov = _camera_number(self.fov_deg, "camera fov")
+            if not 0.0 < fov < 180.0:
+                raise MeshshadeError(f"camera fov must lie in (0, 180) degrees, got {self.fov_deg!r}")
+            object.__setattr__(self, "fov_deg", fov)
+        else:
+            height = _camera_number(self.ortho_height, "orthographic camera height")
+            if not 0.0 < height < math.inf:
+                raise MeshshadeError(f"orthographic camera height must be finite and > 0 mm, got "
+                                     f"{self.ortho_height!r}")
+            object.__setattr__(self, "ortho_height", height)
 
     def basis(self):
         """(forward, right, up) unit vectors."""
@@ -91,37 +110,96 @@ class Camera:
         return f"{self.kind} eye {e} target {t} up {u} {extra}"
 
 
+def _fmt3(v) -> str:
+    return "(" + ", ".join(f"{0.0 + float(x):.6g}" for x in v) + ")"
+
+
+def _camera_number(value, what: str) -> float:
+    try:
+        return float(value) if not isinstance(value, (bool, str)) else math.nan
+    except (TypeError, ValueError):
+        raise MeshshadeError(f"{what} must be a number, got {value!r}") from None
+
+
+def _camera_vec3(value, what: str) -> tuple:
+    """3 finite floats; MeshshadeError naming ``what`` otherwise."""
+    try:
+        v = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise MeshshadeError(f"{what} must be 3 numbers x,y,z, got {value!r}") from None
+    if v.size != 3:
+        raise MeshshadeError(f"{what} must be 3 numbers x,y,z, got {value!r}")
+    if not np.all(np.isfinite(v)):
+        raise MeshshadeError(f"{what} must be finite, got {_fmt3(v)}")
+    return tuple(float(x) for x in v)
+
+
 def auto_camera(mesh, view_dir=(0.0, 0.0, -1.0), *, kind="perspective", fov_deg=30.0, margin=1.08) -> Camera:
-    """A camera looking along ``view_dir`` at the bounding-box centre that frames the whole mesh."""
-    d = np.asarray(view_dir, float)
+    """A camera looking along ``view_dir`` (3 finite numbers, not all 0) at the bounding-box centre that frames the
+    whole mesh (``margin`` > 0 times its bounding sphere)."""
+    d = np.array(_camera_vec3(view_dir, "camera auto view direction dx,dy,dz"))
+    if not np.any(d != 0.0):
+        raise MeshshadeError("camera auto view direction dx,dy,dz must be non-zero, got (0, 0, 0)")
+    d /= np.max(np.abs(d))
     d /= np.linalg.norm(d)
+    margin = _camera_number(margin, "camera margin")
+    if not 0.0 < margin < math.inf:
+        raise MeshshadeError(f"camera margin must be finite and > 0, got {margin!r}")
     lo, hi = mesh.bbox
     c = 0.5 * (lo + hi)
     radius = 0.5 * mesh.scale * margin
     up = (0.0, 1.0, 0.0) if abs(d[1]) < 0.9 else (0.0, 0.0, 1.0)
     if kind == "orthographic":
         return Camera("orthographic", tuple(c - 2 * radius * d), tuple(c), up, ortho_height=2 * radius)
-    dist = radius / np.sin(np.radians(fov_deg) / 2)
-    return Camera("perspective", tuple(c - dist * d), tuple(c), up, fov_deg=fov_deg)
+    fov = _camera_number(fov_deg, "camera fov")
+    if not 0.0 < fov < 180.0:
+        raise MeshshadeError(f"camera fov must lie in (0, 180) degrees, got {fov_deg!r}")
+    dist = radius / np.sin(np.radians(fov) / 2)
+    return Camera("perspective", tuple(c - dist * d), tuple(c), up, fov_deg=fov)
+
+
+CAMERA_SYNTAX = "auto[:dx,dy,dz] | persp:eye:target:up:fov_deg | ortho:eye:target:up:height (vectors x,y,z)"
 
 
 def parse_camera(spec: str, mesh, mm_per_unit: float = 1.0) -> Camera:
     """``auto`` | ``auto:dx,dy,dz`` | ``persp:ex,ey,ez:tx,ty,tz:ux,uy,uz:fov`` | ``ortho:eye:target:up:height``
-    (positions and height in the mesh file's units)."""
-    parts = spec.split(":")
-    try:
-        vec = [tuple(float(v) for v in p.split(",")) for p in parts[1:4]]
-        if parts[0] == "auto":
-            return auto_camera(mesh, vec[0] if len(parts) > 1 else (0.0, 0.0, -1.0))
-        if parts[0] in ("persp", "ortho") and len(parts) == 5 and all(len(v) == 3 for v in vec):
-            eye, tgt = (tuple(np.multiply(v, mm_per_unit)) for v in vec[:2])
-            if parts[0] == "persp":
-                return Camera("perspective", eye, tgt, vec[2], fov_deg=float(parts[4]))
-            return Camera("orthographic", eye, tgt, vec[2], ortho_height=float(parts[4]) * mm_per_unit)
-    except ValueError:
-        pass
-    raise MeshshadeError(f"bad camera {spec!r}: auto[:dx,dy,dz] | persp:eye:target:up:fov_deg | "
-                         "ortho:eye:target:up:height (vectors x,y,z)")
+    (positions and height in the mesh file's units, converted with ``mm_per_unit``).
+
+    Raises MeshshadeError with one line naming the part that is wrong: the syntax, a vector that is not 3 finite
+    numbers, a zero auto view direction, eye equal to target, a zero up vector or one parallel to the view
+    direction, a fov outside (0, 180) degrees, an orthographic height that is not > 0."""
+    scale = _camera_number(mm_per_unit, "mm_per_unit")
+    if not 0.0 < scale < math.inf:
+        raise MeshshadeError(f"mm_per_unit must be a positive finite number, got {mm_per_unit!r}")
+    if not isinstance(spec, str):
+        raise MeshshadeError(f"bad camera {spec!r}: {CAMERA_SYNTAX}")
+    parts = [p.strip() for p in spec.strip().split(":")]
+    kind = parts[0].lower()
+
+    def vec(text, what):
+        try:
+            vals = [float(v) for v in text.split(",")]
+        except ValueError:
+            vals = []
+        if len(vals) != 3:
+            raise MeshshadeError(f"bad camera {spec!r}: {what} must be 3 comma-separated numbers x,y,z, got {text!r}")
+        return _camera_vec3(vals, f"camera {what}")
+
+    if kind == "auto" and len(parts) <= 2:
+        return auto_camera(mesh, vec(parts[1], "auto view direction dx,dy,dz") if len(parts) == 2 else
+                           (0.0, 0.0, -1.0))
+    if kind in ("persp", "ortho") and len(parts) == 5:
+        eye, tgt, up = vec(parts[1], "eye"), vec(parts[2], "target"), vec(parts[3], "up")
+        last = "fov" if kind == "persp" else "height"
+        try:
+            x = float(parts[4])
+        except ValueError:
+            raise MeshshadeError(f"bad camera {spec!r}: the {last} must be a number, got {parts[4]!r}") from None
+        eye, tgt = tuple(np.multiply(eye, scale)), tuple(np.multiply(tgt, scale))
+        if kind == "persp":
+            return Camera("perspective", eye, tgt, up, fov_deg=x)
+        return Camera("orthographic", eye, tgt, up, ortho_height=x * scale)
+    raise MeshshadeError(f"bad camera {spec!r}: {CAMERA_SYNTAX}")
 
 
 # ------------------------------------------------------------------------------------------------ exit radiance
@@ -223,6 +301,11 @@ class PixelGather:
 
 
 # ------------------------------------------------------------------------------------------------ rendering
+#: pixels per band of :func:`render_radiance`: each pass over the image goes band by band, so that every ray-cast
+#: and array operation takes a small fraction of a second and Ctrl-C acts between them (the result does not
+#: depend on it: every pixel sample is computed on its own and added in the same order)
+BAND_PIXELS = 1 << 20
+
 def sample_offsets(spp: int, rng) -> np.ndarray:
     """(spp, 2) jittered stratified sub-pixel offsets in [0, 1)."""
     n = int(np.ceil(np.sqrt(spp)))
@@ -231,6 +314,51 @@ def sample_offsets(spp: int, rng) -> np.ndarray:
     # robust mode can let a ray aimed exactly at a vertex slip through, see raycast.first_hit)
     shift = 1e-4 * np.array([np.sqrt(2.0), np.sqrt(3.0)]) - 1e-4
     return ((g + rng.random((spp, 2))) / n if spp > 1 else np.full((1, 2), 0.5)) + shift
+
+
+#: peak memory of :func:`render_radiance` per pixel (measured ~345 bytes at 256^2 and 512^2, 4 spp, with rays,
+#: hits and per-sample arrays alive at once; the final EXR/PNG arrays add ~170), rounded up
+RENDER_BYTES_PER_PIXEL = 512
+#: most pixel samples (width x height x spp) of a render: 2^32, about half an hour at the ~2.3 M samples/s
+#: measured on 2 cores (512^2 x 4 spp in 0.45 s, docs/benchmarks.md#images)
+MAX_PIXEL_SAMPLES = 1 << 32
+
+
+def _image_count(value, name: str) -> int:
+    ok = not isinstance(value, (bool, str)) and isinstance(value, (int, float, np.integer, np.floating))
+    if ok and not isinstance(value, (int, np.integer)):
+        ok = math.isfinite(value) and float(value).is_integer()
+    if not ok or int(value) < 1:
+        raise MeshshadeError(f"{name} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+def render_memory_limit() -> int:
+    """Bytes a render may use: the physical memory free now (``os.sysconf``), but at least half of the machine's
+    physical memory (the kernel reclaims its page cache on demand); 16 GiB where sysconf cannot tell."""
+    try:
+        page = os.sysconf("SC_PAGE_SIZE")
+        return int(max(os.sysconf("SC_AVPHYS_PAGES"), os.sysconf("SC_PHYS_PAGES") // 2) * page)
+    except (ValueError, OSError, AttributeError):
+        return 16 << 30
+
+
+def check_image_size(width, height, spp) -> tuple[int, int, int]:
+    """Validate an image size before any work: ``width``, ``height`` and ``spp`` integers >= 1, at most
+    ``MAX_PIXEL_SAMPLES`` pixel samples, and the estimated memory (``RENDER_BYTES_PER_PIXEL`` per pixel) within
+    :func:`render_memory_limit`. One-line MeshshadeError with the estimate otherwise; returns the three ints."""
+    width, height = _image_count(width, "image width"), _image_count(height, "image height")
+    spp = _image_count(spp, "spp (samples per pixel)")
+    need, limit = width * height * RENDER_BYTES_PER_PIXEL, render_memory_limit()
+    if need > limit:
+        raise MeshshadeError(f"a {width} x {height} image needs about {need / 2**30:.3g} GiB "
+                             f"({RENDER_BYTES_PER_PIXEL} bytes per pixel), more than the {limit / 2**30:.3g} GiB "
+                             "of memory available: use a smaller width and height")
+    if width * height * spp > MAX_PIXEL_SAMPLES:
+        raise MeshshadeError(f"{width} x {height} pixels x {spp} spp = {width * height * spp:.3g} pixel samples "
+                             f"exceed the limit of 2^32 = {MAX_PIXEL_SAMPLES:.3g} (about half an hour at ~2.3 M "
+                             "samples/s on 2 cores): use fewer pixels or samples per pixel")
+    return width, height, spp
 
 
 def render_radiance(mesh, vertex_radiance, camera: Camera, width: int = 512, height: int = 512, spp: int = 4, *,
@@ -243,14 +371,17 @@ def render_radiance(mesh, vertex_radiance, camera: Camera, width: int = 512, hei
     exitance_at : optional callable (points (k, 3), faces (k,), bary (k, 3)) -> (k, 3) exitance, e.g.
         :class:`PixelGather`: per-pixel mode
     spp : samples per pixel (jittered strata, seeded by ``seed``) for antialiasing
+    width, height, spp : integers >= 1 within the memory and pixel-sample limits of :func:`check_image_size`
+        (checked first, before any work: MeshshadeError with the estimate)
 
     Returns
     -------
     rgb : (H, W, 3) float64, radiance W/(mm^2 sr), premultiplied by coverage (background 0)
     alpha : (H, W) float64 coverage in [0, 1]
     """
-    if width < 1 or height < 1 or spp < 1:
-        raise MeshshadeError("width, height and spp must be >= 1")
+    width, height, spp = check_image_size(width, height, spp)
+    if not isinstance(camera, Camera):
+        raise MeshshadeError(f"camera must be a Camera, got {type(camera).__name__}")
     scene = scene or make_scene(mesh.vertices, mesh.faces)
     rng = np.random.default_rng(seed)
     off = sample_offsets(spp, rng)
@@ -259,27 +390,30 @@ def render_radiance(mesh, vertex_radiance, camera: Camera, width: int = 512, hei
     alpha = np.zeros((height, width))
     aspect = width / height
     M_v = np.asarray(vertex_radiance, float)
+    rows = max(1, BAND_PIXELS // width)  # bands of whole rows: each call short, so Ctrl-C acts between them
     for ox, oy in off:
-        x = (2 * (jj + ox) / width - 1).reshape(-1)
-        y = (1 - 2 * (ii + oy) / height).reshape(-1)
-        o, d = camera.rays(x, y, aspect)
-        hits = scene.first_hit(o, d)
-        h = hits.hit
-        if not np.any(h):
-            continue
-        F = mesh.faces[hits.face[h]]
-        b = hits.bary[h]
-        if exitance_at is None:
-            M = np.einsum("ij,ijk->ik", b, M_v[F])
-        else:
-            M = exitance_at(hits.points[h], hits.face[h], b)
-        n = np.einsum("ij,ijk->ik", b, mesh.vertex_normals[F])
-        n /= np.linalg.norm(n, axis=1, keepdims=True)
-        cos_o = np.abs(np.einsum("ij,ij->i", n, d[h]))
-        L = exit_radiance(M, cos_o, eta)
-        flat = np.flatnonzero(h)
-        rgb.reshape(-1, 3)[flat] += L
-        alpha.reshape(-1)[flat] += 1.0
+        for r0 in range(0, height, rows):
+            band = slice(r0, r0 + rows)
+            x = (2 * (jj[band] + ox) / width - 1).reshape(-1)
+            y = (1 - 2 * (ii[band] + oy) / height).reshape(-1)
+            o, d = camera.rays(x, y, aspect)
+            hits = scene.first_hit(o, d)
+            h = hits.hit
+            if not np.any(h):
+                continue
+            F = mesh.faces[hits.face[h]]
+            b = hits.bary[h]
+            if exitance_at is None:
+                M = np.einsum("ij,ijk->ik", b, M_v[F])
+            else:
+                M = exitance_at(hits.points[h], hits.face[h], b)
+            n = np.einsum("ij,ijk->ik", b, mesh.vertex_normals[F])
+            n /= np.linalg.norm(n, axis=1, keepdims=True)
+            cos_o = np.abs(np.einsum("ij,ij->i", n, d[h]))
+            L = exit_radiance(M, cos_o, eta)
+            flat = np.flatnonzero(h)
+            rgb[band].reshape(-1, 3)[flat] += L  # rows of a C-ordered image: views, added in place
+            alpha[band].reshape(-1)[flat] += 1.0
     return rgb / spp, alpha / spp
 
 

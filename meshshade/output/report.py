@@ -5,6 +5,8 @@ import io as _stdio
 
 import numpy as np
 
+from meshshade.errors import ParameterError
+
 PROFILE_COLUMNS = ("model", "channel", "distance_mm", "reflectance_per_mm2")
 
 
@@ -36,7 +38,12 @@ def _grey(rows) -> bool:
 
 
 def format_profile_table(rows, *, material, extra_columns=()) -> str:
-    """A readable fixed-width table: one column per curve, one line per distance (channels merged if grey)."""
+    """A readable fixed-width table: one column per curve, one line per distance (channels merged if grey).
+
+    ``rows`` as :func:`meshshade.profiles.profile_rows` returns them, at least one (MeshshadeError otherwise)."""
+    rows = list(rows)
+    if not rows:
+        raise ParameterError("no profile to format: give at least one model, shape and distance")
     grey = _grey(rows)
     curves = [r for r in rows if not grey or r["channel"] == "r"]
     heads = []
@@ -49,7 +56,7 @@ def format_profile_table(rows, *, material, extra_columns=()) -> str:
         if not grey:
             h += f" [{r['channel']}]"
         heads.append(h)
-    width = max(14, *(len(h) + 2 for h in heads))
+    width = max([14, *(len(h) + 2 for h in heads)])
     lines = [f"# {material.describe()}", "# reflectance per unit power entering the medium [1/mm^2]",
              f"{'distance_mm':>12}" + "".join(f"{h:>{width}}" for h in heads)]
     s_all = np.unique(np.concatenate([c["distance_mm"] for c in curves]))

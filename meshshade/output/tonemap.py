@@ -8,13 +8,46 @@ Scenes", Computer Graphics Forum 22(3), 2003, eq. 4:
 with world luminance scaled by the exposure (``L_w = luminance / L_wa``, L_wa the log-average luminance as
 Drago does) and the bias ``b`` (0.85 by default, the paper's recommendation). Colour is carried by scaling RGB
 by ``L_d / L_w``. All functions are pure: arrays in, arrays out.
+
+Parameter domains (checked; :class:`~meshshade.errors.MeshshadeError`, one line naming the value): ``bias`` in
+(0, 1] (Drago et al. 2003 eq. 4: ``log(b)/log(0.5)`` must be >= 0, i.e. b <= 1, for the mapping to rise
+monotonically to L_dmax; b = 1 is a pure logarithm, b -> 0 darkens without limit; the paper recommends
+0.7-0.9), ``exposure`` finite and > 0, ``L_dmax`` finite and > 0, ``percentile`` in (0, 100], ``operator``
+"drago" or "exposure". Non-finite or negative radiance is displayed as 0.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from meshshade.errors import ParameterError
+
+OPERATORS = ("drago", "exposure")
 
 #: Rec. 709 / sRGB luminance weights
 LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _positive(value, name: str, *, upper: float = math.inf, upper_open: bool = True, what: str = "") -> float:
+    """``value`` as a float in (0, upper) (or (0, upper]); MeshshadeError naming it and the range otherwise."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        x = math.nan
+    if not (x > 0.0 and (x < upper if upper_open else x <= upper) and math.isfinite(x)):
+        rng = f"(0, {upper:g}{')' if upper_open else ']'}" if math.isfinite(upper) else "finite and > 0"
+        raise ParameterError(f"{name} must be {'in ' if math.isfinite(upper) else ''}{rng}{what}, got {value!r}")
+    return x
+
+
+def check_tonemap_options(operator="drago", bias=0.85, exposure=None) -> None:
+    """Validate the options of :func:`tonemap_linear` (module docstring) before any work."""
+    if operator not in OPERATORS:
+        raise ParameterError(f"unknown tone-mapping operator {operator!r} (drago or exposure)")
+    _positive(bias, "bias", upper=1.0, upper_open=False, what=" (Drago's bias; 0.85 is typical)")
+    if exposure is not None:
+        _positive(exposure, "exposure")
 
 
 def luminance(rgb):
@@ -32,8 +65,12 @@ def drago_tonemap(rgb, *, bias=0.85, exposure=1.0, L_dmax=100.0, mask=None):
     """Drago 2003 adaptive logarithmic mapping of (..., 3) linear RGB to display-linear [0, 1] RGB.
 
     ``mask`` selects the pixels/vertices that define the scene statistics (world adaptation luminance and
-    maximum); background is excluded that way. Monotonic in luminance and maps 0 to 0.
+    maximum); background is excluded that way. Monotonic in luminance and maps 0 to 0. ``bias`` in (0, 1],
+    ``exposure`` and ``L_dmax`` finite and > 0 (MeshshadeError otherwise).
     """
+    bias = _positive(bias, "bias", upper=1.0, upper_open=False, what=" (Drago's bias; 0.85 is typical)")
+    exposure = _positive(exposure, "exposure")
+    L_dmax = _positive(L_dmax, "L_dmax")
     rgb = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64), nan=0.0, posinf=0.0), 0.0, None)
     L = luminance(rgb)
     sel = L[mask] if mask is not None else L.reshape(-1)
@@ -52,7 +89,12 @@ def drago_tonemap(rgb, *, bias=0.85, exposure=1.0, L_dmax=100.0, mask=None):
 
 
 def exposure_tonemap(rgb, *, exposure=None, mask=None, percentile=99.0):
-    """Plain exposure: scale so that the ``percentile`` of luminance maps to 1 (or by ``exposure``), clip."""
+    """Plain exposure: scale so that the ``percentile`` of luminance maps to 1 (or by ``exposure``), clip.
+
+    ``exposure`` None or finite and > 0; ``percentile`` in (0, 100] (MeshshadeError otherwise)."""
+    if exposure is not None:
+        exposure = _positive(exposure, "exposure")
+    percentile = _positive(percentile, "percentile", upper=100.0, upper_open=False)
     rgb = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64), nan=0.0, posinf=0.0), 0.0, None)
     if exposure is None:
         L = luminance(rgb)
@@ -68,12 +110,14 @@ def to_uint8(display_linear):
 
 
 def tonemap_linear(rgb, *, operator="drago", bias=0.85, exposure=None, mask=None):
-    """Tone map to display-linear [0, 1] RGB: ``operator`` is "drago" or "exposure" (ValueError otherwise)."""
+    """Tone map to display-linear [0, 1] RGB: ``operator`` is "drago" or "exposure" (MeshshadeError otherwise;
+    the other parameters as :func:`check_tonemap_options`)."""
+    check_tonemap_options(operator, bias, exposure)
     if operator == "drago":
         return drago_tonemap(rgb, bias=bias, exposure=1.0 if exposure is None else exposure, mask=mask)
     if operator == "exposure":
         return exposure_tonemap(rgb, exposure=exposure, mask=mask)
-    raise ValueError(f"unknown tone-mapping operator {operator!r} (drago or exposure)")
+    raise AssertionError(operator)  # pragma: no cover - check_tonemap_options refused it
 
 
 def tonemap(rgb, *, operator="drago", bias=0.85, exposure=None, mask=None):

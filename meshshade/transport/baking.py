@@ -17,15 +17,18 @@ clustered far field (farfield.py) and the first beam's distance field; :class:`B
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from tqdm import tqdm
 
-from meshshade.errors import MeshshadeError
+from meshshade.errors import MaterialError, MeshshadeError
 from meshshade.geometry.curvature import principal_curvatures
+from meshshade.geometry.mesh import Mesh
 from meshshade.light import BeamLight, entry_samples
+from meshshade.light.sources import light_list
 from meshshade.materials import Material
+from meshshade.progress import Progress, kernel_interrupts
 from meshshade.raycast import make_scene
 from meshshade.transport.auto import neighbourhood_curvature, plan_sources
 from meshshade.transport.farfield import far_field_exitance, far_field_exitance_direct, far_field_radius
@@ -79,7 +82,7 @@ def describe_scale(mesh, material: Material) -> str:
 
 
 def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol: float = 1e-4,
-         curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool = False,
+         curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool | str = False,
          rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
          far_field: str | None = None, far_tol: float = 0.1, far_rel_tol: float = 1e-2,
          far_geodesic: str = "cluster") -> BakeResult:
@@ -106,9 +109,21 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     ``far_geodesic`` ("cluster" or "arc"): how ``auto`` finds the far-zone geodesics of curved vertex samples:
     one exact query per cluster of nearby samples, each member's distance from the centre's by the law of
     cosines in the tangent plane (clusters.py), or the arc method.
+
+    ``progress``: False (default), True or the task named in the progress lines ("bake"; ``render`` and
+    ``compare`` pass their own name): the gather's sources done, as a bar on a terminal and as periodic lines
+    on stderr otherwise (:class:`meshshade.progress.Progress`). Whatever it is, a Ctrl-C (KeyboardInterrupt)
+    is acted upon within a few tenths of a second: the geodesic queries run in calls of about
+    :data:`meshshade.geometry.geodesics.neighbourhoods.BLOCK_SECONDS` each.
     """
-    far_field = _check_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field)
-    lights = list(lights) if isinstance(lights, (list, tuple)) else [lights]
+    if not isinstance(mesh, Mesh):
+        raise MeshshadeError(f"bake needs a meshshade Mesh (mm), got {type(mesh).__name__}")
+    if not isinstance(material, Material):
+        raise MaterialError(f"bake needs a Material, got {type(material).__name__}")
+    far_field = check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol,
+                                   far_tol=far_tol, far_rel_tol=far_rel_tol, far_geodesic=far_geodesic,
+                                   backend=backend, auto_options=auto_options)
+    lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
     clock = Stopwatch()
     curv = principal_curvatures(mesh.vertices, mesh.faces, radius_mm=curvature_radius_mm)
     clock.lap("curvature")
@@ -158,19 +173,47 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
 
 
 # ------------------------------------------------------------------------------------------------ bake's stages
-def _check_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field) -> str:
-    """Reject bad options (MeshshadeError); returns the far-field method with its default resolved."""
+def _real(value) -> float:
+    """``value`` as a float, NaN when it is not a real number (so that every range check below refuses it)."""
+    try:
+        return float(value) if not isinstance(value, (bool, str)) else math.nan
+    except (TypeError, ValueError):
+        return math.nan
+
+
+#: the documented range of ``rtol`` (relative tolerance of the exact series) in bake and profiles
+RTOL_RANGE = (1e-15, 0.1)
+
+
+def check_bake_options(model="curved", cutoff_tol=1e-4, curvature_radius_mm=None, geodesic="exact",
+                       far_field=None, *, rtol=1e-10, far_tol=0.1, far_rel_tol=1e-2, far_geodesic="cluster",
+                       backend="embree", auto_options=None) -> str:
+    """Reject bad options of :func:`bake` (MeshshadeError, one line naming the option, its value and what is
+    allowed) before any work; returns the far-field method with its default resolved. Also used by
+    :func:`meshshade.output.compare.run_comparison` to check everything up front."""
     if model not in MODELS:
         raise MeshshadeError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
-    if not (0 < cutoff_tol < 1):
-        raise MeshshadeError(f"cutoff tolerance must lie in (0, 1), got {cutoff_tol}")
-    if curvature_radius_mm is not None and not (np.isfinite(curvature_radius_mm) and curvature_radius_mm > 0):
-        raise MeshshadeError(f"curvature radius must be a positive number of mm, got {curvature_radius_mm}")
+    if not 0.0 < _real(cutoff_tol) < 1.0:
+        raise MeshshadeError(f"cutoff tolerance (cutoff_tol) must lie in (0, 1), got {cutoff_tol!r}")
+    if curvature_radius_mm is not None and not 0.0 < _real(curvature_radius_mm) < math.inf:
+        raise MeshshadeError(f"curvature radius must be a positive finite number of mm, got {curvature_radius_mm!r}")
     if geodesic not in GEODESIC_METHODS:
         raise MeshshadeError(f"unknown geodesic method {geodesic!r}; choose exact or arc")
     far_field = far_field or ("clustered" if model == "auto" else "off")
     if far_field not in FAR_FIELD_METHODS:
         raise MeshshadeError(f"unknown far-field method {far_field!r}; choose off, clustered or direct")
+    if not RTOL_RANGE[0] <= _real(rtol) <= RTOL_RANGE[1]:
+        raise MeshshadeError(f"rtol (relative tolerance of the exact series) must lie in [{RTOL_RANGE[0]:g}, "
+                             f"{RTOL_RANGE[1]:g}], got {rtol!r}")
+    for name, value in (("far_tol", far_tol), ("far_rel_tol", far_rel_tol)):
+        if not 0.0 < _real(value) < 1.0:
+            raise MeshshadeError(f"{name} must lie in (0, 1), got {value!r}")
+    if far_geodesic not in ("cluster", "arc"):
+        raise MeshshadeError(f"unknown far_geodesic {far_geodesic!r}; choose cluster or arc")
+    if backend not in ("embree", "numpy"):
+        raise MeshshadeError(f"unknown ray backend {backend!r}; choose embree or numpy")
+    if auto_options is not None and not isinstance(auto_options, dict):
+        raise MeshshadeError(f"auto_options must be a dict or None, got {type(auto_options).__name__}")
     return far_field
 
 
@@ -228,26 +271,26 @@ def _zone_groups(zone) -> list:
     return [(z, idx) for z, idx in groups if idx.size]
 
 
-def _gather_near(kernel, stream: PairStream, groups, chord_cut, progress: bool) -> tuple[np.ndarray, dict]:
-    """The geodesic gather of every zone (the near field of clustered sources): M (n, 3) W/mm^2 and counts."""
+def _gather_near(kernel, stream: PairStream, groups, chord_cut, progress) -> tuple[np.ndarray, dict]:
+    """The geodesic gather of every zone (the near field of clustered sources): M (n, 3) W/mm^2 and counts.
+
+    ``progress``: False, True or the task named in the progress lines (default "bake"); the sources done are
+    counted in :class:`~meshshade.progress.Progress` (a bar on a terminal, periodic lines otherwise)."""
     mesh, samples = stream.mesh, stream.samples
-    if progress and len(samples) > stream.chunk:
-        # no bar when stderr is not a terminal (pipes, logs): errors stay one clean line there
-        stream.bar = tqdm(total=len(samples), desc="gather", unit="src", leave=False, disable=None)
-    try:
+    stream.bar = Progress(progress if isinstance(progress, str) else "bake", len(samples), "sources",
+                          enabled=bool(progress))
+    with stream.bar:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
         M, stats = gather(kernel, mesh.n_vertices, samples.power, stream.src_cut, stream.pairs(groups),
                           source_radius=source_patch_radius(samples, mesh.vertex_areas), chord_cutoff_mm=chord_cut)
-    finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
-        if stream.bar is not None:
-            stream.bar.close()
     return M, {**stats, "pairs_found": stream.pairs_found, "geodesic_pairs_computed": stream.geodesic_pairs}
 
 
 def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, far_rel_tol: float):
     """The far field of the clustered sources (pairs with chord beyond r_near): M (n, 3) W/mm^2 and stats."""
     fn = far_field_exitance if far_field == "clustered" else far_field_exitance_direct
-    M, fstats = fn((samples.positions[clustered], samples.power[clustered]), mesh.vertices, material, near, cut,
-                   rel_tol=far_rel_tol)
+    with kernel_interrupts():  # numba in this thread: a Ctrl-C is a KeyboardInterrupt, not a SystemError
+        M, fstats = fn((samples.positions[clustered], samples.power[clustered]), mesh.vertices, material, near,
+                       cut, rel_tol=far_rel_tol)
     return M, {"far_field": far_field, "near_mm": near.tolist(), "far_field_rel_tol": far_rel_tol,
                "far_pairs_exact": fstats["pairs_exact"], "far_clusters_accepted": fstats.get("clusters_accepted", 0)}
 

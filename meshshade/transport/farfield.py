@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from meshshade.errors import MeshshadeError
+from meshshade.errors import ParameterError
 from meshshade.kernels.dipole import dipole_cutoff_radius
 from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
@@ -66,9 +66,9 @@ RECEIVER_BLOCK = 32
 def _points(name, value) -> np.ndarray:
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != 3:
-        raise MeshshadeError(f"{name} must be an (n, 3) array, got shape {arr.shape}")
+        raise ParameterError(f"{name} must be an (n, 3) array, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise MeshshadeError(f"{name} must be finite")
+        raise ParameterError(f"{name} must be finite")
     return np.ascontiguousarray(arr)
 
 
@@ -77,9 +77,9 @@ def _power(value, k) -> np.ndarray:
     if arr.ndim == 1:
         arr = np.repeat(arr[:, None], 3, axis=1)
     if arr.shape != (k, 3):
-        raise MeshshadeError(f"source power must be (k,) or (k, 3) with k = {k} sources, got shape {arr.shape}")
+        raise ParameterError(f"source power must be (k,) or (k, 3) with k = {k} sources, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise MeshshadeError("source power must be finite and >= 0 [W]")
+        raise ParameterError("source power must be finite and >= 0 [W]")
     return np.ascontiguousarray(arr)
 
 
@@ -87,10 +87,10 @@ def _radii(name, value, *, allow_zero) -> np.ndarray:
     try:
         arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)).copy()
     except (TypeError, ValueError):
-        raise MeshshadeError(f"{name} must be a number or three numbers (mm), got {value!r}") from None
+        raise ParameterError(f"{name} must be a number or three numbers (mm), got {value!r}") from None
     bad = ~np.isfinite(arr) | (arr < 0) | (~allow_zero & (arr == 0))
     if np.any(bad):
-        raise MeshshadeError(f"{name} must be finite and {'>=' if allow_zero else '>'} 0 mm, got {arr.tolist()}")
+        raise ParameterError(f"{name} must be finite and {'>=' if allow_zero else '>'} 0 mm, got {arr.tolist()}")
     return arr
 
 
@@ -132,7 +132,7 @@ class SourceTree:
         pos = _points("source positions", positions)
         pw = _power(power, len(pos))
         if int(leaf_size) < 1:
-            raise MeshshadeError(f"leaf_size must be >= 1, got {leaf_size}")
+            raise ParameterError(f"leaf_size must be >= 1, got {leaf_size}")
         k = len(pos)
         depth = int(tree_depth(max(k, 1), int(leaf_size)))
         lo, hi = node_ranges(k, depth)
@@ -160,7 +160,7 @@ def _as_tree(sources, leaf_size) -> SourceTree:
     try:
         positions, power = sources
     except (TypeError, ValueError):
-        raise MeshshadeError("sources must be a SourceTree or a (positions (k, 3), power (k, 3)) pair") from None
+        raise ParameterError("sources must be a SourceTree or a (positions (k, 3), power (k, 3)) pair") from None
     return SourceTree.build(positions, power, leaf_size=leaf_size)
 
 
@@ -212,9 +212,9 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
     rn = _radii("r_near_mm", r_near_mm, allow_zero=True)
     cut = _radii("cutoff_mm", cutoff_mm, allow_zero=False)
     if not (np.isfinite(rel_tol) and rel_tol >= 0):
-        raise MeshshadeError(f"rel_tol must be finite and >= 0, got {rel_tol}")
+        raise ParameterError(f"rel_tol must be finite and >= 0, got {rel_tol}")
     if not (0 <= budget_share < 1):
-        raise MeshshadeError(f"budget_share must lie in [0, 1), got {budget_share}")
+        raise ParameterError(f"budget_share must lie in [0, 1), got {budget_share}")
     tree = _as_tree(sources, leaf_size)
     st, al, mu, zv = _channel_params(material)
     if tree.n_sources == 0 or len(recv) == 0:
@@ -250,7 +250,7 @@ def far_field_exitance_direct(sources, receivers, material: Material, r_near_mm,
         try:
             positions, power = sources
         except (TypeError, ValueError):
-            raise MeshshadeError("sources must be a SourceTree or a (positions (k, 3), power (k, 3)) pair") from None
+            raise ParameterError("sources must be a SourceTree or a (positions (k, 3), power (k, 3)) pair") from None
         pos = _points("source positions", positions)
         pw = _power(power, len(pos))
     st, al, mu, zv = _channel_params(material)
@@ -284,7 +284,7 @@ def far_field_radius(material: Material, far_tol: float = DEFAULT_FAR_TOL) -> np
     local exitance where the surface is lit.
     """
     if not (0 < far_tol < 1):
-        raise MeshshadeError(f"far_tol must lie in (0, 1), got {far_tol}")
+        raise ParameterError(f"far_tol must lie in (0, 1), got {far_tol}")
     out = np.empty(3)
     for c in range(3):
         ch = material.channel(c)

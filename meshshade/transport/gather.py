@@ -9,12 +9,13 @@ vertices (:func:`gather`).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from meshshade.kernels.dipole import dipole_cutoff_radius
 from meshshade.materials import Material
+from meshshade.progress import kernel_interrupts
 from meshshade.transport.clusters import cluster_sources, expand_far_pairs
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, SourceFrames, patch_average_factor
 from meshshade.transport.zones import NEAR_MARGIN, ZONES, cluster_geometry
@@ -96,9 +97,10 @@ class PairStream:
     mesh : Mesh (mm); samples : EntrySamples (k); frames : SourceFrames of the samples; solvers : geodesic
     neighbourhood solver per method ("exact", "arc"); cut, near : (3,) mm, cutoff and r_near per channel;
     src_cut : (k, 3) mm, geodesic gather radius per source and channel. Time spent finding pairs is charged to
-    ``clock``'s "neighbourhoods", time between chunks (the gather) to "gather"; ``bar`` (tqdm or None) counts
-    sources. ``pairs_found`` and ``geodesic_pairs`` count the pairs yielded and the geodesic distances a
-    solver computed.
+    ``clock``'s "neighbourhoods", time between chunks (the gather) to "gather"; ``bar``
+    (:class:`~meshshade.progress.Progress`, or anything with ``update(amount)``, or None) counts sources, also
+    within a chunk as the solvers' blocks complete (every few tenths of a second). ``pairs_found`` and
+    ``geodesic_pairs`` count the pairs yielded and the geodesic distances a solver computed.
     """
 
     mesh: object
@@ -113,6 +115,7 @@ class PairStream:
     bar: object = None
     pairs_found: int = 0
     geodesic_pairs: int = 0
+    _credited: float = field(default=0.0, init=False, repr=False)  # this chunk's sources counted in ``bar``
 
     def pairs(self, groups):
         """Pairs of every ``(zone index, source indices)`` group, in order."""
@@ -122,12 +125,26 @@ class PairStream:
             else:
                 yield from self._zone_pairs(ZONES[z], idx)
 
-    def query(self, method: str, sel, radius) -> tuple:
-        """Pairs of sources ``sel`` within geodesic ``radius`` (mm, scalar or per source) by solver ``method``."""
+    def query(self, method: str, sel, radius, share: float = 0.0, n_sources: int | None = None) -> tuple:
+        """Pairs of sources ``sel`` within geodesic ``radius`` (mm, scalar or per source) by solver ``method``;
+        the query counts as ``share`` of ``n_sources`` (default ``sel.size``) sources of progress."""
         s, f = self.samples, self.frames
+        credit = None
+        if self.bar is not None and share > 0:
+            worth, start = share * (sel.size if n_sources is None else n_sources), self._credited
+
+            def credit(done, total):
+                self._count(start + worth * done / max(total, 1) - self._credited)
+
         nb = self.solvers[method].query(s.positions[sel], s.face[sel], s.bary[sel], s.vertex[sel], f.normals[sel],
-                                        radius, d1=f.d1[sel], d2=f.d2[sel], k1=f.k1[sel], k2=f.k2[sel])
+                                        radius, d1=f.d1[sel], d2=f.d2[sel], k1=f.k1[sel], k2=f.k2[sel],
+                                        progress=credit)
         return sel[nb.source_index()], nb.vertex.astype(np.int64), nb.distance, nb.chord, nb.phi
+
+    def _count(self, amount: float) -> None:
+        if self.bar is not None and amount > 0:
+            self._credited += amount
+            self.bar.update(amount)
 
     def _emit(self, p, geodesic_pairs: int, n_sources: int):
         self.pairs_found += p[0].size
@@ -135,8 +152,8 @@ class PairStream:
         self.clock.lap("neighbourhoods")
         yield p
         self.clock.lap("gather")
-        if self.bar is not None:
-            self.bar.update(n_sources)
+        self._count(n_sources - self._credited)  # the chunk's sources, less what its queries counted already
+        self._credited = 0.0
 
     def _zone_pairs(self, zone, idx):
         """One method over each source's whole gather radius, or exact geodesics in the near zone and arc
@@ -145,11 +162,11 @@ class PairStream:
         for a in range(0, idx.size, self.chunk):
             sel = idx[a:a + self.chunk]
             if zone.outer_method is None:
-                p = self.query(zone.inner_method, sel, self.src_cut[sel].max(axis=1))
+                p = self.query(zone.inner_method, sel, self.src_cut[sel].max(axis=1), share=0.9)
                 n_geo = p[0].size
             else:
-                pi = self.query(zone.inner_method, sel, NEAR_MARGIN * self.near.max())
-                po = self.query(zone.outer_method, sel, self.cut.max())
+                pi = self.query(zone.inner_method, sel, NEAR_MARGIN * self.near.max(), share=0.45)
+                po = self.query(zone.outer_method, sel, self.cut.max(), share=0.45)
                 fresh = ~np.isin(po[0] * n + po[1], pi[0] * n + pi[1])
                 p = tuple(np.concatenate([x, y[fresh]]) for x, y in zip(pi, po))
                 n_geo = pi[0].size + po[0].size
@@ -170,10 +187,11 @@ class PairStream:
             c1 = min(ptr.size - 1, c0 + c_chunk)
             mem = order[ptr[c0]:ptr[c1]]
             cen = order[ptr[c0:c1]]
-            pn = self.query("exact", mem, near_c)
-            pc = self.query("exact", cen, cut.max() + a_max)
+            pn = self.query("exact", mem, near_c, share=0.45)
+            pc = self.query("exact", cen, cut.max() + a_max, share=0.45, n_sources=mem.size)
             keys = np.sort(pn[0] * n + pn[1])
-            pf = expand_far_pairs(pc, (mem, centre_of[ptr[c0]:ptr[c1]]), samples.positions, mesh.vertices,
-                                  self.frames, exclude_keys=keys, max_distance=cut.max())
+            with kernel_interrupts():  # numba in this thread: a Ctrl-C is a KeyboardInterrupt, not a SystemError
+                pf = expand_far_pairs(pc, (mem, centre_of[ptr[c0]:ptr[c1]]), samples.positions, mesh.vertices,
+                                      self.frames, exclude_keys=keys, max_distance=cut.max())
             p = tuple(np.concatenate([x, y]) for x, y in zip(pn, pf))
             yield from self._emit(p, pn[0].size + pc[0].size, mem.size)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshshade.errors import MeshshadeError
+from meshshade.errors import ParameterError
 from meshshade.kernels.curvature import CurvatureTable
 from meshshade.kernels.dipole import dipole_profile, dipole_tail_reflectance
 from meshshade.kernels.sphere import sphere_series_profile
@@ -81,7 +81,7 @@ class PairKernel:
     def __init__(self, model: str, material: Material, frames: SourceFrames, *, rtol: float = 1e-10,
                  sphere_radius_rtol: float = 1e-3, plan=None):
         if model not in MODELS:
-            raise MeshshadeError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+            raise ParameterError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
         if model == "auto" and plan is None:
             raise ValueError("model 'auto' needs the per-sample plan (meshshade.transport.auto.plan_sources)")
         self.model, self.material, self.frames, self.plan = model, material, frames, plan

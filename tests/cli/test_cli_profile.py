@@ -61,7 +61,7 @@ def test_profile_table_and_plot(tmp_path, capsys):
     (["profile", "--material", "skn1"], "did you mean 'skin1'"),
     (["profile", "--sigma-s-prime", "1"], "--sigma-a"),
     (["profile", "--sigma-s-prime", "-1", "--sigma-a", "0.01"], "sigma_s_prime"),
-    (["profile", "--sigma-s-prime", "nan", "--sigma-a", "0.01"], "sigma_s_prime"),
+    (["profile", "--sigma-s-prime", "nan", "--sigma-a", "0.01"], "--sigma-s-prime"),
     (["profile", "--material", "skin1", "--shape", "sphere"], "--radius"),
     (["profile", "--material", "skin1", "--distances", "1,x"], "--distances"),
     (["profile", "--material", "skin1", "--distances", "-1"], "distances"),

@@ -280,3 +280,35 @@ def test_face_normals_agree_with_the_mesh_container(sphere):
                                   mesh.face_areas)
     # outward on a sphere centred at the origin
     assert np.all(np.einsum("ij,ij->i", face_normals(V, mesh.faces), V[mesh.faces].mean(axis=1)) > 0)
+
+
+# ------------------------------------------------------------------------------------- non-manifold vertices
+
+def _mirrored_through_vertex(V, F, k):
+    n = len(V)
+    others = np.flatnonzero(np.arange(n) != k)
+    index = np.full(n, k)
+    index[others] = n + np.arange(n - 1)
+    return np.vstack([V, 2 * V[k] - V[others]]), np.vstack([F, index[F][:, [0, 2, 1]]])
+
+
+def test_nonmanifold_vertex_two_solids_touching_at_a_point(sphere):
+    from meshshade.geometry.mesh import nonmanifold_vertices
+
+    V, F = _mirrored_through_vertex(*sphere, 5)
+    assert np.flatnonzero(nonmanifold_vertices(len(V), F)).tolist() == [5]
+    with pytest.warns(MeshDefectWarning, match="1 vertices join fans of faces that meet only at the vertex"):
+        report = validate_mesh(V, F)
+    assert report.n_nonmanifold_vertices == 1 and report.n_nonmanifold_edges == 0 and report.is_closed
+
+
+def test_nonmanifold_vertices_not_reported_for_manifold_cases(sphere):
+    from meshshade.geometry.mesh import nonmanifold_vertices
+
+    V, F = sphere
+    upper = V[F].mean(axis=1)[:, 2] > 0
+    fins = np.vstack([F, [[F[0, 0], F[0, 1], len(V)]]])  # a non-manifold edge is not a bow-tie
+    degenerate = np.vstack([F, [[F[0, 0], F[0, 0], F[0, 1]]]])
+    for n, faces in ((len(V), F), (len(V), F[upper]), (len(V) + 1, fins), (len(V), degenerate)):
+        assert not nonmanifold_vertices(n, faces).any()
+    assert _quiet_validate(V, F).n_nonmanifold_vertices == 0

@@ -33,7 +33,7 @@ KERNELS = {
                                                                                    albedo_prime=a, eta=e),
 }
 BAD_MATERIALS = [(1.5, 1.3), (-0.1, 1.3), (np.nan, 1.3), (np.inf, 1.3), (0.9, 0.0), (0.9, -1.3), (0.9, np.nan),
-                 (0.9, np.inf), ("skin", 1.3), (0.9, "glass")]
+                 (0.9, np.inf), ("skin", 1.3), (0.9, "glass"), (0.9, 0.5), (0.9, 2.6), (0.9, 60.0)]
 
 
 @pytest.mark.parametrize("albedo,eta", BAD_MATERIALS)
@@ -71,8 +71,17 @@ def test_cylinder_needs_a_positive_albedo():
 def test_material_error_names_the_value():
     with pytest.raises(MaterialError, match=r"albedo_prime .*\[0, 1\], got 1\.5"):
         dipole_profile(1.0, albedo_prime=1.5, eta=1.3)
-    with pytest.raises(MaterialError, match=r"eta must be finite and > 0, got 0\.0"):
+    with pytest.raises(MaterialError, match=r"eta .*must be finite and lie in \[1, 2\.5\].*got 0\.0"):
         curvature_ratios(1.0, albedo_prime=0.9, eta=[1.3, 0.0])
+    with pytest.raises(MaterialError, match=r"eta .*\[1, 2\.5\].*got 100\.0"):
+        dipole_profile(1.0, albedo_prime=0.9, eta=100.0)
+
+
+@pytest.mark.parametrize("eta", [1.0, 1.7, 2.5])
+@pytest.mark.parametrize("name", KERNELS)
+def test_eta_domain_edges_are_accepted_everywhere(name, eta):
+    """One domain of eta for every kernel (kernels/optics.check_eta): [1, 2.5], both ends included."""
+    KERNELS[name](0.9, eta)
 
 
 @pytest.mark.parametrize("call", [

@@ -15,6 +15,7 @@ from meshshade.geometry.topology import winding_number
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.light import BeamLight, DirectionalLight, EntrySamples, PointLight, entry_samples, parse_light_spec
 from meshshade.light.shadows import ShadowCuller
+from meshshade.light.samples import beam_footprint, check_exitance
 from meshshade.light.sources import BEAM_SAMPLES
 from meshshade.raycast import NumpyScene, make_scene
 
@@ -91,11 +92,18 @@ def test_parse_light_spec_defaults():
     ("point:inf,0,0", "point light position must be finite"),
     ("beam:0,0,0:0,0,0", "beam direction must be non-zero"),
     ("directional:0,0,0", "directional light direction must be non-zero"),
-    ("beam:0,0,0:0,0,1:-1", "beam power must be >= 0"),
+    ("beam:0,0,0:0,0,1:-1", "beam power must be > 0 and at most 1e20 W, got -1.0"),
+    ("beam:0,0,0:0,0,1:0", "beam power must be > 0 and at most 1e20 W, got 0.0"),
+    ("beam:0,0,0:0,0,1:1e21", "beam power must be > 0 and at most 1e20 W, got 1e21"),
     ("beam:0,0,0:0,0,1:nan", "beam power must be finite"),
     ("beam:0,0,0:0,0,1:lots", "beam power must be a number"),
-    ("directional:0,0,1:-0.1", "directional irradiance must be >= 0"),
-    ("point:0,0,0:-3", "point light intensity must be >= 0"),
+    ("beam:0,0,0:0,0,1:1:-2", "beam radius must be >= 0"),
+    ("beam:0,0,0:0,0,1:1:inf", "beam radius must be finite"),
+    ("directional:0,0,1:-0.1", "directional irradiance must be > 0 and at most 1e20 W/mm^2"),
+    ("directional:0,0,-1:1e308", "directional irradiance must be > 0 and at most 1e20 W/mm^2, got 1e308"),
+    ("directional:0,0,-1:0", "directional irradiance must be > 0"),
+    ("point:0,0,0:-3", "point light intensity must be > 0 and at most 1e20 W/sr"),
+    ("point:0,0,0:inf", "point light intensity must be finite"),
 ])
 def test_parse_light_spec_errors(spec, fragment):
     with pytest.raises(LightError) as info:
@@ -116,8 +124,11 @@ def test_lights_validate_at_construction_and_are_frozen():
         BeamLight((0, 0, 0), (0, 0, 0))
     with pytest.raises(LightError, match="3 numbers"):
         PointLight((0, 0), 1.0)
-    with pytest.raises(LightError, match=">= 0"):
+    with pytest.raises(LightError, match="> 0"):
         DirectionalLight((0, 0, 1), -1.0)
+    with pytest.raises(LightError, match="must be a number"):
+        BeamLight((0, 0, 0), (0, 0, 1), True)
+    assert BeamLight((0, 0, 0), (0, 0, 1), 1e20).power == 1e20  # MAX_LIGHT_STRENGTH itself is allowed
     light = PointLight(np.array([1, 2, 3]), 2)
     assert light.position == (1.0, 2.0, 3.0) and isinstance(light.intensity, float)
     with pytest.raises(dataclasses.FrozenInstanceError):
@@ -287,18 +298,37 @@ def test_entry_samples_backends_agree():
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
 
 
-def test_entry_samples_warns_when_a_light_reaches_nothing():
-    """An open patch facing +z, lit from below: no vertex faces the light."""
+def test_no_light_reaching_the_mesh_is_an_error_one_among_several_a_warning():
+    """An open patch facing +z, lit from below: no vertex faces the light. Alone: LightError (the result would be
+    all zeros) naming the light, why, and the reversed direction; with a light that does reach it: a warning."""
     patch = trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], faces=[[0, 1, 2], [1, 3, 2]])
     V, F, N, A = as_arrays(patch)
-    with pytest.warns(UserWarning, match="reaches no vertex"):
-        es = entry_samples(V, F, N, A, [DirectionalLight((0.0, 0.0, 1.0))], None, ETA)
-    assert len(es) == 0 and es.positions.shape == (0, 3) and es.power.dtype == np.float64
+    with pytest.raises(LightError) as info:
+        entry_samples(V, F, N, A, [DirectionalLight((0.0, 0.0, 1.0))], None, ETA)
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith("directional light 0 (travelling along (0, 0, 1)") and "reaches no vertex" in msg
+    assert "faces away from it or is shadowed" in msg and "did you mean directional:0,0,-1?" in msg
+    with pytest.raises(LightError, match=r"^no light reaches the mesh .*directional light 0 .*point light 1 "):
+        entry_samples(V, F, N, A, [DirectionalLight((0.0, 0.0, 1.0)), PointLight((0.5, 0.5, -3.0))], None, ETA)
+    with pytest.warns(UserWarning, match=r"directional light 0 .* reaches no vertex"):
+        es = entry_samples(V, F, N, A, [DirectionalLight((0.0, 0.0, 1.0)), DirectionalLight((0.0, 0.0, -1.0))],
+                           None, ETA)
+    assert len(es) == 4 and np.all(es.light_index == 1)
     assert es.incident_power[0] == 0.0 and es.specular_power[0] == 0.0
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         lit = entry_samples(V, F, N, A, [DirectionalLight((0.0, 0.0, -1.0))], None, ETA)
     assert len(lit) == 4 and lit.power.sum() == pytest.approx(float(fresnel_transmittance_entry(1.0, ETA)))
+
+
+def test_a_beam_that_misses_is_an_error_even_among_other_lights():
+    V, F, N, A = sphere(10.0, 2)
+    with pytest.raises(LightError, match=r"beam light 1 \(from \(30, 0, 50\) mm .*\) misses the mesh$"):
+        entry_samples(V, F, N, A, [DirectionalLight((0.0, 0.0, -1.0)), BeamLight((30.0, 0.0, 50.0), (0, 0, -1.0))],
+                      None, ETA)
+    with pytest.raises(LightError, match=r"mesh lies behind the origin: did you mean direction 0,0,-1\?"):
+        entry_samples(V, F, N, A, [BeamLight((0.0, 0.0, 50.0), (0, 0, 1.0))], None, ETA)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -411,7 +441,57 @@ def test_finite_width_beam_spreads_power_over_many_entry_points():
     # every ray hits: the incident power is the beam's; entering = incident - specular
     assert s.incident_power[0] == pytest.approx(2.0)
     assert s.power.sum() + s.specular_power[0] == pytest.approx(2.0)
-    # a beam wider than the sphere loses the rays that miss
+    # a beam wider than the sphere: its power beyond the sphere's cross-section is lost; its 64 rays would hit
+    # with 16 of them, while 1281 vertices lie lit in its cylinder: those sample it (irradiance P / (pi R^2))
     wide = entry_samples(V, F, N, A, [BeamLight((0, 0, 50), (0, 0, -1), 1.0, radius=20.0)], eta=1.3)
-    assert wide.incident_power[0] == pytest.approx(len(wide) / BEAM_SAMPLES)
-    assert len(wide) < BEAM_SAMPLES
+    assert wide.incident_power[0] == pytest.approx(10.0 ** 2 / 20.0 ** 2, rel=5e-3)
+    assert len(wide) > BEAM_SAMPLES and np.all(wide.vertex >= 0) and np.all(V[wide.vertex, 2] >= -1e-9)
+
+
+@pytest.mark.parametrize("radius", [11.0, 150.0, 1e6])
+def test_wide_beam_around_a_small_mesh_is_not_a_miss(radius):
+    """Issue 17: a beam of radius 150 mm on a 10 mm sphere, axis through the centre, was reported as a miss
+    because its 64 fixed rays all pass beside the sphere (the innermost ring has radius 13 mm). It lights the
+    sphere's cross-section with irradiance P / (pi R^2)."""
+    V, F, N, A = sphere(10.0, 3)
+    es = entry_samples(V, F, N, A, [BeamLight((0, 0, 40), (0, 0, -1), 2.0, radius=radius)], None, ETA)
+    expected = 2.0 * 10.0 ** 2 / radius ** 2
+    assert es.incident_power[0] == pytest.approx(expected, rel=1e-2)
+    assert np.all(es.power >= 0) and np.all(np.isfinite(es.power))
+
+
+def test_wide_beam_reaching_only_a_thin_mesh_between_its_rays():
+    """A sphere of radius 0.5 mm off the axis of a beam of radius 30 mm: no ray of the sunflower hits it, its lit
+    vertices still do (and carry the beam's irradiance times their projected area)."""
+    V, F, N, A = sphere(0.5, 3, center=(7.0, 3.0, 0.0))
+    light = BeamLight((0, 0, 40), (0, 0, -1), 1.0, radius=30.0)
+    scene = make_scene(V, F)
+    assert not np.any(scene.first_hit(light.ray_origins(), np.broadcast_to(light.direction, (BEAM_SAMPLES, 3))).hit)
+    es = entry_samples(V, F, N, A, [light], scene, ETA)
+    assert es.incident_power[0] == pytest.approx(0.5 ** 2 / 30.0 ** 2, rel=2e-2)
+
+
+def test_beam_footprint_excludes_shadowed_and_back_vertices():
+    """Big sphere with a small one 20 mm above it, beam along -z of radius 2.5 mm: only the small sphere's top is
+    lit; the big sphere's vertices under it lie in the cylinder but are shadowed."""
+    (V, F, N, A), n_big = big_and_small_spheres(3)
+    light = BeamLight((0, 0, 50), (0, 0, -1), 1.0, radius=2.5)
+    idx, cos = beam_footprint(light, V, N, A, make_scene(V, F))
+    assert idx.size > 0 and np.all(idx >= n_big) and np.all(V[idx, 2] > 20.0) and np.all(cos > 0)
+    in_cylinder = (np.hypot(V[:, 0], V[:, 1]) <= 2.5) & (N[:, 2] > 0)
+    assert np.any(in_cylinder[:n_big])   # the big sphere's top is in the cylinder, and shadowed
+    # a beam starting between the spheres (below the small one) lights the big sphere
+    low = BeamLight((0, 0, 12), (0, 0, -1), 1.0, radius=2.5)
+    idx, _ = beam_footprint(low, V, N, A, make_scene(V, F))
+    assert idx.size > 0 and np.all(idx < n_big)
+
+
+def test_check_exitance_turns_an_overflow_into_an_error_naming_the_light():
+    lights = [DirectionalLight((0.0, 0.0, -1.0), 1e20)]
+    check_exitance(np.ones((4, 3)), lights)
+    check_exitance(np.zeros((0, 3)), lights)
+    for bad, word in ((np.inf, "not finite"), (np.nan, "not finite"), (-1e-3, "negative")):
+        M = np.ones((4, 3))
+        M[2, 1] = bad
+        with pytest.raises(LightError, match=rf"radiance is {word} for directional light 0 .*irradiance 1e\+20"):
+            check_exitance(M, lights)

@@ -78,7 +78,7 @@ def test_auto_camera_frames_the_mesh():
         assert alpha.sum() > 0.1 * alpha.size
         assert alpha[0].sum() == alpha[-1].sum() == alpha[:, 0].sum() == alpha[:, -1].sum() == 0  # margin
     # up parallel to the view direction (0, 0, -1): no image plane; the package's own error, with its reason
-    with pytest.raises(MeshshadeError, match="up vector is parallel to the view direction"):
+    with pytest.raises(MeshshadeError, match=r"up vector \(0, 0, 1\) is parallel to the view direction"):
         render.Camera("orthographic", (0, 0, 1), (0, 0, 0), (0, 0, 1))
 
 

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from meshshade.errors import MeshshadeError
 from meshshade.output.tonemap import drago_tonemap, exposure_tonemap, srgb_encode, to_uint8, tonemap
 
 
@@ -45,7 +46,7 @@ def test_exposure_and_uint8():
     u8 = to_uint8(out)
     assert u8.dtype == np.uint8 and u8.min() == 0 and u8.max() == 255
     assert tonemap(rgb, operator="exposure").dtype == np.uint8
-    with pytest.raises(ValueError):
+    with pytest.raises(MeshshadeError, match="unknown tone-mapping operator 'reinhard'"):
         tonemap(rgb, operator="reinhard")
 
 

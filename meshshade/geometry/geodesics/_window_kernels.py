@@ -321,11 +321,13 @@ def _seed_face_source(f, bary, stamp, cut, he_tail, he_twin, he_tox, he_tsx, he_
 @njit(cache=True, nogil=True)
 def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, he_head, he_opp, he_twin,
                   he_tox, he_tsx, he_len, he_ox, he_oy, v_ptr, v_he, emitter, inv_delta, nb,
-                  fan_start, fan_ok, he_corner, v_theta):
+                  fan_start, fan_ok, he_corner, v_theta, stop):
     """Window propagation for a block of k sources (``src_vertex`` (k,) vertex or -1, else face ``src_face`` (k,)
     at barycentric ``src_bary`` (k, 3)), each up to its ``cutoff`` (k,) mm.
 
     Returns (counts (k,) int64, vertex (nnz,) int32, distance (nnz,) float64 mm), rows in source order.
+    ``stop`` (1,) int64: when another thread sets it non-zero (an interrupted query), the call returns at its
+    next event with an unfinished result, which the caller drops (one source can take a second).
     """
     k = src_vertex.shape[0]
     m3 = he_tail.shape[0]
@@ -428,7 +430,7 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
                 npool += 1
             nc = 0
             # ---- next event ------------------------------------------------------------------------------
-            if qn == 0:
+            if qn == 0 or stop[0] != 0:
                 break
             key, item, cur = _bq_pop(bhead, ek, ei, en, cur, nb)
             qn -= 1

@@ -53,8 +53,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from meshshade.geometry.geodesics.neighbourhoods import (GeodesicNeighbourhoods, Neighbourhoods, _default_threads,
-                                                           assemble_neighbourhoods)
+from meshshade.geometry.geodesics.neighbourhoods import (GeodesicNeighbourhoods, Neighbourhoods, Pacer,
+                                                           _default_threads, assemble_neighbourhoods,
+                                                           expected_work, pace_rate, run_paced)
 from meshshade.geometry.mesh import face_normals
 
 __all__ = ["FastGeodesicNeighbourhoods", "ACCURACY"]
@@ -291,6 +292,7 @@ class FastGeodesicNeighbourhoods:
         self._area_per_vertex = 0.5 * float(np.linalg.norm(face_normals(self.vertices, self.faces, unit=False),
                                                            axis=1).sum()) / len(self.vertices)
         self._cap = None
+        self._pace: dict = {}  # measured speed of the kernel calls per size class (pace_rate)
         self.stats: dict = {}
 
     @property
@@ -354,14 +356,15 @@ class FastGeodesicNeighbourhoods:
         # arc normal: the vertex normal, or the barycentric blend of the face's vertex normals
         an = np.where(on_face[:, None], np.einsum("kj,kjc->kc", bary, NV[fc]), NV[np.maximum(sv, 0)])
         an /= np.where((ln := np.linalg.norm(an, axis=1, keepdims=True)) > 0, ln, 1.0)
-        bs = int(block_size or 4096)
-        res = []
-        for a in range(0, k, bs):
-            b = min(k, a + bs)
-            res.append(self._run(psv[a:b], corners[a:b], np.ascontiguousarray(pts[a:b]), np.ascontiguousarray(an[a:b]),
-                                 cut[a:b]))
-            if progress is not None:
-                progress(b, k)
+        # each call is parallel over the threads and takes about BLOCK_SECONDS (Ctrl-C acts between calls)
+        if block_size:
+            pacer = Pacer(np.ones(k), seconds=np.inf, min_block=int(block_size), max_block=int(block_size))
+        else:
+            work = expected_work(cut, self.n_vertices, self._area_per_vertex) / self.n_threads
+            pacer = Pacer(work, pace_rate(self._pace, work), min_block=self.n_threads, max_block=4096)
+        res = run_paced(lambda a, b: self._run(psv[a:b], corners[a:b], np.ascontiguousarray(pts[a:b]),
+                                               np.ascontiguousarray(an[a:b]), cut[a:b]),
+                        pacer, k, progress=progress)
         counts = np.concatenate([r[0] for r in res]) if res else np.zeros(0, np.int64)
         vertex = (self._vperm[np.concatenate([r[1] for r in res])].astype(np.int32) if res
                   else np.zeros(0, np.int32))

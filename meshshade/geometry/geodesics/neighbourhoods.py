@@ -36,7 +36,8 @@ Azimuth
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+import time
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,6 +47,7 @@ from meshshade.geometry.geodesics import _window_kernels as _k
 from meshshade.geometry.geodesics._saddle_kernels import _build_fans
 from meshshade.geometry.mesh import face_geometry, face_normals
 from meshshade.geometry.topology import vertex_adjacency
+from meshshade.progress import kernel_interrupts
 
 __all__ = ["GeodesicNeighbourhoods", "Neighbourhoods", "geodesic_neighbourhoods", "geodesic_distances_from",
            "tangent_azimuth", "METHODS"]
@@ -53,6 +55,17 @@ __all__ = ["GeodesicNeighbourhoods", "Neighbourhoods", "geodesic_neighbourhoods"
 METHODS = ("window", "fmm", "dijkstra")
 #: barycentric weights are kept at least this far inside their face (a source on an edge lights both faces)
 _BARY_FLOOR = 1e-9
+#: seconds of work per kernel call of a query: Python acts on Ctrl-C (and SIGTERM, SIGHUP) only between calls,
+#: never inside a numba kernel, so this bounds how long an interrupt waits (see :func:`run_paced`)
+BLOCK_SECONDS = 0.2
+#: seconds per unit of work (one expected pair) assumed before any call has been timed: the slowest measured,
+#: exact windows over a whole pebble of 10k vertices or half an icosphere of 41k (30-40 us per pair; 1-13 us
+#: is typical over a few hundred vertices)
+_PRIOR_SECONDS_PER_PAIR = 4e-5
+#: work of one source beyond its expected pairs (seeding, the queue), in pairs
+_SOURCE_OVERHEAD_PAIRS = 16.0
+#: pairs per slice of :func:`assemble_neighbourhoods` (each numpy call on a slice takes a few tens of ms)
+ASSEMBLE_PAIRS = 1 << 19
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -219,6 +232,130 @@ def _default_threads() -> int:
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# pacing: kernel calls of about BLOCK_SECONDS each
+# ---------------------------------------------------------------------------------------------------------------
+
+def expected_work(cutoff_mm, n_vertices: int, area_per_vertex: float) -> np.ndarray:
+    """(k,) work estimate of each source, in pairs: the vertices expected within its cutoff (the disc's area over
+    the mean area per vertex, at most all vertices) plus a constant per source."""
+    cut = np.asarray(cutoff_mm, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        pairs = np.minimum(np.pi * cut * cut / max(area_per_vertex, 1e-300), float(n_vertices))
+    return np.where(np.isnan(pairs), float(n_vertices), pairs) + _SOURCE_OVERHEAD_PAIRS
+
+
+def pace_rate(rates: dict, work) -> dict:
+    """The measured-speed record (:class:`Pacer`'s ``rate``) for sources of this much ``work`` (k,), kept per
+    factor-2 class of the mean work per source: the cost per pair grows with the neighbourhood (exact windows:
+    2-5 us per pair over a few hundred vertices, 30-40 us over a whole mesh of 10-40k), and a bake alternates
+    queries of very different radii (auto's near and far zones)."""
+    mean = float(np.mean(work)) if len(work) else 1.0
+    return rates.setdefault(int(np.log2(max(mean, 1.0))), {})
+
+
+class Pacer:
+    """Cuts k sources into consecutive blocks of about ``seconds`` of kernel work each.
+
+    ``work`` (k,) estimates each source's work (:func:`expected_work`); the seconds per unit of work are measured
+    on the calls made so far (``rate``, a dict the caller may keep across queries: ``{"seconds", "work"}``, older
+    calls fading by half every few calls), starting from a conservative prior. A block has between ``min_block``
+    and ``max_block`` sources. Where blocks end never changes a result: every source is computed on its own.
+    """
+
+    def __init__(self, work, rate: dict | None = None, *, seconds: float = BLOCK_SECONDS, min_block: int = 1,
+                 max_block: int = 512):
+        self.cum = np.cumsum(np.asarray(work, dtype=np.float64))
+        self.rate = {} if rate is None else rate
+        self.seconds = float(seconds)
+        self.min_block, self.max_block = max(1, int(min_block)), max(1, int(max_block))
+
+    def seconds_per_work(self) -> float:
+        r = self.rate
+        return r["seconds"] / r["work"] if r.get("work", 0.0) > 0 else _PRIOR_SECONDS_PER_PAIR
+
+    def next(self, a: int) -> int:
+        """End (exclusive) of the block that starts at source ``a``."""
+        k = self.cum.shape[0]
+        start = self.cum[a - 1] if a > 0 else 0.0
+        b = int(np.searchsorted(self.cum, start + self.seconds / self.seconds_per_work(), side="right"))
+        return int(min(k, a + self.max_block, max(b, a + self.min_block)))
+
+    def work(self, a: int, b: int) -> float:
+        return float(self.cum[b - 1] - (self.cum[a - 1] if a > 0 else 0.0))
+
+    def record(self, a: int, b: int, seconds: float) -> None:
+        """A call over sources ``a:b`` took ``seconds``."""
+        r = self.rate
+        r["seconds"] = 0.8 * r.get("seconds", 0.0) + seconds
+        r["work"] = 0.8 * r.get("work", 0.0) + self.work(a, b)
+
+
+def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, stop=None) -> list:
+    """``run(a, b)`` over consecutive blocks ``a:b`` of ``k`` sources chosen by ``pacer``; the results in source
+    order.
+
+    With ``n_threads`` > 1 the blocks run on worker threads (the kernels release the GIL), at most two per
+    thread submitted at a time, while the calling thread waits (a wait Python interrupts at once). Each call
+    takes about :data:`BLOCK_SECONDS`, so after Ctrl-C (a KeyboardInterrupt raised in the calling thread, also
+    by ``progress``) at most the blocks already running finish before it propagates; the queued ones are
+    cancelled, and ``stop`` ((1,) array or None) is set to 1, which tells the running kernels that watch it to
+    return at once (their results are dropped). In the calling thread, an interrupt that numba reports as a
+    SystemError is raised as the KeyboardInterrupt it is (:func:`meshshade.progress.kernel_interrupts`).
+    ``progress(done, k)`` is called after each block with the number of sources done.
+    """
+    results: dict = {}
+    done = 0
+    if k == 0:
+        return []
+    first = pacer.next(0)
+    if n_threads <= 1 or first >= k:
+        a = 0
+        while a < k:
+            b = first if a == 0 else pacer.next(a)
+            t = time.perf_counter()
+            with kernel_interrupts():  # a Ctrl-C during the call: KeyboardInterrupt, never numba's SystemError
+                results[a] = run(a, b)
+            pacer.record(a, b, time.perf_counter() - t)
+            done += b - a
+            a = b
+            if progress is not None:
+                progress(done, k)
+        return [results[a] for a in sorted(results)]
+
+    def timed(a, b):
+        t = time.perf_counter()
+        out = run(a, b)
+        return out, time.perf_counter() - t
+
+    ex = ThreadPoolExecutor(max_workers=n_threads)
+    pending: dict = {}
+    try:
+        a = 0
+        while a < k or pending:
+            while a < k and len(pending) < 2 * n_threads:
+                b = first if a == 0 else pacer.next(a)
+                pending[ex.submit(timed, a, b)] = (a, b)
+                a = b
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for f in finished:
+                a0, b0 = pending.pop(f)
+                results[a0], seconds = f.result()
+                pacer.record(a0, b0, seconds)
+                done += b0 - a0
+                if progress is not None:
+                    progress(done, k)
+    except BaseException:
+        if stop is not None:
+            stop[0] = 1  # kernels that watch it return at their next step
+        raise
+    finally:  # on an interrupt or error: queued blocks are dropped, running ones finish (or stop early)
+        for f in pending:
+            f.cancel()
+        ex.shutdown(wait=True)
+    return [results[a] for a in sorted(results)]
+
+
+# ---------------------------------------------------------------------------------------------------------------
 # solver
 # ---------------------------------------------------------------------------------------------------------------
 
@@ -292,6 +429,9 @@ class GeodesicNeighbourhoods:
         object.__setattr__(self, "faces", _readonly(F))
         object.__setattr__(self, "vertex_normals", _readonly(N))
         object.__setattr__(self, "_topo", topo)
+        cross = face_geometry(V, F)[0] if F.size else np.zeros((0, 3))
+        object.__setattr__(self, "_area_per_vertex", 0.5 * float(np.linalg.norm(cross, axis=1).sum()) / V.shape[0])
+        object.__setattr__(self, "_pace", {})  # measured speed of the kernel calls per size class (pace_rate)
 
     # -- description -------------------------------------------------------------------------------------------
     @property
@@ -359,14 +499,14 @@ class GeodesicNeighbourhoods:
             nrm = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
         return pts, sf, bary, sv, np.where(np.isfinite(nrm), nrm, 0.0)
 
-    def _run_block(self, sv, sf, bary, cut):
+    def _run_block(self, sv, sf, bary, cut, stop=None):
         t = self._topo
         sv = np.where(sv >= 0, t["vinv"][np.maximum(sv, 0)], -1)
         sf = np.where(sf >= 0, t["finv"][np.maximum(sf, 0)], -1)
-        counts, vertex, dist = self._run_internal(sv, sf, bary, cut)
+        counts, vertex, dist = self._run_internal(sv, sf, bary, cut, np.zeros(1, np.int64) if stop is None else stop)
         return counts, t["vperm"][vertex].astype(np.int32), dist
 
-    def _run_internal(self, sv, sf, bary, cut):
+    def _run_internal(self, sv, sf, bary, cut, stop):
         t = self._topo
         # bucket queue: width 1/8 mean edge, enough buckets to span the largest jump of a key (3 longest edges)
         delta = t["mean_edge"] / 8.0 if t["mean_edge"] > 0 else 1.0
@@ -376,7 +516,7 @@ class GeodesicNeighbourhoods:
             return _k._window_block(sv, sf, bary, cut, self.n_vertices, t["he_tail"], t["he_head"], t["he_opp"],
                                     t["he_twin"], t["he_tox"], t["he_tsx"], t["he_len"], t["he_ox"], t["he_oy"],
                                     t["v_ptr"], t["v_he"], t["emitter"], *q,
-                                    t["fan_start"], t["fan_ok"], t["he_corner"], t["v_theta"])
+                                    t["fan_start"], t["fan_ok"], t["he_corner"], t["v_theta"], stop)
         return _g._vertex_queue_block(sv, sf, bary, cut, self.n_vertices, t["e_ptr"], t["e_nbr"], t["e_len"],
                                      t["he_tail"], t["he_head"], t["he_len"], t["he_ox"], t["he_oy"],
                                      t["v_ptr"], t["v_he"], self.method == "fmm", *q)
@@ -406,9 +546,11 @@ class GeodesicNeighbourhoods:
         chord, tangent : bool
             Whether to return ``chord`` (8 bytes/pair) and ``tangent`` (24 bytes/pair).
         progress : callable(done, total) or None
-            Called after each block of sources.
+            Called after each block of sources with the number of sources done.
         block_size : int or None
-            Sources per kernel call (default: balanced over the threads, at most 512).
+            Sources per kernel call (default: as many as take about :data:`BLOCK_SECONDS`, by the pairs expected
+            within the cutoff and the measured speed of the previous calls, so that Ctrl-C acts within about that
+            long; at most 512 and a quarter of the sources per thread). Results do not depend on it.
 
         Returns
         -------
@@ -421,25 +563,15 @@ class GeodesicNeighbourhoods:
         if not np.all(cut >= 0) or np.any(np.isnan(cut)):
             raise ValueError("cutoff_mm must be >= 0 (inf allowed)")
         nthreads = int(self.n_threads or _default_threads())
-        bs = int(block_size or max(1, min(512, -(-k // (4 * nthreads)))))
-        blocks = [(a, min(k, a + bs)) for a in range(0, k, bs)]
-        results = [None] * len(blocks)
-
-        def work(j):
-            a, b = blocks[j]
-            return self._run_block(sv[a:b], sf[a:b], bary[a:b], cut[a:b])
-
-        if nthreads == 1 or len(blocks) == 1:
-            for j in range(len(blocks)):
-                results[j] = work(j)
-                if progress is not None:
-                    progress(blocks[j][1], k)
+        most = max(1, min(512, -(-k // (4 * nthreads))))  # several blocks per thread, for balance
+        if block_size:
+            pacer = Pacer(np.ones(k), seconds=np.inf, min_block=int(block_size), max_block=int(block_size))
         else:
-            with ThreadPoolExecutor(max_workers=nthreads) as ex:
-                for j, r in enumerate(ex.map(work, range(len(blocks)))):
-                    results[j] = r
-                    if progress is not None:
-                        progress(blocks[j][1], k)
+            work = expected_work(cut, self.n_vertices, self._area_per_vertex)
+            pacer = Pacer(work, pace_rate(self._pace, work), max_block=most)
+        stop = np.zeros(1, np.int64)  # set by run_paced when interrupted: running window kernels return early
+        results = run_paced(lambda a, b: self._run_block(sv[a:b], sf[a:b], bary[a:b], cut[a:b], stop), pacer, k,
+                            n_threads=nthreads, progress=progress, stop=stop)
         counts = np.concatenate([r[0] for r in results]) if results else np.zeros(0, np.int64)
         vertex = np.concatenate([r[1] for r in results]) if results else np.zeros(0, np.int32)
         dist = np.concatenate([r[2] for r in results]) if results else np.zeros(0)
@@ -465,28 +597,41 @@ def assemble_neighbourhoods(V, pts, nrm, counts, vertex, dist, cut, method, *, d
                             chord=True, tangent=False) -> "Neighbourhoods":
     """Build the CSR :class:`Neighbourhoods` from per-source ``counts`` and the flat ``vertex``/``dist`` arrays,
     adding the chord, the unit tangent (projection of x_o - x_i on the source's tangent plane) and, when the
-    principal directions are given, the azimuth phi (:func:`tangent_azimuth`). Shared by every solver."""
+    principal directions are given, the azimuth phi (:func:`tangent_azimuth`). Shared by every solver.
+
+    The pairs are processed in slices of :data:`ASSEMBLE_PAIRS` (row by row, so the result does not depend on
+    it): each numpy call stays short and Ctrl-C is acted upon between them."""
     k = counts.shape[0]
     indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
     want_phi = d1 is not None and d2 is not None
     ch = tan = phi = None
-    if chord or tangent or want_phi:
-        src = np.repeat(np.arange(k), counts)
-        diff = V[vertex] - pts[src]
-    if chord:
-        ch = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-    if tangent or want_phi:
-        tan = diff - np.einsum("ij,ij->i", diff, nrm[src])[:, None] * nrm[src]
-        ln = np.linalg.norm(tan, axis=1)
-        tan /= np.where(ln > 0, ln, 1.0)[:, None]
-        if want_phi:
-            D1 = np.asarray(d1, dtype=np.float64).reshape(k, 3)[src]
-            D2 = np.asarray(d2, dtype=np.float64).reshape(k, 3)[src]
-            kk1 = None if k1 is None else np.broadcast_to(np.asarray(k1, np.float64), (k,))[src]
-            kk2 = None if k2 is None else np.broadcast_to(np.asarray(k2, np.float64), (k,))[src]
-            phi = tangent_azimuth(tan, D1, D2, dist, kk1, kk2)
-        if not tangent:
-            tan = None
+    if not (chord or tangent or want_phi):
+        return Neighbourhoods(indptr, vertex, dist, ch, tan, phi, cut, method)
+    p = int(indptr[-1])
+    src = np.repeat(np.arange(k), counts)
+    ch = np.empty(p) if chord else None
+    tan = np.empty((p, 3)) if tangent else None
+    phi = np.empty(p) if want_phi else None
+    if want_phi:
+        d1 = np.asarray(d1, dtype=np.float64).reshape(k, 3)
+        d2 = np.asarray(d2, dtype=np.float64).reshape(k, 3)
+        k1 = None if k1 is None else np.broadcast_to(np.asarray(k1, np.float64), (k,))
+        k2 = None if k2 is None else np.broadcast_to(np.asarray(k2, np.float64), (k,))
+    for a in range(0, p, ASSEMBLE_PAIRS):
+        sl = slice(a, min(p, a + ASSEMBLE_PAIRS))
+        s = src[sl]
+        diff = V[vertex[sl]] - pts[s]
+        if chord:
+            ch[sl] = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        if tangent or want_phi:
+            t = diff - np.einsum("ij,ij->i", diff, nrm[s])[:, None] * nrm[s]
+            ln = np.linalg.norm(t, axis=1)
+            t /= np.where(ln > 0, ln, 1.0)[:, None]
+            if want_phi:
+                phi[sl] = tangent_azimuth(t, d1[s], d2[s], dist[sl], None if k1 is None else k1[s],
+                                          None if k2 is None else k2[s])
+            if tangent:
+                tan[sl] = t
     return Neighbourhoods(indptr, vertex, dist, ch, tan, phi, cut, method)
 
 
