@@ -47,11 +47,13 @@ import numpy as np
 
 from meshshade.errors import MaterialError, MeshshadeError
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
+from meshshade.geometry.mesh import MeshDefectWarning
 from meshshade.light import BeamLight
+from meshshade.light.samples import check_exitance
 from meshshade.materials import Material
 from meshshade.montecarlo.emitter import Emitter
 from meshshade.montecarlo.engine import PoolWalk
-from meshshade.montecarlo.interior import SafeDistanceGrid
+from meshshade.montecarlo.interior import SafeDistanceGrid, open_surface_warning
 from meshshade.montecarlo.wavefront_oracle import WavefrontWalk
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
@@ -251,6 +253,8 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     grid = direct = None
     if engine not in ("auto", "direct", "batched"):
         raise MeshshadeError(f"engine must be 'auto', 'direct' or 'batched', got {engine!r}")
+    if not fast_interior and (msg := open_surface_warning(F)):  # the fast engine says it when building its grid
+        warnings.warn(msg, MeshDefectWarning, stacklevel=2)
     if fast_interior:
         sigma_t_max = float(np.max(material.sigma_s_prime / (1.0 - material.g) + material.sigma_a))
         # no half-space certificates under a time budget: their set-up would be spent before the first photon
@@ -338,6 +342,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         beam_entry = (int(b[1]), np.asarray(b[2]))
         if beam_distances:
             beam_distance = GeodesicNeighbourhoods(V, F).distances_from(face=beam_entry[0], bary=beam_entry[1])
+    check_exitance(radiance, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
     return MCResult(material=material, face_power=face_p, face_power_stderr=face_se, vertex_power=vert_p,
                     radiance=radiance, radiance_stderr=radiance_se, totals=totals, lost=frac[4],
                     incident_power=tot[5], entering_power=tot[6], photons=emitted_max, events=events,

@@ -26,6 +26,7 @@ from meshshade.errors import MaterialError, MeshshadeError
 from meshshade.geometry.curvature import principal_curvatures
 from meshshade.geometry.mesh import Mesh
 from meshshade.light import BeamLight, entry_samples
+from meshshade.light.samples import check_exitance
 from meshshade.light.sources import light_list
 from meshshade.materials import Material
 from meshshade.progress import Progress, kernel_interrupts
@@ -168,6 +169,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     stats.update(kernel.stats)
     stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
     stats["entering_power"] = float(samples.power.sum())
+    check_exitance(M, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
     return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, beam_distance, cut, model, material,
                       clock.timings, stats, plan)
 
