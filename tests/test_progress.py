@@ -296,14 +296,15 @@ def small_sphere():
 def test_bake_reports_its_sources_in_lines_when_stderr_is_not_a_terminal(small_sphere, capsys, monkeypatch):
     monkeypatch.setenv(P.INTERVAL_ENV, "0")  # a line at every update
     mat, light = material_from_options("skin1"), [parse_light_spec("directional:0,0,-1")]
-    quiet = bake(small_sphere, mat, light, model="dipole", progress=False)
-    assert capsys.readouterr().err == ""
-    res = bake(small_sphere, mat, light, model="dipole", progress="render")
-    lines = capsys.readouterr().err.splitlines()
-    k = len(res.samples)
-    assert lines and all(line.startswith("meshshade: render: ") for line in lines), lines
-    assert lines[-1].startswith(f"meshshade: render: 100 % ({k}/{k} sources)"), lines
-    np.testing.assert_array_equal(res.radiance, quiet.radiance)
+    for transport, unit in (("direct", "sources"), ("hierarchical", "receivers")):
+        quiet = bake(small_sphere, mat, light, model="dipole", progress=False, transport=transport)
+        assert capsys.readouterr().err == ""
+        res = bake(small_sphere, mat, light, model="dipole", progress="render", transport=transport)
+        lines = capsys.readouterr().err.splitlines()
+        k = len(res.samples) if transport == "direct" else small_sphere.n_vertices
+        assert lines and all(line.startswith("meshshade: render: ") for line in lines), lines
+        assert lines[-1].startswith(f"meshshade: render: 100 % ({k}/{k} {unit})"), lines
+        np.testing.assert_array_equal(res.radiance, quiet.radiance)
 
 
 def test_mc_reports_photons_in_lines(small_sphere, capsys, monkeypatch):

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from meshshade.errors import MaterialError, MeshshadeError
+from meshshade.errors import MaterialError, MeshshadeError, ParameterError
 from meshshade.geometry.curvature import principal_curvatures
 from meshshade.geometry.mesh import Mesh
 from meshshade.light import BeamLight, entry_samples
@@ -31,8 +31,9 @@ from meshshade.light.sources import light_list
 from meshshade.materials import Material
 from meshshade.progress import Progress, kernel_interrupts
 from meshshade.raycast import make_scene
-from meshshade.transport.auto import neighbourhood_curvature, plan_sources
+from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
 from meshshade.transport.farfield import far_field_exitance, far_field_exitance_direct, far_field_radius
+from meshshade.transport.hierarchical import FarFieldUnsupported, SurfaceTransport, vertex_power
 from meshshade.transport.gather import PairStream, Stopwatch, chunk_size, cutoff_radii, gather
 from meshshade.transport.models import MODELS
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, source_frames, source_patch_radius
@@ -42,6 +43,7 @@ log = logging.getLogger("meshshade")
 
 FAR_FIELD_METHODS = ("off", "clustered", "direct")
 GEODESIC_METHODS = ("exact", "arc")
+TRANSPORTS = ("auto", "hierarchical", "direct")
 
 
 @dataclass(frozen=True)
@@ -86,7 +88,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool | str = False,
          rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
          far_field: str | None = None, far_tol: float = 0.1, far_rel_tol: float = 1e-2,
-         far_geodesic: str = "cluster") -> BakeResult:
+         far_geodesic: str = "cluster", transport="auto") -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
 
     Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
@@ -111,6 +113,13 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     one exact query per cluster of nearby samples, each member's distance from the centre's by the law of
     cosines in the tangent plane (clusters.py), or the arc method.
 
+    ``transport``: how the vertex samples of directional and point lights are summed: "direct" (every pair
+    within the cutoff, the reference; the options above), "hierarchical" (transport/hierarchical.py: a
+    near field within a few patch radii and clusters beyond, cost near-linear in the vertex count), "auto"
+    (default: hierarchical where its distance check passes on this mesh, else direct; ``stats["transport"]``
+    says which and why), or a :class:`~meshshade.transport.hierarchical.SurfaceTransport` built for this
+    mesh, material and model (reused across lights and frames). Beam samples always use the direct sum.
+
     ``progress``: False (default), True or the task named in the progress lines ("bake"; ``render`` and
     ``compare`` pass their own name): the gather's sources done, as a bar on a terminal and as periodic lines
     on stderr otherwise (:class:`meshshade.progress.Progress`). Whatever it is, a Ctrl-C (KeyboardInterrupt)
@@ -121,9 +130,10 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         raise MeshshadeError(f"bake needs a meshshade Mesh (mm), got {type(mesh).__name__}")
     if not isinstance(material, Material):
         raise MaterialError(f"bake needs a Material, got {type(material).__name__}")
+    far_field_given = far_field is not None
     far_field = check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol,
                                    far_tol=far_tol, far_rel_tol=far_rel_tol, far_geodesic=far_geodesic,
-                                   backend=backend, auto_options=auto_options)
+                                   backend=backend, auto_options=auto_options, transport=transport)
     lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
     clock = Stopwatch()
     curv = principal_curvatures(mesh.vertices, mesh.faces, radius_mm=curvature_radius_mm)
@@ -132,8 +142,51 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     samples = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, lights, scene=scene,
                             eta=material.eta)
     clock.lap("rays")
-    frames = source_frames(samples, curv, mesh.faces)
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
+    direct_options = far_field_given or far_geodesic != "cluster"
+    core, why = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
+                                   direct_options=direct_options,
+                                   cutoff_tol=cutoff_tol, auto_options=auto_options, rtol=rtol, progress=progress)
+    if core is None:
+        M, beam_distance, stats, plan, kstats = _direct(mesh, material, lights, samples, curv, cut, model, clock,
+                                                        far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol,
+                                                        auto_options, progress)
+        stats["transport"] = "direct" + (f" ({why})" if why else "")
+    else:
+        for k, v in core.timings.items():
+            clock.timings[k] = clock.timings.get(k, 0.0) + v
+        clock.lap("")
+        clock.timings.pop("", None)
+        M, hstats = core.exitance(vertex_power(samples, mesh.n_vertices), progress=progress)
+        for k, v in hstats.pop("timings").items():
+            clock.timings[k] = clock.timings.get(k, 0.0) + v
+        clock.lap("")
+        clock.timings.pop("", None)
+        point = samples.vertex < 0
+        stats = {"entry_samples": len(samples), "cutoff_mm": cut.tolist(), **samples.stats, **core.stats, **hstats,
+                 "transport": "hierarchical"}
+        plan, beam_distance, kstats = core.sample_plan(samples), None, {}
+        if np.any(point):  # beams: few samples, the direct sum over their whole neighbourhoods
+            sub = subset_samples(samples, point)
+            Mb, beam_distance, bstats, bplan, kstats = _direct(mesh, material, lights, sub, curv, cut, model, clock,
+                                                               "off", far_tol, far_rel_tol, far_geodesic, geodesic,
+                                                               rtol, auto_options, progress)
+            M = M + Mb
+            stats.update({f"beam_{k}": v for k, v in bstats.items() if k in ("pairs_found", "pairs_evaluated")})
+            if plan is not None and bplan is not None:
+                plan = merge_plans(plan, bplan, point)
+    stats.update(kstats)
+    stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
+    stats["entering_power"] = float(samples.power.sum())
+    check_exitance(M, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
+    return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, beam_distance, cut, model, material,
+                      clock.timings, stats, plan)
+
+
+def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field, far_tol, far_rel_tol, far_geodesic,
+            geodesic, rtol, auto_options, progress):
+    """The direct sum of :func:`bake` over ``samples``: (M, beam distance, stats, AutoPlan or None, kernel stats)."""
+    frames = source_frames(samples, curv, mesh.faces)
     far_field, near = _near_radius(mesh, material, samples, cut, far_field, far_tol)
     plan = None
     if model == "auto":
@@ -166,12 +219,59 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         beam_distance = _beam_distance(mesh, samples, lights, zone, solvers, src_cut)
         if beam_distance is not None:
             clock.lap("neighbourhoods")
-    stats.update(kernel.stats)
-    stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
-    stats["entering_power"] = float(samples.power.sum())
-    check_exitance(M, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
-    return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, beam_distance, cut, model, material,
-                      clock.timings, stats, plan)
+    return M, beam_distance, stats, plan, kernel.stats
+
+
+def subset_samples(samples, mask):
+    """The EntrySamples rows ``mask`` (per-light totals unchanged)."""
+    return replace(samples, **{k: getattr(samples, k)[mask] for k in
+                               ("positions", "face", "bary", "vertex", "normals", "power", "cos_incidence",
+                                "light_index")})
+
+
+def merge_plans(vertex_plan, point_plan, point):
+    """The AutoPlan of all entry samples from that of the vertex samples (``~point``) and of the others."""
+    out = {}
+    for name in ("kernel", "exact_geodesic", "far_dipole"):
+        a, b = getattr(vertex_plan, name), getattr(point_plan, name)
+        arr = np.array(a, copy=True)
+        arr[point] = b
+        out[name] = arr
+    return AutoPlan(**out)
+
+
+def _surface_transport(transport, mesh, material, model, samples, curv, **kw):
+    """``(SurfaceTransport or None, reason)``: the hierarchical transport of the vertex samples, or None for the
+    direct sum (asked for, no vertex samples, or ``transport="auto"`` on a mesh where it is not accurate)."""
+    if isinstance(transport, SurfaceTransport):
+        if (transport.mesh is not mesh or transport.material.describe() != material.describe()
+                or transport.model != model):
+            raise ParameterError("the SurfaceTransport passed as transport was built for another mesh, material or "
+                                 "model")
+        return transport, None
+    if transport == "direct":
+        return None, None
+    if transport == "auto" and kw.pop("direct_options", False):
+        return None, "direct-sum options given"
+    if not np.any(samples.vertex >= 0):
+        return None, "no vertex samples"
+    kw = dict(kw)
+    kw.pop("direct_options", None)
+    if transport == "hierarchical":
+        try:
+            return SurfaceTransport.build(mesh, material, model, curvature=curv, **kw), None
+        except FarFieldUnsupported as e:
+            worst = e.check["errors"][-1]
+            log.warning("meshshade: %s; transport='hierarchical' was asked for: using %g patch radii anyway",
+                        e, worst["near_patch_radii"])
+            return SurfaceTransport.build(mesh, material, model, curvature=curv,
+                                          near_patch_radii=worst["near_patch_radii"], **kw), None
+    try:
+        return SurfaceTransport.build(mesh, material, model, curvature=curv, **kw), None
+    except FarFieldUnsupported as e:
+        w = e.check["errors"][-1]
+        return None, (f"hierarchical far field not accurate on this mesh: distance error mean {w['mean']:.2g}, "
+                      f"max {w['max']:.2g}")
 
 
 # ------------------------------------------------------------------------------------------------ bake's stages
@@ -189,7 +289,7 @@ RTOL_RANGE = (1e-15, 0.1)
 
 def check_bake_options(model="curved", cutoff_tol=1e-4, curvature_radius_mm=None, geodesic="exact",
                        far_field=None, *, rtol=1e-10, far_tol=0.1, far_rel_tol=1e-2, far_geodesic="cluster",
-                       backend="embree", auto_options=None) -> str:
+                       backend="embree", auto_options=None, transport="auto") -> str:
     """Reject bad options of :func:`bake` (MeshshadeError, one line naming the option, its value and what is
     allowed) before any work; returns the far-field method with its default resolved. Also used by
     :func:`meshshade.output.compare.run_comparison` to check everything up front."""
@@ -214,6 +314,9 @@ def check_bake_options(model="curved", cutoff_tol=1e-4, curvature_radius_mm=None
         raise MeshshadeError(f"unknown far_geodesic {far_geodesic!r}; choose cluster or arc")
     if backend not in ("embree", "numpy"):
         raise MeshshadeError(f"unknown ray backend {backend!r}; choose embree or numpy")
+    if not (isinstance(transport, SurfaceTransport) or (isinstance(transport, str) and transport in TRANSPORTS)):
+        raise MeshshadeError(f"unknown transport {transport!r}; choose {', '.join(TRANSPORTS)} (or pass a "
+                             "SurfaceTransport)")
     if auto_options is not None and not isinstance(auto_options, dict):
         raise MeshshadeError(f"auto_options must be a dict or None, got {type(auto_options).__name__}")
     return far_field

@@ -110,9 +110,9 @@ def sphere10():
 def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     """With curvature_tol = 0, validity_tol = inf and geodesic_tol = 0 auto must reproduce `curved` exactly."""
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
-    ref = transport.bake(sphere10, SKIN, light, model="curved")
+    ref = transport.bake(sphere10, SKIN, light, model="curved", transport="direct")
     opts = dict(curvature_tol=0.0, validity_tol=np.inf, geodesic_tol=0.0)
-    got = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_field="off")
+    got = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_field="off", transport="direct")
     assert got.stats["auto_kernel_curved"] == got.stats["entry_samples"]
     np.testing.assert_allclose(got.radiance, ref.radiance, rtol=1e-12, atol=0)
     # far zone on geodesics shared by clusters of samples (default) or on arc geodesics, exact within r_near.
@@ -124,14 +124,14 @@ def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     assert zones.clusters_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
     for far_geodesic, zone, max_tol, median_tol in (("cluster", "zone_exact_near_cluster_far", 0.01, 2e-4),
                                                    ("arc", "zone_exact_near_arc_far", 0.025, 2e-3)):
-        split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic)
+        split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic, transport="direct")
         assert split.stats[zone] == split.stats["entry_samples"]
         if far_geodesic == "cluster":  # one exact far query per cluster instead of per sample
             assert split.stats["geodesic_pairs_computed"] < 0.6 * ref.stats["geodesic_pairs_computed"]
         rel = np.abs(split.radiance - ref.radiance)[lit] / ref.radiance[lit]
         assert rel.max() < max_tol and np.median(rel) < median_tol, (far_geodesic, rel.max(), np.median(rel))
     # geodesic="arc" caps auto at arc geodesics everywhere
-    arc = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, geodesic="arc")
+    arc = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, geodesic="arc", transport="direct")
     assert arc.stats["zone_arc"] == arc.stats["entry_samples"] and arc.stats["auto_geodesic_exact"] == 0
 
 
@@ -206,8 +206,8 @@ def test_far_field_dipole_model_matches_no_far_field(sphere40):
     (M > 5 % of the peak: the lit side and past the terminator) that share is < 1e-3; in the dim far side, which
     is lit only through the shell, it is not small (measured up to 8 %), and the test says nothing there."""
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
-    off = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc")
-    direct = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="direct")
+    off = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", transport="direct")
+    direct = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="direct", transport="direct")
     clustered = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="clustered",
                                far_rel_tol=1e-2)
     assert direct.stats["zone_arc_near"] == direct.stats["entry_samples"]
@@ -225,9 +225,9 @@ def test_auto_uses_clustered_far_field_only_where_flat(sphere40):
     """On a 40 mm sphere in marble nothing is flat on the scale of the 48 mm cutoff: no clustered far field;
     with curvature_tol = inf (declare everything flat) all vertex samples go to the clustered zone."""
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
-    r = transport.bake(sphere40, MARBLE, light, model="auto")
+    r = transport.bake(sphere40, MARBLE, light, model="auto", transport="direct")
     assert r.stats.get("zone_exact_near", 0) + r.stats.get("zone_arc_near", 0) == 0
-    flat = transport.bake(sphere40, MARBLE, light, model="auto", auto_options=dict(curvature_tol=np.inf))
+    flat = transport.bake(sphere40, MARBLE, light, model="auto", auto_options=dict(curvature_tol=np.inf), transport="direct")
     assert flat.stats.get("zone_exact_near", 0) + flat.stats.get("zone_arc_near", 0) == flat.stats["entry_samples"]
     # the clustered far field covers every (vertex, source, channel) pair with near_c < chord <= cutoff_c: an
     # independent brute-force count (numpy, all pairs) equals the leaf pairs when no cluster is accepted (rel_tol
@@ -284,8 +284,8 @@ def test_auto_on_a_large_marble_box_uses_dipole_arc_and_far_field():
     fitted curvature is spread over a few vertices) while computing fewer geodesic pairs."""
     mesh = Mesh.from_arrays(*box((300.0, 300.0, 300.0), 30))
     light = [DirectionalLight((0.2, 0.1, -1.0), 1.0)]
-    ref = transport.bake(mesh, MARBLE, light, model="curved")
-    got = transport.bake(mesh, MARBLE, light, model="auto")
+    ref = transport.bake(mesh, MARBLE, light, model="curved", transport="direct")
+    got = transport.bake(mesh, MARBLE, light, model="auto", transport="direct")
     s = got.stats
     assert s["auto_kernel_dipole"] > 0 and s["auto_kernel_curved"] > 0
     assert s.get("zone_arc_near", 0) + s.get("zone_exact_near", 0) > 0 and s["far_field"] == "clustered"

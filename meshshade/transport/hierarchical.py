@@ -1,0 +1,481 @@
+"""The hierarchical transport: exitance from vertex sources at a cost near-linear in the vertex count.
+
+The direct sum (transport="direct", transport/baking.py) pays an exact geodesic and a kernel value for every
+(source, vertex) pair within the cutoff: O(N x disc) pairs, N^2 on a mesh refined at fixed size. Here every
+vertex v is a potential source with the power Phi_v its light gives it, and the exitance splits by the chord
+distance of each pair (docs/physics.md §9):
+
+* **near field** — pairs within a few patch radii of the source (``r_near(u) = near_patch_radii * a_u``, a_u the
+  radius of the source's dual patch; chord <= r_near(u), found by a geodesic query to 1.1 r_near(u), so pairs
+  across a fold are dropped): the model's own kernel (PairKernel, exact or arc geodesics, the patch average of
+  eq. (58)), computed once per mesh and material into a sparse matrix per channel, ``M_near = W Phi``;
+* **far field** — every other pair within the cutoff: a k-d tree of the lit sources per kernel kind, traversed
+  per receiver (transport/hierarchy_kernels.py). A cluster of radius a at distance d >= a/theta is replaced by
+  four sigma points carrying its zeroth to second moments, with its mean normal and mean shape operator (the
+  kernel stays expanded at the source, as in the direct sum); closer clusters are opened, and leaves are summed
+  pair by pair. Surface distances of far pairs are arcs from the chord and the two normals (eq. (59)).
+
+Cost: the near field is O(N) pairs (about 25 per vertex at 5 patch radii); a receiver visits O(log(cutoff/r_near)
+/ theta^2) clusters, so the far field is O(N log N). :class:`SurfaceTransport` holds everything that depends
+only on the mesh, material and model (curvatures, frames, the auto plan, the near-field matrices, the trees), so
+that each further light, frame or bake costs only its rays, one sparse product and one traversal.
+
+Pure array work; no I/O.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from meshshade.errors import MeshshadeError, ParameterError
+from meshshade.geometry.curvature import principal_curvatures
+from meshshade.kernels.curvature import CurvatureTable
+from meshshade.kernels.dipole import dipole_profile
+from meshshade.kernels.optics import diffusion_params
+from meshshade.kernels.sphere import sphere_series_profile
+from meshshade.materials import Material
+from meshshade.progress import Progress, kernel_interrupts
+from meshshade.transport.auto import CURVED, AutoPlan, DIPOLE, EXACT_SPHERE, neighbourhood_curvature, plan_sources
+from meshshade.transport.farfield import _receiver_order
+from meshshade.transport.farfield_kernels import kd_permutation, node_ranges, tree_depth
+from meshshade.transport.gather import cutoff_radii
+from meshshade.transport.hierarchy_kernels import (KIND_CURVED, KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_SPHERE,
+                                                   cluster_geometry, far_traverse)
+from meshshade.transport.models import MODELS
+from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, patch_average_factor, source_frames
+from meshshade.transport.zones import NEAR_MARGIN, neighbourhood_solver
+
+#: candidate near radii of each source, in radii of its dual patch (>= PATCH_AVERAGE_RADII: the far field is
+#: point to point); :func:`far_distance_check` picks the smallest whose far-field distances are good enough
+NEAR_PATCH_RADII = (5.0, 7.0, 10.0, 14.0, 20.0)
+#: tolerance of the far field's distance model: mean and max over the sampled sources of the error the arcs make in
+#: a source's total exitance (:func:`far_distance_check`)
+FAR_DISTANCE_TOL = (3e-3, 2e-2)
+#: the distance check looks within the radius holding all but this share of the dipole's total (saves time)
+CHECK_CUTOFF_TOL = 1e-3
+#: sources sampled by the distance check (exact geodesic queries to the cutoff)
+DISTANCE_CHECK_SOURCES = 16
+#: opening criterion: a cluster of radius a is used whole at distance d >= a / THETA
+THETA = 0.3
+#: clusters whose normals spread wider than acos(CONE_MIN) are opened (folds, creases, thin parts)
+CONE_MIN = 0.8
+#: sources per leaf of the trees
+LEAF_SIZE = 16
+#: receivers per traversal call (progress and Ctrl-C between calls)
+RECEIVER_BLOCK = 16384
+#: relative width of the exact-sphere radius bins and the theta grid of their tables (as PairKernel)
+SPHERE_RADIUS_RTOL = 1e-3
+SPHERE_THETA_POINTS = 4097
+
+
+class FarFieldUnsupported(MeshshadeError):
+    """The far field's distance model is not accurate enough on this mesh at any candidate near radius.
+
+    ``check`` holds :func:`far_distance_check`'s measurements."""
+
+    def __init__(self, check: dict):
+        self.check = check
+        worst = check["errors"][-1]
+        super().__init__(f"the hierarchical far field's arc distances are not accurate on this mesh (error of a "
+                         f"source's exitance: mean {worst['mean']:.3g}, max {worst['max']:.3g} at "
+                         f"{worst['near_patch_radii']:g} patch radii; tolerance {FAR_DISTANCE_TOL[0]:g} / "
+                         f"{FAR_DISTANCE_TOL[1]:g}); use the direct transport")
+
+
+def far_distance_check(mesh, material: Material, cut, patch, *, candidates=NEAR_PATCH_RADII,
+                       n_sources: int = DISTANCE_CHECK_SOURCES, tol=FAR_DISTANCE_TOL, seed: int = 0) -> dict:
+    """Measure the far field's distance model on ``mesh`` and pick the near radius (in patch radii).
+
+    The far field takes the surface distance of a pair from its chord and normals (arc, docs/physics.md
+    eq. (59)); the direct sum takes exact polyhedral geodesics within the cutoff (pairs across a fold, close in
+    space but far along the surface, never count). For ``n_sources`` vertices (seeded) the exact geodesics to the
+    cutoff and every vertex within the cutoff's chord are compared, per channel, through the planar dipole:
+
+        e_u(f) = |sum_{chord > f a_u, arc <= cut} R(arc) - sum_{chord > f a_u, s <= cut} R(s)| / sum_{s <= cut} R(s),
+
+    the error the far field's distances make in the exitance a lit source u causes (its patch radius a_u),
+    were its far pairs summed exactly. The smallest candidate f with mean_u e_u <= tol[0] and max_u e_u <= tol[1]
+    (worst channel) is chosen. Returns ``{"near_patch_radii": f or None, "errors": [{"near_patch_radii", "mean",
+    "max"}, ...]}`` (one row per candidate tried, in order).
+    """
+    n = mesh.n_vertices
+    rng = np.random.default_rng(seed)
+    idx = np.sort(rng.choice(n, size=min(n, n_sources), replace=False))
+    V, N = mesh.vertices, mesh.vertex_normals
+    solver = neighbourhood_solver("exact", mesh)
+    cut = np.minimum(cut, cutoff_radii(material, CHECK_CUTOFF_TOL))  # the part of the kernel that matters
+    rmax = float(np.max(cut))
+    nb = solver.query(V[idx], np.full(idx.size, -1), np.full((idx.size, 3), np.nan), idx, N[idx], rmax)
+    src = nb.source_index()
+    ball = cKDTree(V).query_ball_point(V[idx], rmax)
+    err = np.zeros((len(candidates), idx.size, 3))
+    dist = np.full(n, np.inf)
+    for i, u in enumerate(idx):
+        mine = src == i
+        dist[nb.vertex[mine]] = nb.distance[mine]
+        dist[u] = 0.0
+        cand = np.asarray(ball[i], dtype=np.int64)
+        s = dist[cand]
+        dist[nb.vertex[mine]] = np.inf
+        chord = np.linalg.norm(V[cand] - V[u], axis=1)
+        kc = np.einsum("ij,ij->i", N[cand] - N[u], V[cand] - V[u]) / np.maximum(chord, 1e-300) * 0.5
+        w = np.minimum(np.abs(kc), 1.0)
+        arc = np.where(w < 1e-4, chord, chord * np.arcsin(w) / np.maximum(w, 1e-300))
+        for c in range(3):
+            ch = material.channel(c)
+            st = ch["sigma_t_prime"]
+            Rs = np.where(s <= cut[c], dipole_profile(np.where(np.isfinite(s), s, 0.0) * st,
+                                                      albedo_prime=ch["albedo_prime"], eta=ch["eta"]), 0.0)
+            Ra = np.where(arc <= cut[c], dipole_profile(arc * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"]), 0.0)
+            tot = Rs.sum()
+            for j, f in enumerate(candidates):
+                far = chord > f * patch[u]
+                err[j, i, c] = abs(Ra[far].sum() - Rs[far].sum()) / tot if tot > 0 else 0.0
+    rows = []
+    for j, f in enumerate(candidates):
+        worst = err[j].max(axis=1)
+        rows.append({"near_patch_radii": float(f), "mean": float(worst.mean()), "max": float(worst.max())})
+        if rows[-1]["mean"] <= tol[0] and rows[-1]["max"] <= tol[1]:
+            return {"near_patch_radii": float(f), "errors": rows}
+    return {"near_patch_radii": None, "errors": rows}
+
+
+class VertexSources:
+    """Every vertex as a potential entry sample (the geometry of EntrySamples' vertex samples)."""
+
+    def __init__(self, mesh):
+        n = mesh.n_vertices
+        self.positions = mesh.vertices
+        self.normals = mesh.vertex_normals
+        self.vertex = np.arange(n, dtype=np.int64)
+        self.face = np.full(n, -1, dtype=np.int64)
+        self.bary = np.full((n, 3), np.nan)
+
+    def __len__(self) -> int:
+        return len(self.vertex)
+
+
+@dataclass(frozen=True, eq=False)
+class _Tree:
+    rows: np.ndarray      # vertex index of each tree row
+    lo: np.ndarray
+    hi: np.ndarray
+    depth: int
+
+    @property
+    def first_leaf(self) -> int:
+        return (1 << self.depth) - 1
+
+
+@dataclass(eq=False)
+class SurfaceTransport:
+    """What the hierarchical transport of one mesh, material and model reuses across lights and frames.
+
+    Build with :meth:`build`; :meth:`exitance` maps vertex-sample powers to exitance. Attributes: ``mesh``,
+    ``material``, ``model``; ``curvature`` (PrincipalCurvatures of the vertices); ``frames`` (SourceFrames of
+    every vertex); ``plan`` (AutoPlan per vertex for ``model="auto"``, else None); ``kind`` (n,) int8 kernel
+    per vertex as a source (hierarchy_kernels.KIND_*); ``cutoff_mm`` (3,); ``near_mm`` (n,) near radius per
+    source; ``near`` the sparse near-field matrices per computed channel (receiver rows, source columns,
+    1/mm^2 with the patch average); ``timings`` and ``stats`` of the build.
+    """
+
+    mesh: object
+    material: Material
+    model: str
+    curvature: object
+    frames: object
+    plan: object
+    kind: np.ndarray
+    cutoff_mm: np.ndarray
+    near_mm: np.ndarray
+    patch_mm: np.ndarray
+    channels: list
+    near: dict
+    theta: float
+    trees: dict
+    shape: np.ndarray
+    sphere_row: np.ndarray
+    log_radius: np.ndarray
+    sphere_table: np.ndarray
+    sphere_r0: np.ndarray
+    params: tuple
+    timings: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------------------------------------ build
+    @classmethod
+    def build(cls, mesh, material: Material, model: str = "auto", *, geodesic: str = "exact",
+              cutoff_tol: float = 1e-4, curvature=None, curvature_radius_mm: float | None = None,
+              auto_options: dict | None = None, rtol: float = 1e-10, theta: float = THETA,
+              near_patch_radii: float | None = None, progress: bool | str = False) -> "SurfaceTransport":
+        """The geometric work for ``mesh`` (a Mesh in mm), ``material`` and ``model`` (one of MODELS).
+
+        ``geodesic`` ("exact" or "arc"): the near field's geodesics (with ``auto``, exact where the plan asks
+        for it and "exact" is allowed). ``curvature``: PrincipalCurvatures of the mesh, if already computed.
+        ``theta`` in (0, 1): the clusters' opening criterion. ``near_patch_radii`` (>= 4, or None): the near
+        radius in patch radii; None lets :func:`far_distance_check` choose it from NEAR_PATCH_RADII on this mesh,
+        and raises :class:`FarFieldUnsupported` when none of them makes the far field's distances accurate
+        enough (bake's ``transport="auto"`` then uses the direct sum).
+        """
+        if model not in MODELS:
+            raise ParameterError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+        if geodesic not in ("exact", "arc"):
+            raise ParameterError(f"unknown geodesic method {geodesic!r}; choose exact or arc")
+        if not 0.0 < float(theta) < 1.0:
+            raise ParameterError(f"theta (cluster opening criterion) must lie in (0, 1), got {theta!r}")
+        if near_patch_radii is not None and not PATCH_AVERAGE_RADII <= float(near_patch_radii) <= 1e3:
+            raise ParameterError(f"near_patch_radii must lie in [{PATCH_AVERAGE_RADII:g}, 1000], got {near_patch_radii!r}")
+        timings: dict = {}
+        t0 = time.perf_counter()
+        curv = curvature if curvature is not None else principal_curvatures(mesh.vertices, mesh.faces,
+                                                                            radius_mm=curvature_radius_mm)
+        timings["curvature"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        src = VertexSources(mesh)
+        frames = source_frames(src, curv, mesh.faces)
+        n = mesh.n_vertices
+        cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
+        patch = np.sqrt(mesh.vertex_areas / np.pi)
+        check = None
+        if near_patch_radii is None:
+            check = far_distance_check(mesh, material, cut, patch)
+            timings["distance check"] = time.perf_counter() - t0
+            if check["near_patch_radii"] is None:
+                raise FarFieldUnsupported(check)
+            near_patch_radii = check["near_patch_radii"]
+        near_mm = np.minimum(near_patch_radii * patch, cut.max())
+        plan = None
+        if model == "auto":
+            vals = np.stack([np.maximum(np.abs(curv.k1), np.abs(curv.k2)), -curv.k2], axis=1)
+            kn_near, kn_far = neighbourhood_curvature(src, vals, mesh.vertices, mesh.faces,
+                                                      [NEAR_MARGIN * near_mm, cut.max()], mesh.mean_edge_length)
+            plan = plan_sources(frames.k1, frames.k2, kn_near[:, 0], kn_far[:, 0], material, NEAR_MARGIN * near_mm,
+                                cut, kmin_far=-kn_far[:, 1], **(auto_options or {}))
+        H = 0.5 * (frames.k1 + frames.k2)
+        kind = np.full(n, KIND_CURVED, dtype=np.int8)
+        if model == "dipole":
+            kind[:] = KIND_DIPOLE_CHORD
+        elif model == "exact-sphere":
+            kind[:] = np.where(H > 0, KIND_SPHERE, KIND_DIPOLE_CHORD)
+        elif model == "auto":
+            kind[plan.kernel == DIPOLE] = KIND_DIPOLE_SURFACE
+            kind[plan.kernel == CURVED] = KIND_CURVED
+            kind[plan.kernel == EXACT_SPHERE] = KIND_SPHERE
+        timings["plan"] = time.perf_counter() - t0
+        kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan)
+        t0 = time.perf_counter()
+        if model == "auto":
+            exact = plan.exact_geodesic & (geodesic == "exact")
+        else:
+            exact = np.full(n, geodesic == "exact")
+        near, nstats = _near_matrices(mesh, src, frames, kernel, exact, near_mm, patch, progress)
+        timings["near field"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        shape = _shape_operators(frames)
+        sph_row, logr, sph_tab, sph_r0 = _sphere_tables(material, H, kind == KIND_SPHERE, rtol)
+        trees = {}
+        for k in np.unique(kind):
+            rows = np.flatnonzero(kind == k)
+            depth = int(tree_depth(max(rows.size, 1), LEAF_SIZE))
+            lo, hi = node_ranges(rows.size, depth)
+            perm = kd_permutation(np.ascontiguousarray(mesh.vertices[rows]), depth, lo, hi)
+            trees[int(k)] = _Tree(rows[perm], lo, hi, depth)
+        timings["trees"] = time.perf_counter() - t0
+        stats = {"near_pairs": nstats["pairs"], "near_pairs_exact_geodesic": nstats["exact_pairs"],
+                 "near_mm_median": float(np.median(near_mm)), "near_patch_radii": float(near_patch_radii),
+                 **({"far_distance_error": check["errors"]} if check else {}),
+                 **{f"sources_{name}": int((kind == k).sum()) for k, name in _KIND_NAMES.items()}}
+        if model == "exact-sphere":
+            stats["exact_sphere_fallback_dipole"] = int((H <= 0).sum())
+        return cls(mesh, material, model, curv, frames, plan, kind, cut, near_mm, patch, kernel.channels, near,
+                   float(theta), trees, shape, sph_row, logr, sph_tab, sph_r0, _channel_params(material, cut),
+                   timings, stats)
+
+    # ------------------------------------------------------------------------------------------------ use
+    def sample_plan(self, samples):
+        """The auto plan per entry sample (that of its vertex; rows of point samples are placeholders), or None."""
+        if self.plan is None:
+            return None
+        v = np.maximum(samples.vertex, 0)
+        return AutoPlan(self.plan.kernel[v], self.plan.exact_geodesic[v], self.plan.far_dipole[v])
+
+    def exitance(self, vertex_power, *, progress: bool | str = False) -> tuple[np.ndarray, dict]:
+        """Exitance M (n, 3) [W/mm^2] of the vertex sources with powers ``vertex_power`` (n,) W (0 where unlit),
+        and stats (timings, cluster and pair counts)."""
+        mesh = self.mesh
+        n = mesh.n_vertices
+        pv = np.asarray(vertex_power, dtype=np.float64)
+        if pv.shape != (n,) or not np.all(np.isfinite(pv)) or np.any(pv < 0):
+            raise ParameterError(f"vertex_power must be a finite (n,) = ({n},) array >= 0 [W]")
+        timings: dict = {}
+        t0 = time.perf_counter()
+        M = np.zeros((n, 3))
+        for c, same in self.channels:
+            m = self.near[c] @ pv
+            for cc in same:
+                M[:, cc] = m
+        timings["near field"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rep = np.arange(3)
+        for c, same in self.channels:
+            rep[same] = c
+        st, al, mu, zr, zb, zv, a0, coef, n_int = self.params
+        recv = mesh.vertices
+        rnrm = mesh.vertex_normals
+        order = _receiver_order(recv)
+        counts = np.zeros(2, dtype=np.int64)
+        lit_trees = []
+        for k, tree in self.trees.items():
+            power = np.ascontiguousarray(pv[tree.rows])
+            if not np.any(power > 0):
+                continue
+            r = tree.rows
+            geo = cluster_geometry(np.ascontiguousarray(mesh.vertices[r]), np.ascontiguousarray(self.frames.normals[r]),
+                                   np.ascontiguousarray(self.shape[r]), power, np.ascontiguousarray(self.patch_mm[r]),
+                                   np.ascontiguousarray(self.near_mm[r]), np.ascontiguousarray(self.sphere_row[r]),
+                                   np.ascontiguousarray(self.log_radius[r]), tree.lo, tree.hi)
+            lit_trees.append((k, tree, power, geo))
+        timings["clusters"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        bar = Progress(progress if isinstance(progress, str) else "bake", n * max(len(lit_trees), 1), "receivers",
+                       enabled=bool(progress) and bool(lit_trees))
+        with bar:
+            for k, tree, power, geo in lit_trees:
+                P, sig, nsig, ssig, nmean, cone, Smean, rad, rn, srow = geo
+                r = tree.rows
+                args = (k, np.ascontiguousarray(mesh.vertices[r]), np.ascontiguousarray(self.frames.normals[r]),
+                        np.ascontiguousarray(self.shape[r]), power, np.ascontiguousarray(self.near_mm[r]),
+                        np.ascontiguousarray(self.sphere_row[r]), tree.lo, tree.hi, tree.first_leaf, P, sig, nsig, ssig, nmean,
+                        cone, Smean, rad, rn, srow, self.cutoff_mm, self.theta, CONE_MIN, rep, st, al, mu, zr, zb,
+                        zv, a0, coef, n_int, self.sphere_table, self.sphere_r0)
+                for a in range(0, n, RECEIVER_BLOCK):
+                    blk = order[a:a + RECEIVER_BLOCK]
+                    with kernel_interrupts():
+                        Mf, cnt = far_traverse(recv, rnrm, blk, *args)
+                    M[blk] += Mf[blk]
+                    counts += cnt[blk].sum(axis=0)
+                    bar.update(blk.size)
+        timings["far field"] = time.perf_counter() - t0
+        stats = {"far_pairs": int(counts[0]), "far_clusters": int(counts[1]), "timings": timings}
+        return M, stats
+
+
+_KIND_NAMES = {KIND_DIPOLE_CHORD: "dipole_chord", KIND_DIPOLE_SURFACE: "dipole_surface", KIND_CURVED: "curved",
+               KIND_SPHERE: "exact_sphere"}
+
+
+def _channel_params(material: Material, cut):
+    """Per-channel arrays the numba kernels take: sigma_t', alpha', mu, z_r, z_b, z_v, a(0) (optical units) and
+    the curvature tables' coefficients padded to one (3, n_int, 16) array with their lengths."""
+    p = diffusion_params(material.albedo_prime, material.eta)
+    st = np.ascontiguousarray(material.sigma_t_prime, dtype=np.float64)
+    b3 = lambda v: np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (3,)))  # noqa: E731
+    tables = [CurvatureTable(float(material.albedo_prime[c]), float(material.eta),
+                             max(float(cut[c] * st[c]) * 1.25, 10.0)) for c in range(3)]
+    n_int = np.array([t.coef.shape[0] for t in tables], dtype=np.int64)
+    coef = np.zeros((3, int(n_int.max()), tables[0].coef.shape[1]))
+    for c, t in enumerate(tables):
+        coef[c, :t.coef.shape[0]] = t.coef
+    a0 = np.array([t.a0 for t in tables])
+    return st, b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_b), b3(p.z_v), a0, coef, n_int
+
+
+def _shape_operators(frames) -> np.ndarray:
+    """(n, 6) shape operator k1 d1 d1^T + k2 d2 d2^T as (xx, yy, zz, xy, xz, yz), 1/mm."""
+    d1, d2, k1, k2 = frames.d1, frames.d2, frames.k1[:, None], frames.k2[:, None]
+    S = np.empty((len(d1), 6))
+    for q, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        S[:, q] = (k1 * d1[:, i:i + 1] * d1[:, j:j + 1] + k2 * d2[:, i:i + 1] * d2[:, j:j + 1])[:, 0]
+    return S
+
+
+def _sphere_tables(material: Material, H, use, rtol):
+    """Exact-sphere tables of the sources ``use`` (local radius 1/H binned to SPHERE_RADIUS_RTOL as PairKernel
+    does): per source the table row (-1 for none) and log radius; the tables log R [1/mm^2] on a uniform theta
+    grid, rows ``3 * bin + channel``, and the radius of each bin."""
+    n = H.size
+    row = np.full(n, -1, dtype=np.int64)
+    logr = np.zeros(n)
+    if not np.any(use):
+        return row, logr, np.zeros((3, 2)), np.ones(1)
+    radius = 1.0 / H[use]
+    q = np.round(np.log(radius) / np.log1p(SPHERE_RADIUS_RTOL)).astype(np.int64)
+    bins, inv = np.unique(q, return_inverse=True)
+    row[use] = inv
+    r0 = np.exp(bins * np.log1p(SPHERE_RADIUS_RTOL))
+    logr[use] = np.log(r0[inv])
+    theta = np.linspace(0.0, np.pi, SPHERE_THETA_POINTS)
+    tab = np.empty((3 * bins.size, SPHERE_THETA_POINTS))
+    for b, R0 in enumerate(r0):
+        for c in range(3):
+            ch = material.channel(c)
+            st = ch["sigma_t_prime"]
+            vals = sphere_series_profile(theta, R0_opt=R0 * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"],
+                                         rtol=rtol) * st * st
+            tab[3 * b + c] = np.log(np.maximum(vals, 1e-300))
+    return row, logr, tab, r0
+
+
+def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch, progress):
+    """Sparse near-field matrices per computed channel: W[v, u] = R(v; u) w_patch for the pairs with chord <=
+    near_mm[u] found within geodesic NEAR_MARGIN near_mm[u] of u (exact geodesics where ``exact``, arc elsewhere)."""
+    n = mesh.n_vertices
+    parts = {c: [] for c, _ in kernel.channels}
+    rows_all, cols_all = [], []
+    n_pairs = n_exact = 0
+    bar = Progress(progress if isinstance(progress, str) else "bake", n, "sources (near field)",
+                   enabled=bool(progress))
+    with bar:
+        for method, sel_all in (("exact", np.flatnonzero(exact)), ("arc", np.flatnonzero(~exact))):
+            if sel_all.size == 0:
+                continue
+            solver = neighbourhood_solver(method, mesh)
+            per_source = np.pi * (NEAR_MARGIN * near_mm[sel_all]) ** 2 / np.maximum(mesh.vertex_areas[sel_all], 1e-300)
+            chunk = max(256, int(4_000_000 // max(1.0, float(np.mean(per_source)))))
+            for a in range(0, sel_all.size, chunk):
+                sel = sel_all[a:a + chunk]
+                done = [0]
+
+                def credit(k, total, done=done):
+                    bar.update(k - done[0])
+                    done[0] = k
+                nb = solver.query(src.positions[sel], src.face[sel], src.bary[sel], src.vertex[sel],
+                                  frames.normals[sel], NEAR_MARGIN * near_mm[sel], d1=frames.d1[sel],
+                                  d2=frames.d2[sel], k1=frames.k1[sel], k2=frames.k2[sel], progress=credit)
+                s_idx = sel[nb.source_index()]
+                vtx = nb.vertex.astype(np.int64)
+                keep = nb.chord <= near_mm[s_idx]
+                s_idx, vtx, s, chord, phi = s_idx[keep], vtx[keep], nb.distance[keep], nb.chord[keep], nb.phi[keep]
+                phi = np.where(np.isfinite(phi), phi, 0.0)  # a degenerate frame (normals that cancel): any azimuth
+                for c, _ in kernel.channels:
+                    R = kernel.evaluate(c, s_idx, s, chord, phi)
+                    a_p = patch[s_idx]
+                    close = np.flatnonzero(s < PATCH_AVERAGE_RADII * a_p)
+                    if close.size:
+                        ch = kernel.material.channel(c)
+                        R[close] *= patch_average_factor(s[close], a_p[close], albedo_prime=ch["albedo_prime"],
+                                                         eta=ch["eta"], sigma_t_prime=ch["sigma_t_prime"])
+                    parts[c].append(R)
+                rows_all.append(vtx)
+                cols_all.append(s_idx)
+                n_pairs += vtx.size
+                n_exact += vtx.size if method == "exact" else 0
+                bar.update(sel.size - done[0])
+    rows = np.concatenate(rows_all) if rows_all else np.zeros(0, np.int64)
+    cols = np.concatenate(cols_all) if cols_all else np.zeros(0, np.int64)
+    near = {}
+    for c, _ in kernel.channels:
+        vals = np.concatenate(parts[c]) if parts[c] else np.zeros(0)
+        near[c] = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+    return near, {"pairs": int(n_pairs), "exact_pairs": int(n_exact)}
+
+
+def vertex_power(samples, n_vertices: int) -> np.ndarray:
+    """(n,) W: the power of the vertex samples of ``samples`` (EntrySamples) summed per vertex (several lights)."""
+    at_v = samples.vertex >= 0
+    return np.bincount(samples.vertex[at_v], weights=samples.power[at_v], minlength=n_vertices)
+

@@ -1,0 +1,348 @@
+"""Numba kernels of the hierarchical transport (meshshade/transport/hierarchical.py): cluster geometry per light and
+the far-field traversal with every model's kernel.
+
+Everything is float64 on plain arrays, lengths in mm. A source cluster (a node of the k-d tree over vertex
+sources, farfield_kernels.node_ranges / kd_permutation) stands for its sources by four *sigma points*: with P the
+node's power, c its power-weighted centroid and lambda_1 >= lambda_2 the two largest eigenvalues (axes e_1, e_2)
+of its power-weighted covariance, the points ``c +- sqrt(2 lambda_k) e_k`` with power P/4 each reproduce the
+cluster's zeroth, first and second moments exactly (docs/physics.md §9), so the sum over the cluster is
+replaced by four kernel values with an error of third order in the cluster's size over its distance (odd terms
+cancel by symmetry: fourth order for symmetric clusters), whatever the kernel. The third eigenvalue (the sagitta
+of a curved cluster) is dropped: (k a^2/2)^2 against a^2.
+
+Kernels (``kind``): 0 dipole of the chord, 1 dipole of the surface distance, 2 the first-order curved kernel
+(soft policy, docs/physics.md eqs. (49)-(53)) with the source's shape operator, 3 the exact sphere of the source's
+local radius (tabulated per radius bin, log-linear in theta). The surface distance of a far pair is the arc of
+docs/physics.md eq. (59) from the chord and the two normals.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from meshshade.kernels.curvature.coefficients import _ratios_direct
+from meshshade.kernels.curvature.policies import _DELTA_MAX, _INV_SAT
+from meshshade.kernels.curvature.table import _PER_UNIT, _table_eval
+from meshshade.kernels.dipole import dipole_diffuse_reflectance
+
+STACK_SIZE = 256
+KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_CURVED, KIND_SPHERE = 0, 1, 2, 3
+
+
+# ---------------------------------------------------------------------------------------------------- geometry
+@njit(cache=True, inline="always")
+def arc_length(chord, k_chord):
+    """Surface distance of a pair from its chord (mm) and the normal-section curvature estimate
+    ``k_chord = k c / 2`` (eq. (59)): ``c asin(u)/u`` with ``u = min(|k c/2|, 1)``."""
+    u = min(abs(k_chord), 1.0)
+    if u < 1e-4:
+        return chord * (1.0 + u * u / 6.0)
+    return chord * math.asin(u) / u
+
+
+@njit(cache=True, inline="always")
+def pair_geometry(x0, x1, x2, nx0, nx1, nx2, y0, y1, y2, ny0, ny1, ny2, S, srow):
+    """(chord, surface distance, kn, kn_perp) of the pair receiver x (normal nx) <- source y (normal ny, shape
+    operator S[srow] as (xx, yy, zz, xy, xz, yz)): kn is the normal curvature at y towards x, kn_perp across."""
+    v0, v1, v2 = x0 - y0, x1 - y1, x2 - y2
+    c2 = v0 * v0 + v1 * v1 + v2 * v2
+    c = math.sqrt(c2)
+    if c <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    kc = ((nx0 - ny0) * v0 + (nx1 - ny1) * v1 + (nx2 - ny2) * v2) / c2 * c * 0.5
+    s = arc_length(c, kc)
+    # tangent direction at y towards x
+    vn = v0 * ny0 + v1 * ny1 + v2 * ny2
+    t0, t1, t2 = v0 - vn * ny0, v1 - vn * ny1, v2 - vn * ny2
+    tt = t0 * t0 + t1 * t1 + t2 * t2
+    sxx, syy, szz, sxy, sxz, syz = S[srow, 0], S[srow, 1], S[srow, 2], S[srow, 3], S[srow, 4], S[srow, 5]
+    tr = sxx + syy + szz
+    nsn = (sxx * ny0 * ny0 + syy * ny1 * ny1 + szz * ny2 * ny2
+           + 2.0 * (sxy * ny0 * ny1 + sxz * ny0 * ny2 + syz * ny1 * ny2))
+    if tt <= 1e-30 * c2:
+        kn = 0.5 * (tr - nsn)
+    else:
+        kn = (sxx * t0 * t0 + syy * t1 * t1 + szz * t2 * t2
+              + 2.0 * (sxy * t0 * t1 + sxz * t0 * t2 + syz * t1 * t2)) / tt
+    return c, s, kn, tr - nsn - kn
+
+
+# ---------------------------------------------------------------------------------------------------- kernels
+@njit(cache=True, inline="always")
+def kernel_value(kind, c, chord, s, kn, knp, sph_row, st, al, mu, zr, zb, zv, a0, coef, n_int, sph_tab, sph_r0):
+    """R [1/mm^2] of channel ``c`` for one pair: kind (module docstring), chord and surface distance s (mm), the
+    source's normal curvatures towards the receiver and across (1/mm), its sphere-table row (kind 3)."""
+    sc = st[c]
+    if kind == KIND_DIPOLE_CHORD:
+        return dipole_diffuse_reflectance(chord * sc, al[c], mu[c], zr[c], zv[c]) * sc * sc
+    if kind == KIND_DIPOLE_SURFACE:
+        return dipole_diffuse_reflectance(s * sc, al[c], mu[c], zr[c], zv[c]) * sc * sc
+    if kind == KIND_CURVED:
+        rho = s * sc
+        k1o, k2o = kn / sc, knp / sc
+        if k1o == 0.0 and k2o == 0.0:
+            return dipole_diffuse_reflectance(rho, al[c], mu[c], zr[c], zv[c]) * sc * sc
+        u = math.sqrt(rho) * _PER_UNIT
+        if u < n_int[c]:
+            ra, rb = _table_eval(u, coef[c])
+        elif rho * mu[c] >= 1500.0:
+            return 0.0
+        else:
+            ra, rb = _ratios_direct(rho, mu[c], zr[c], zb[c])
+        delta = k1o * ra + k2o * rb
+        delta = delta / math.sqrt(1.0 + (delta * _INV_SAT) * (delta * _INV_SAT))
+        out = dipole_diffuse_reflectance(rho, al[c], mu[c], zr[c], zv[c], min(delta, _DELTA_MAX))
+        rd0 = dipole_diffuse_reflectance(0.0, al[c], mu[c], zr[c], zv[c])
+        if out > rd0:
+            d0 = max((k1o + k2o) * a0[c], 0.0)
+            d0 = d0 / math.sqrt(1.0 + (d0 * _INV_SAT) * (d0 * _INV_SAT))
+            cap = rd0 * math.exp(min(d0, _DELTA_MAX))
+            if out > cap:
+                out = cap
+        return out * sc * sc
+    # exact sphere: log-linear interpolation of log R [1/mm^2] on a uniform theta grid over [0, pi]
+    if sph_row < 0:
+        return dipole_diffuse_reflectance(chord * sc, al[c], mu[c], zr[c], zv[c]) * sc * sc
+    row = sph_row * 3 + c
+    th = min(s / sph_r0[sph_row], math.pi)
+    m = sph_tab.shape[1] - 1
+    f = th / math.pi * m
+    i = min(int(f), m - 1)
+    w = f - i
+    return math.exp((1.0 - w) * sph_tab[row, i] + w * sph_tab[row, i + 1])
+
+
+# ---------------------------------------------------------------------------------------------------- clusters
+@njit(cache=True, inline="always")
+def rotated_shape(S, row, a0, a1, a2, b0, b1, b2, out, orow, w):
+    """out[orow] += w R S[row] R^T with R the smallest rotation taking unit normal a to unit normal b (Rodrigues):
+    a shape operator tangent to a, carried to b's tangent plane. (xx, yy, zz, xy, xz, yz) storage."""
+    v0, v1, v2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    c = a0 * b0 + a1 * b1 + a2 * b2
+    f = 1.0 / (1.0 + c) if c > -0.999999 else 0.0
+    R = np.empty((3, 3))
+    R[0, 0] = 1.0 - f * (v1 * v1 + v2 * v2)
+    R[1, 1] = 1.0 - f * (v0 * v0 + v2 * v2)
+    R[2, 2] = 1.0 - f * (v0 * v0 + v1 * v1)
+    R[0, 1], R[1, 0] = -v2 + f * v0 * v1, v2 + f * v0 * v1
+    R[0, 2], R[2, 0] = v1 + f * v0 * v2, -v1 + f * v0 * v2
+    R[1, 2], R[2, 1] = -v0 + f * v1 * v2, v0 + f * v1 * v2
+    A = np.empty((3, 3))
+    A[0, 0], A[1, 1], A[2, 2] = S[row, 0], S[row, 1], S[row, 2]
+    A[0, 1] = A[1, 0] = S[row, 3]
+    A[0, 2] = A[2, 0] = S[row, 4]
+    A[1, 2] = A[2, 1] = S[row, 5]
+    B = R @ A @ R.T
+    out[orow, 0] += w * B[0, 0]
+    out[orow, 1] += w * B[1, 1]
+    out[orow, 2] += w * B[2, 2]
+    out[orow, 3] += w * B[0, 1]
+    out[orow, 4] += w * B[0, 2]
+    out[orow, 5] += w * B[1, 2]
+
+
+@njit(cache=True, parallel=True)
+def cluster_geometry(pos, nrm, shape, power, patch, near, sph, logr, lo, hi):
+    """Per node of the tree (rows in tree order): total power P, sigma points (4, 3), mean unit normal, the cosine
+    of its normal cone (min over members of n_j . n_mean), power-weighted mean shape operator (6), bounding
+    radius about the centroid (including the members' patch radii), the largest near radius of its members and a
+    representative sphere-table row (``sph``, the member whose log local radius ``logr`` is nearest the
+    power-weighted mean; -1 without sphere rows). Nodes without power get P = 0 and are skipped by the traversal."""
+    n_nodes = lo.shape[0]
+    P = np.zeros(n_nodes)
+    sig = np.zeros((n_nodes, 4, 3))
+    nsig = np.zeros((n_nodes, 4, 3))
+    ssig = np.zeros((n_nodes, 4, 6))
+    nmean = np.zeros((n_nodes, 3))
+    cone = np.zeros(n_nodes)
+    Smean = np.zeros((n_nodes, 6))
+    rad = np.zeros(n_nodes)
+    rn = np.zeros(n_nodes)
+    srow = np.full(n_nodes, -1, np.int64)
+    for i in prange(n_nodes):
+        a, b = lo[i], hi[i]
+        w = 0.0
+        cx = cy = cz = 0.0
+        for j in range(a, b):
+            p = power[j]
+            w += p
+            cx += p * pos[j, 0]
+            cy += p * pos[j, 1]
+            cz += p * pos[j, 2]
+        if not w > 0.0:
+            continue
+        cx, cy, cz = cx / w, cy / w, cz / w
+        Q = np.zeros((3, 3))
+        m0 = m1 = m2 = 0.0
+        s6 = np.zeros(6)
+        r_max = 0.0
+        rn_max = 0.0
+        for j in range(a, b):
+            p = power[j]
+            dx, dy, dz = pos[j, 0] - cx, pos[j, 1] - cy, pos[j, 2] - cz
+            Q[0, 0] += p * dx * dx
+            Q[1, 1] += p * dy * dy
+            Q[2, 2] += p * dz * dz
+            Q[0, 1] += p * dx * dy
+            Q[0, 2] += p * dx * dz
+            Q[1, 2] += p * dy * dz
+            m0 += p * nrm[j, 0]
+            m1 += p * nrm[j, 1]
+            m2 += p * nrm[j, 2]
+            for q in range(6):
+                s6[q] += p * shape[j, q]
+            if p > 0.0:
+                r = math.sqrt(dx * dx + dy * dy + dz * dz) + patch[j]
+                if r > r_max:
+                    r_max = r
+                if near[j] > rn_max:
+                    rn_max = near[j]
+        Q[1, 0], Q[2, 0], Q[2, 1] = Q[0, 1], Q[0, 2], Q[1, 2]
+        lam, vec = np.linalg.eigh(Q / w)
+        for k in range(2):  # the two largest axes (eigh sorts ascending)
+            ax = 2 - k
+            h = math.sqrt(2.0 * max(lam[ax], 0.0))
+            for q in range(3):
+                sig[i, 2 * k, q] = (cx, cy, cz)[q] + h * vec[q, ax]
+                sig[i, 2 * k + 1, q] = (cx, cy, cz)[q] - h * vec[q, ax]
+        nn = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+        if nn > 0.0:
+            m0, m1, m2 = m0 / nn, m1 / nn, m2 / nn
+        cmin = 1.0
+        lmean = 0.0
+        for j in range(a, b):
+            if power[j] > 0.0:
+                cj = nrm[j, 0] * m0 + nrm[j, 1] * m1 + nrm[j, 2] * m2
+                if cj < cmin:
+                    cmin = cj
+                lmean += power[j] * logr[j]
+        # the normal at each sigma point: the mean normal turned by the mean shape operator (dn = S dx)
+        for q in range(4):
+            e0, e1, e2 = sig[i, q, 0] - cx, sig[i, q, 1] - cy, sig[i, q, 2] - cz
+            g0 = m0 + s6[0] / w * e0 + s6[3] / w * e1 + s6[4] / w * e2
+            g1 = m1 + s6[3] / w * e0 + s6[1] / w * e1 + s6[5] / w * e2
+            g2 = m2 + s6[4] / w * e0 + s6[5] / w * e1 + s6[2] / w * e2
+            gn = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+            if gn > 0.0:
+                nsig[i, q, 0], nsig[i, q, 1], nsig[i, q, 2] = g0 / gn, g1 / gn, g2 / gn
+        # the mean shape operator in the mean normal's tangent plane (each member's carried there first), then
+        # carried on to each sigma point's normal
+        sm = np.zeros((1, 6))
+        for j in range(a, b):
+            if power[j] > 0.0:
+                rotated_shape(shape, j, nrm[j, 0], nrm[j, 1], nrm[j, 2], m0, m1, m2, sm, 0, power[j] / w)
+        for q in range(4):
+            rotated_shape(sm, 0, m0, m1, m2, nsig[i, q, 0], nsig[i, q, 1], nsig[i, q, 2], ssig[i], q, 1.0)
+        P[i] = w
+        nmean[i, 0], nmean[i, 1], nmean[i, 2] = m0, m1, m2
+        cone[i] = cmin if nn > 0.0 else -1.0
+        for q in range(6):
+            Smean[i, q] = s6[q] / w
+        rad[i] = r_max
+        rn[i] = rn_max
+        lmean = lmean / w
+        best = math.inf
+        for j in range(a, b):
+            if power[j] > 0.0 and sph[j] >= 0:
+                dd = abs(logr[j] - lmean)
+                if dd < best:
+                    best = dd
+                    srow[i] = sph[j]
+    return P, sig, nsig, ssig, nmean, cone, Smean, rad, rn, srow
+
+
+# ---------------------------------------------------------------------------------------------------- traversal
+@njit(cache=True, parallel=True)
+def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo, hi, first_leaf, P, sig, nsig, ssig, nmean,
+                 cone, Smean, rad, rn, srow, cutoff, theta, cone_min, rep, st, al, mu, zr, zb, zv, a0, coef, n_int,
+                 sph_tab, sph_r0):
+    """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in ``order``.
+
+    A node is skipped when its sources are all beyond the cutoff (chord), used whole (sigma points, mean normal,
+    mean shape operator, representative sphere row) when all its pairs are far (d - a > its largest near
+    radius), a <= theta d and its normal cone is within acos(cone_min), else opened; at leaves each source
+    counts when its chord exceeds its near radius and its surface distance is within the cutoff. ``rep[c]``
+    is the channel computed for channel c (equal channels are computed once). Returns M and per-receiver counts
+    (n, 2): kernel evaluations at leaves, clusters used.
+    """
+    n = recv.shape[0]
+    M = np.zeros((n, 3))
+    counts = np.zeros((n, 2), np.int64)
+    full = 0
+    for c in range(3):
+        if rep[c] == c:
+            full |= 1 << c
+    for t in prange(order.shape[0]):
+        o = order[t]
+        x0, x1, x2 = recv[o, 0], recv[o, 1], recv[o, 2]
+        nx0, nx1, nx2 = rnrm[o, 0], rnrm[o, 1], rnrm[o, 2]
+        acc = np.zeros(3)
+        stack = np.empty(STACK_SIZE, np.int64)
+        smask = np.empty(STACK_SIZE, np.int64)
+        stack[0], smask[0] = 0, full
+        top = 1
+        n_leaf = 0
+        n_clu = 0
+        while top > 0:
+            top -= 1
+            node, mask = stack[top], smask[top]
+            if not P[node] > 0.0:
+                continue
+            # distance from the receiver to the node's power centroid (the mean of its sigma points)
+            cx = 0.25 * (sig[node, 0, 0] + sig[node, 1, 0] + sig[node, 2, 0] + sig[node, 3, 0])
+            cy = 0.25 * (sig[node, 0, 1] + sig[node, 1, 1] + sig[node, 2, 1] + sig[node, 3, 1])
+            cz = 0.25 * (sig[node, 0, 2] + sig[node, 1, 2] + sig[node, 2, 2] + sig[node, 3, 2])
+            v0, v1, v2 = x0 - cx, x1 - cy, x2 - cz
+            d = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+            a = rad[node]
+            whole = d - a > rn[node] and a <= theta * d and cone[node] >= cone_min
+            s_hi = 0.0
+            if whole:  # the surface distance of the node's farthest pair, by the centroid's arc curvature
+                kc = ((nx0 - nmean[node, 0]) * v0 + (nx1 - nmean[node, 1]) * v1 + (nx2 - nmean[node, 2]) * v2) / (d * d)
+                s_hi = arc_length(d + a, 0.5 * kc * (d + a))
+            use = 0
+            open_mask = 0
+            for c in range(3):
+                if not (mask >> c) & 1 or d - a > cutoff[c]:  # chord <= surface distance: all beyond the cutoff
+                    continue
+                if whole and s_hi <= cutoff[c]:
+                    use |= 1 << c
+                else:
+                    open_mask |= 1 << c
+            if use:
+                w = 0.25 * P[node]
+                for q in range(4):
+                    ch, s, kn, knp = pair_geometry(x0, x1, x2, nx0, nx1, nx2, sig[node, q, 0], sig[node, q, 1],
+                                                   sig[node, q, 2], nsig[node, q, 0], nsig[node, q, 1],
+                                                   nsig[node, q, 2], ssig[node], q)
+                    for c in range(3):
+                        if (use >> c) & 1:
+                            acc[c] += w * kernel_value(kind, c, ch, s, kn, knp, srow[node], st, al, mu, zr, zb,
+                                                       zv, a0, coef, n_int, sph_tab, sph_r0)
+                n_clu += 1
+            if open_mask == 0:
+                continue
+            if node >= first_leaf:
+                for j in range(lo[node], hi[node]):
+                    if power[j] <= 0.0:
+                        continue
+                    ch, s, kn, knp = pair_geometry(x0, x1, x2, nx0, nx1, nx2, pos[j, 0], pos[j, 1], pos[j, 2],
+                                                   nrm[j, 0], nrm[j, 1], nrm[j, 2], shape, j)
+                    if ch <= near[j]:
+                        continue
+                    for c in range(3):
+                        if (open_mask >> c) & 1 and s <= cutoff[c]:
+                            acc[c] += power[j] * kernel_value(kind, c, ch, s, kn, knp, sph[j], st, al, mu, zr, zb,
+                                                              zv, a0, coef, n_int, sph_tab, sph_r0)
+                    n_leaf += 1
+                continue
+            stack[top], smask[top] = 2 * node + 1, open_mask
+            stack[top + 1], smask[top + 1] = 2 * node + 2, open_mask
+            top += 2
+        for c in range(3):
+            M[o, c] = acc[rep[c]]
+        counts[o, 0] = n_leaf
+        counts[o, 1] = n_clu
+    return M, counts
