@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args,
+from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_transport_arg, add_light_arg, add_material_args,
                                    add_mesh_args, add_model_arg, lights_from_args, mesh_and_material, number)
 from meshshade.io import check_output_path
 from meshshade.output.bake_file import write_bake
@@ -25,6 +25,7 @@ def add_bake_args(p: argparse.ArgumentParser) -> None:
                    help="neighbourhood for the curvature fit [mm] (default 2 mean edge lengths)")
     add_geodesic_arg(p)
     add_far_field_arg(p)
+    add_transport_arg(p)
     p.add_argument("--out", required=True, metavar="OUT.ply",
                    help="PLY with radiance_r/g/b (W/mm^2) and tone-mapped red/green/blue vertex colours")
     p.add_argument("--npz", metavar="OUT.npz", help="also save radiance, k1, k2, d1, d2, beam distance")
@@ -34,12 +35,13 @@ def run_bake(args) -> int:
     check_output_path(args.out, [args.mesh], suffixes=(".ply",))
     if args.npz:
         check_output_path(args.npz, [args.mesh, args.out], suffixes=(".npz",), option="--npz")
-    check_bake_options(args.model, args.cutoff_tol, args.curvature_radius, args.geodesic, args.far_field)
+    check_bake_options(args.model, args.cutoff_tol, args.curvature_radius, args.geodesic, args.far_field,
+                       transport=args.transport)
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
     result = bake(mesh, material, lights, model=args.model, cutoff_tol=args.cutoff_tol,
                   curvature_radius_mm=args.curvature_radius, progress=not args.quiet, geodesic=args.geodesic,
-                  far_field=args.far_field)
+                  far_field=args.far_field, transport=args.transport)
     write_bake(result, mesh, args.out, npz=args.npz)
     if not args.quiet:
         print(describe_result(result))

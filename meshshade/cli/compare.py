@@ -35,7 +35,8 @@ def run_compare(args) -> int:
     cmp = run_comparison(scene.mesh, scene.material, scene.lights, models, camera=scene.camera, width=args.width,
                          height=args.height, spp=args.spp, per_pixel=args.per_pixel, cutoff_tol=args.cutoff_tol,
                          floor=args.floor, mc_photons=args.photons, geodesic=args.geodesic,
-                         far_field=args.far_field, progress=False if args.quiet else "compare")
+                         far_field=args.far_field, transport=args.transport,
+                         progress=False if args.quiet else "compare")
     for p in save_comparison(cmp, out, models=models, metadata=scene.metadata, operator=args.tonemap,
                              bias=args.bias, background=scene.background):
         print(f"wrote {p}")

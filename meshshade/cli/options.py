@@ -151,6 +151,13 @@ def add_far_field_arg(p: argparse.ArgumentParser) -> None:
                         "of the cutoff)")
 
 
+def add_transport_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--transport", default="auto", choices=["auto", "hierarchical", "direct"],
+                   help="how directional/point-light samples are summed: hierarchical (near field plus clusters; "
+                        "near-linear in the vertex count), direct (every pair, the reference) or auto (default: "
+                        "hierarchical where its distance check passes on the mesh, else direct)")
+
+
 # --- images (render, compare) ------------------------------------------------------------------------
 def add_image_args(p: argparse.ArgumentParser) -> None:
     """Mesh, material, lights, bake knobs and camera/image options of ``render`` and ``compare``."""
@@ -168,6 +175,7 @@ def add_image_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bias", type=number, default=0.85, help="Drago bias (default 0.85)")
     add_geodesic_arg(p)
     add_far_field_arg(p)
+    add_transport_arg(p)
     p.add_argument("--per-pixel", action="store_true",
                    help="gather the kernel at every pixel sample (exact peaks; slower) instead of interpolating")
 

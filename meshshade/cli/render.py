@@ -63,11 +63,11 @@ def run_render(args) -> int:
     baked = read_baked_ply(args.mesh, units=args.units)  # None unless the input is a bake's PLY
     if baked is not None:
         return _render_baked(args, baked, exr, png)
-    check_bake_options(args.model, args.cutoff_tol, None, args.geodesic, args.far_field)
+    check_bake_options(args.model, args.cutoff_tol, None, args.geodesic, args.far_field, transport=args.transport)
     scene = image_scene_from_args(args)
     mesh, material = scene.mesh, scene.material
     res = bake(mesh, material, scene.lights, model=args.model, cutoff_tol=args.cutoff_tol, geodesic=args.geodesic,
-               far_field=args.far_field, progress=False if args.quiet else "render")
+               far_field=args.far_field, transport=args.transport, progress=False if args.quiet else "render")
     gather = PixelGather(mesh, res) if args.per_pixel else None
     rgb, alpha = render_radiance(mesh, res.radiance, scene.camera, args.width, args.height, args.spp,
                                  eta=material.eta, exitance_at=gather)
@@ -86,6 +86,7 @@ def _ignored_options(args, info) -> list[str]:
     given = [("--material/--sigma-s-prime/--sigma-a", material_given(args)), ("--eta", args.eta is not None),
              ("--light", bool(args.light)), ("--model", args.model != "curved"),
              ("--geodesic", args.geodesic != "exact"), ("--far-field", args.far_field is not None),
+             ("--transport", args.transport != "auto"),
              ("--cutoff-tol", args.cutoff_tol != 1e-4),
              ("--units", mm_per_unit(args.units) != info["mm_per_unit"] and args.units.strip().lower() != "mm")]
     return [name for name, yes in given if yes]

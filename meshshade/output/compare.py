@@ -136,7 +136,7 @@ def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
 
 def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camera=None, width=256, height=256,
                    spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
-                   seed: int = 0, geodesic: str = "exact", far_field: str | None = None,
+                   seed: int = 0, geodesic: str = "exact", far_field: str | None = None, transport: str = "auto",
                    progress: bool | str = False) -> dict:
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
@@ -147,7 +147,7 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
 
     Every argument is checked before any work (MeshshadeError, one line): ``models`` two different names among
     ``COMPARE_MODELS``; ``floor`` in (0, 1); the bake options as :func:`~meshshade.transport.baking.bake`
-    (``cutoff_tol``, ``geodesic``, ``far_field``); ``width``, ``height``, ``spp`` as
+    (``cutoff_tol``, ``geodesic``, ``far_field``, ``transport``); ``width``, ``height``, ``spp`` as
     :func:`~meshshade.output.render.check_image_size`; with ``mc``, ``mc_photons`` and ``seed`` as
     :func:`~meshshade.montecarlo.simulation.check_mc_options`; ``camera`` a Camera or None; the lights.
     ``progress`` (False, True or a task name, default "compare") is passed to each bake and Monte Carlo run.
@@ -161,7 +161,7 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     lights = light_list(lights)
     for m in models:
         if m != "mc":
-            check_bake_options(m, cutoff_tol, None, geodesic, far_field)
+            check_bake_options(m, cutoff_tol, None, geodesic, far_field, transport=transport)
     if "mc" in models:
         groups = len(set(zip(material.sigma_s_prime.tolist(), material.sigma_a.tolist())))
         mc_photons, seed = check_mc_options(mc_photons, seed=seed, groups=groups)[:2]
@@ -178,7 +178,7 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
             res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
         else:
             res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field,
-                       progress=task)
+                       transport=transport, progress=task)
             ex = render.PixelGather(mesh, res) if per_pixel else None
         images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
                                              exitance_at=ex, scene=scene))
