@@ -3,7 +3,7 @@
 The direct sum (transport="direct", transport/baking.py) pays an exact geodesic and a kernel value for every
 (source, vertex) pair within the cutoff: O(N x disc) pairs, N^2 on a mesh refined at fixed size. Here every
 vertex v is a potential source with the power Phi_v its light gives it, and the exitance splits by the chord
-distance of each pair (docs/physics.md §9):
+distance of each pair (docs/physics.md §9.1, eq. (71)):
 
 * **near field** — pairs within a few patch radii of the source (``r_near(u) = near_patch_radii * a_u``, a_u the
   radius of the source's dual patch; chord <= r_near(u), found by a geodesic query to 1.1 r_near(u), so pairs
@@ -56,9 +56,11 @@ NEAR_PATCH_RADII = (5.0, 7.0, 10.0, 14.0, 20.0)
 #: a source's total exitance (:func:`far_distance_check`)
 FAR_DISTANCE_TOL = (3e-3, 2e-2)
 #: the distance check looks within the radius holding all but this share of the dipole's total (saves time)
-CHECK_CUTOFF_TOL = 1e-3
+CHECK_CUTOFF_TOL = 1e-2
+#: ... and within the radius holding about this many vertices around a source (time)
+CHECK_MAX_PAIRS = 4_000
 #: sources sampled by the distance check (exact geodesic queries to the cutoff)
-DISTANCE_CHECK_SOURCES = 16
+DISTANCE_CHECK_SOURCES = 24
 #: opening criterion: a cluster of radius a is used whole at distance d >= a / THETA
 THETA = 0.3
 #: clusters whose normals spread wider than acos(CONE_MIN) are opened (folds, creases, thin parts)
@@ -108,6 +110,9 @@ def far_distance_check(mesh, material: Material, cut, patch, *, candidates=NEAR_
     V, N = mesh.vertices, mesh.vertex_normals
     solver = neighbourhood_solver("exact", mesh)
     cut = np.minimum(cut, cutoff_radii(material, CHECK_CUTOFF_TOL))  # the part of the kernel that matters
+    # and at most about CHECK_MAX_PAIRS exact geodesics per source (window propagation slows down on fine meshes)
+    r_pairs = float(np.sqrt(CHECK_MAX_PAIRS * np.median(mesh.vertex_areas) / np.pi))
+    cut = np.minimum(cut, r_pairs)
     rmax = float(np.max(cut))
     nb = solver.query(V[idx], np.full(idx.size, -1), np.full((idx.size, 3), np.nan), idx, N[idx], rmax)
     src = nb.source_index()
@@ -140,8 +145,8 @@ def far_distance_check(mesh, material: Material, cut, patch, *, candidates=NEAR_
         worst = err[j].max(axis=1)
         rows.append({"near_patch_radii": float(f), "mean": float(worst.mean()), "max": float(worst.max())})
         if rows[-1]["mean"] <= tol[0] and rows[-1]["max"] <= tol[1]:
-            return {"near_patch_radii": float(f), "errors": rows}
-    return {"near_patch_radii": None, "errors": rows}
+            return {"near_patch_radii": float(f), "radius_mm": rmax, "errors": rows}
+    return {"near_patch_radii": None, "radius_mm": rmax, "errors": rows}
 
 
 class VertexSources:
@@ -244,6 +249,7 @@ class SurfaceTransport:
         if near_patch_radii is None:
             check = far_distance_check(mesh, material, cut, patch)
             timings["distance check"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
             if check["near_patch_radii"] is None:
                 raise FarFieldUnsupported(check)
             near_patch_radii = check["near_patch_radii"]
@@ -272,11 +278,12 @@ class SurfaceTransport:
             exact = plan.exact_geodesic & (geodesic == "exact")
         else:
             exact = np.full(n, geodesic == "exact")
-        near, nstats = _near_matrices(mesh, src, frames, kernel, exact, near_mm, patch, progress)
+        sph_row, logr, sph_tab, sph_r0 = _sphere_tables(material, H, kind == KIND_SPHERE, rtol)
+        near, nstats = _near_matrices(mesh, src, frames, kernel, exact, near_mm, patch, progress,
+                                      (sph_row, sph_tab, sph_r0))
         timings["near field"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         shape = _shape_operators(frames)
-        sph_row, logr, sph_tab, sph_r0 = _sphere_tables(material, H, kind == KIND_SPHERE, rtol)
         trees = {}
         for k in np.unique(kind):
             rows = np.flatnonzero(kind == k)
@@ -420,9 +427,22 @@ def _sphere_tables(material: Material, H, use, rtol):
     return row, logr, tab, r0
 
 
-def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch, progress):
+def _sphere_lookup(tab, r0, row, c, s):
+    """R [1/mm^2] from the exact-sphere tables (rows ``3 row + c``) at distances ``s`` mm, log-linear in theta."""
+    m = tab.shape[1] - 1
+    f = np.minimum(s / r0[row], np.pi) / np.pi * m
+    i = np.minimum(f.astype(np.int64), m - 1)
+    w = f - i
+    r = 3 * row + c
+    return np.exp((1.0 - w) * tab[r, i] + w * tab[r, i + 1])
+
+
+def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch, progress, sphere):
     """Sparse near-field matrices per computed channel: W[v, u] = R(v; u) w_patch for the pairs with chord <=
-    near_mm[u] found within geodesic NEAR_MARGIN near_mm[u] of u (exact geodesics where ``exact``, arc elsewhere)."""
+    near_mm[u] found within geodesic NEAR_MARGIN near_mm[u] of u (exact geodesics where ``exact``, arc elsewhere).
+    Pairs of exact-sphere sources take their kernel from the sphere tables ``sphere`` = (row per source, log R
+    tables, radius per row; log-linear in theta as PairKernel's own tables)."""
+    sph_row, sph_tab, sph_r0 = sphere
     n = mesh.n_vertices
     parts = {c: [] for c, _ in kernel.channels}
     rows_all, cols_all = [], []
@@ -451,8 +471,14 @@ def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch,
                 keep = nb.chord <= near_mm[s_idx]
                 s_idx, vtx, s, chord, phi = s_idx[keep], vtx[keep], nb.distance[keep], nb.chord[keep], nb.phi[keep]
                 phi = np.where(np.isfinite(phi), phi, 0.0)  # a degenerate frame (normals that cancel): any azimuth
+                row = sph_row[s_idx]
+                on = row >= 0
                 for c, _ in kernel.channels:
-                    R = kernel.evaluate(c, s_idx, s, chord, phi)
+                    R = np.empty(s.size)
+                    if np.any(~on):
+                        R[~on] = kernel.evaluate(c, s_idx[~on], s[~on], chord[~on], phi[~on])
+                    if np.any(on):
+                        R[on] = _sphere_lookup(sph_tab, sph_r0, row[on], c, s[on])
                     a_p = patch[s_idx]
                     close = np.flatnonzero(s < PATCH_AVERAGE_RADII * a_p)
                     if close.size:

@@ -5,7 +5,7 @@ Everything is float64 on plain arrays, lengths in mm. A source cluster (a node o
 sources, farfield_kernels.node_ranges / kd_permutation) stands for its sources by four *sigma points*: with P the
 node's power, c its power-weighted centroid and lambda_1 >= lambda_2 the two largest eigenvalues (axes e_1, e_2)
 of its power-weighted covariance, the points ``c +- sqrt(2 lambda_k) e_k`` with power P/4 each reproduce the
-cluster's zeroth, first and second moments exactly (docs/physics.md §9), so the sum over the cluster is
+cluster's zeroth, first and second moments exactly (docs/physics.md §9.1, eq. (72)), so the sum over the cluster is
 replaced by four kernel values with an error of third order in the cluster's size over its distance (odd terms
 cancel by symmetry: fourth order for symmetric clusters), whatever the kernel. The third eigenvalue (the sagitta
 of a curved cluster) is dropped: (k a^2/2)^2 against a^2.

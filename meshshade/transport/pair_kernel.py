@@ -209,22 +209,35 @@ def patch_average_factor(s_mm, a_mm, *, albedo_prime, eta, sigma_t_prime):
     a = np.asarray(a_mm, dtype=np.float64) * sigma_t_prime
     s, a = np.broadcast_arrays(s, a)
     out = np.ones(s.shape)
-    m = a > 0
-    if not np.any(m):
+    m = np.flatnonzero(a.reshape(-1) >= DISC_TABLE_A[0])   # below, the patch average is the point value to 1e-6
+    if not m.size:
         return out
-    sm, am = s[m], a[m]
-    kw = {"albedo_prime": albedo_prime, "eta": eta}
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        f = _disc_average(sm, am, **kw) / dipole_profile(sm, **kw)
+    sm, am = s.reshape(-1)[m], a.reshape(-1)[m]
+    kw = {"albedo_prime": float(albedo_prime), "eta": float(eta)}
+    f = np.ones(m.size)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
+        u, la = sm / am, np.log(am)
+        tab = (u <= PATCH_AVERAGE_RADII) & (am <= DISC_TABLE_A[1])
+        if np.any(tab):
+            f[tab] = np.exp(_disc_table(**kw).ev(u[tab], la[tab]))
+        direct = ~tab
+        if np.any(direct):  # patches wider than DISC_TABLE_A[1] transport lengths, or pairs beyond the table
+            f[direct] = _disc_average(sm[direct], am[direct], **kw) / dipole_profile(sm[direct], **kw)
         self_pair = sm <= SELF_PAIR_RTOL * am
         if np.any(self_pair):
-            f[self_pair] *= _self_term_ratio(am[self_pair], float(albedo_prime), float(eta))
-    out[m] = np.where(np.isfinite(f) & (f > 0), f, 1.0)
+            f[self_pair] *= _self_term_ratio(am[self_pair], **kw)
+    f = np.where(np.isfinite(f) & (f > 0), f, 1.0)
+    out.reshape(-1)[m] = f
     return out
 
 
 #: a pair closer than this fraction of the patch radius is the self pair (source vertex = receiver vertex)
 SELF_PAIR_RTOL = 1e-9
+#: range of a sigma_t' over which the disc rule is tabulated (bicubic in s/a and ln a: within 1e-4 of the
+#: quadrature); below it the factor is 1 (the patch is far narrower than the kernel), above it the quadrature runs
+DISC_TABLE_A = (1e-3, 8.0)
+_DISC_TABLE_U = np.linspace(0.0, PATCH_AVERAGE_RADII, 257)
+_DISC_TABLE_LOG_A = np.arange(np.log(DISC_TABLE_A[0]), np.log(DISC_TABLE_A[1]) + 0.1, 0.1)
 #: Gauss-Legendre panels in the polar angle t about the receiver (fractions of pi) and nodes per panel
 _DISC_T_PANELS = np.array([0.0, 1.0 / 256, 1.0 / 64, 1.0 / 16, 0.25, 1.0]) * np.pi
 _DISC_T_NODES = 12
@@ -241,59 +254,83 @@ _DISC_T, _DISC_W = _disc_nodes()
 
 def _disc_average(s, a, *, albedo_prime, eta):
     """Average of the dipole R_d over the disc of radius ``a`` centred at distance ``s`` from the receiver (optical
-    units, (k,) arrays, a > 0); see :func:`patch_average_factor`. Returns (k,) in units of R_d/sigma_t'^2."""
+    units, (k,) arrays, a > 0; within 1e-7 of a brute-force 2-D quadrature for a up to 30); see
+    :func:`patch_average_factor`. Returns (k,) in units of R_d/sigma_t'^2."""
     kw = {"albedo_prime": albedo_prime, "eta": eta}
     inside = s < a
     full = np.where(inside, dipole_tail_reflectance(0.0, **kw) - dipole_tail_reflectance(np.where(inside, a - s, 0.0),
                                                                                           **kw), 0.0)
-    t = _DISC_T[None, :]
-    sc, ac = s[:, None], a[:, None]
-    r2 = (sc - ac) ** 2 + 4.0 * sc * ac * np.sin(0.5 * t) ** 2
-    r = np.sqrt(r2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        arc = np.arccos(np.clip((r2 + sc * sc - ac * ac) / (2.0 * r * sc), -1.0, 1.0))
-    integrand = np.where(sc > 0, 2.0 * sc * ac * np.sin(t) * arc, 0.0) * dipole_profile(r, **kw)
-    return (full + integrand @ _DISC_W) / (np.pi * a * a)
-
-
-#: log grid of a sigma_t' on which the self-term ratio is tabulated (outside it the ratio is 1)
-_SELF_LOG_A = np.linspace(np.log(1e-3), np.log(1e3), 145)
+    out = np.empty(s.shape)
+    for b in range(0, s.size, 65536):   # blocks of pairs: (block, 60) temporaries
+        sc, ac, t = s[b:b + 65536, None], a[b:b + 65536, None], _DISC_T[None, :]
+        r2 = (sc - ac) ** 2 + 4.0 * sc * ac * np.sin(0.5 * t) ** 2
+        r = np.sqrt(r2)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            arc = np.arccos(np.clip((r2 + sc * sc - ac * ac) / (2.0 * r * sc), -1.0, 1.0))
+        integrand = np.where(sc > 0, 2.0 * sc * ac * np.sin(t) * arc, 0.0) * dipole_profile(r, **kw)
+        out[b:b + 65536] = integrand @ _DISC_W
+    return (full + out) / (np.pi * a * a)
 
 
 @lru_cache(maxsize=64)
-def _self_term_table(albedo_prime: float, eta: float) -> np.ndarray:
-    """Ratio of the lattice-calibrated self term to the self disc average, on ``_SELF_LOG_A`` (docstring of
-    :func:`patch_average_factor`). Per grid value: the regular triangular lattice of cell area pi a^2 (spacing
-    h = a sqrt(2 pi/sqrt 3)); its sites within rho_c = max(PATCH_AVERAGE_RADII a, min(10, 40 a)) are summed
-    exactly, a smooth step chi from 1 to 0 over [rho_c, rho_c + 6 h] hands the rest to the integral (the lattice
-    sum of a function smooth on the scale h equals its integral to high order), and the self term is what is
-    left of T(0)."""
+def _disc_table(*, albedo_prime: float, eta: float):
+    """Bicubic spline of ln(disc average / point value) over (s/a, ln(a sigma_t')), once per material (~0.1 s)."""
+    from scipy.interpolate import RectBivariateSpline  # lazy: scipy.interpolate costs ~0.1 s at import
+
+    kw = {"albedo_prime": albedo_prime, "eta": eta}
+    u, la = np.meshgrid(_DISC_TABLE_U, _DISC_TABLE_LOG_A, indexing="ij")
+    a = np.exp(la).ravel()
+    s = u.ravel() * a
+    with np.errstate(under="ignore"):
+        f = np.log(_disc_average(s, a, **kw) / dipole_profile(s, **kw)).reshape(u.shape)
+    return RectBivariateSpline(_DISC_TABLE_U, _DISC_TABLE_LOG_A, f, kx=3, ky=3, s=0)
+
+
+#: ln(a sigma_t') grid of the self-term ratio (outside it the ratio is 1: below, the self term holds less than
+#: 1e-3 of the kernel's total and the ratio is within 1 % of 1; above, the neighbours' share underflows)
+_SELF_LOG_A = np.linspace(np.log(0.02), np.log(1e3), 55)
+#: width of the smooth hand-over from the lattice sum to the integral, in lattice spacings
+_SELF_WIDTH_H = 16.0
+
+
+@lru_cache(maxsize=64)
+def _self_term_table(*, albedo_prime: float, eta: float):
+    """Cubic spline in ln(a sigma_t') of the ratio of the lattice-calibrated self term to the self disc average
+    (docstring of :func:`patch_average_factor`), once per material (~0.2 s).
+
+    Per grid value a: the regular triangular lattice of cell area pi a^2 (spacing h = a sqrt(2 pi/sqrt 3)), the
+    receiver on a site. Sites within rho_c = PATCH_AVERAGE_RADII a + 2 h are summed exactly with the bake's
+    weights; a C-infinity step chi from 1 to 0 over [rho_c, rho_c + 16 h] hands the rest to the integral (the
+    lattice sum of R_d (1 - chi), analytic in a strip wider than rho_c and smooth on the scale 16 h, equals its
+    integral to ~1e-7: doubling the width moves the ratio by < 3e-7); the self term is what is left of T(0)."""
+    from scipy.interpolate import CubicSpline  # lazy, as above
+
     kw = {"albedo_prime": albedo_prime, "eta": eta}
     total = float(dipole_tail_reflectance(0.0, **kw))
     xg, wg = np.polynomial.legendre.leggauss(48)
     out = np.ones(_SELF_LOG_A.size)
-    for j, la in enumerate(_SELF_LOG_A):   # a loop over table nodes (145), once per material
+    for j, la in enumerate(_SELF_LOG_A):   # a loop over the table's nodes, once per material
         a = float(np.exp(la))
         h = a * np.sqrt(2.0 * np.pi / np.sqrt(3.0))
         area = np.pi * a * a
-        rho_c = max(PATCH_AVERAGE_RADII * a, min(10.0, 40.0 * a))
-        width = 6.0 * h
-        n = int(np.ceil((rho_c + width) / h)) + 2
-        i, k = np.meshgrid(np.arange(-2 * n, 2 * n + 1), np.arange(-n - 1, n + 2))
-        x, y = h * (i + 0.5 * k), h * (0.5 * np.sqrt(3.0)) * k
-        r = np.hypot(x, y).ravel()
+        rho_c = PATCH_AVERAGE_RADII * a + 2.0 * h
+        width = _SELF_WIDTH_H * h
+        n = int(np.ceil((rho_c + width) / h)) + 2       # rows k reach |y| = 0.87 h |k|, columns |x| >= h (|i| - |k|/2)
+        nk = int(np.ceil(n / (0.5 * np.sqrt(3.0))))
+        i, k = np.meshgrid(np.arange(-n - nk, n + nk + 1), np.arange(-nk, nk + 1))
+        r = np.hypot(h * (i + 0.5 * k), h * (0.5 * np.sqrt(3.0)) * k).ravel()
         r = r[(r > 0) & (r < rho_c + width)]
-        w = np.ones(r.size)
-        close = r < PATCH_AVERAGE_RADII * a
-        w[close] = _disc_average(r[close], np.full(int(close.sum()), a), **kw) / dipole_profile(r[close], **kw)
-        near_sum = area * float(np.sum(dipole_profile(r, **kw) * w * _smooth_step((r - rho_c) / width)))
+        kern = dipole_profile(r, **kw)                  # the bake's weight of each site: point value, or
+        close = r < PATCH_AVERAGE_RADII * a               # the disc average within PATCH_AVERAGE_RADII a
+        kern[close] = _disc_average(r[close], np.full(int(close.sum()), a), **kw)
+        near_sum = area * float(np.sum(kern * _smooth_step((r - rho_c) / width)))
         rr = rho_c + 0.5 * width * (xg + 1.0)
         far = float(np.sum(0.5 * width * wg * dipole_profile(rr, **kw) * (1.0 - _smooth_step((rr - rho_c) / width))
                            * 2.0 * np.pi * rr)) + float(dipole_tail_reflectance(rho_c + width, **kw))
         self_disc = float(_disc_average(np.zeros(1), np.array([a]), **kw)[0])
         ratio = (total - near_sum - far) / (area * self_disc)
         out[j] = ratio if np.isfinite(ratio) and ratio > 0 else 1.0
-    return out
+    return CubicSpline(_SELF_LOG_A, out)
 
 
 def _smooth_step(t):
@@ -305,9 +342,11 @@ def _smooth_step(t):
     return down / (up + down)
 
 
-def _self_term_ratio(a, albedo_prime: float, eta: float):
+def _self_term_ratio(a, *, albedo_prime: float, eta: float):
     """(k,) ratio of the calibrated self term to the self disc average at patch radii ``a`` (optical units)."""
-    table = _self_term_table(albedo_prime, eta)
     la = np.log(a)
     inside = (la >= _SELF_LOG_A[0]) & (la <= _SELF_LOG_A[-1])
-    return np.where(inside, np.interp(la, _SELF_LOG_A, table), 1.0)
+    out = np.ones(la.shape)
+    if np.any(inside):
+        out[inside] = _self_term_table(albedo_prime=albedo_prime, eta=eta)(la[inside])
+    return out

@@ -31,8 +31,8 @@ The inner integral runs over the lit arc only, so its integrand is smooth (analy
 where w vanishes linearly in c); Gauss-Legendre on [0, psi_max] converges fast. In gamma, I changes form where the
 circle of radius gamma about x starts to leave the lit cap (gamma = |pi/2 - beta|) and where it leaves it entirely
 (gamma = pi/2 + beta): both are panel breaks. The kernel peaks at gamma = 0 with a width of a few transport
-lengths: the gamma panels are graded in arc length s = R gamma (0, 1/8, 1/4, 1/2, 1, 2, 4, ... mm, then steps of
-``STEP_MM``), with ``n_gamma`` Gauss-Legendre nodes each.
+lengths: the gamma panels are graded in arc length s = R gamma (0, 1/8, 1/4, 1/2, 1, 2 mm, then steps of
+``STEP_MM`` up to ``UNIFORM_MM``, growing by ``GROWTH`` beyond), with ``n_gamma`` Gauss-Legendre nodes each.
 
 The only code of meshshade used is the kernel itself, ``meshshade.kernels.sphere.sphere_series_profile``, which
 is tested on its own against mpmath evaluations of the Bessel series (tests/kernels). The transport integral, the
@@ -49,8 +49,9 @@ import numpy as np
 
 from meshshade.kernels.sphere import sphere_series_profile
 
-#: panel length in mm of the gamma quadrature beyond the graded start
-STEP_MM = 2.0
+#: gamma panels of STEP_MM beyond the graded start up to UNIFORM_MM of arc, growing by GROWTH beyond (a huge sphere:
+#: there the kernel is below 1e-9 of its peak for the materials tested)
+STEP_MM, UNIFORM_MM, GROWTH = 2.0, 200.0, 1.5
 
 
 def fresnel_transmittance(c, eta: float) -> np.ndarray:
@@ -92,9 +93,11 @@ def sphere_directional_exitance(beta, *, R_mm: float, material, channel: int = 0
     beta = np.asarray(beta, dtype=np.float64)
     flat = beta.reshape(-1)
     half_turn = np.pi * R_mm
-    graded = [0.0, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0]
-    s_breaks = np.unique(np.concatenate([[b for b in graded if b < half_turn],
-                                         np.arange(graded[-1], half_turn, STEP_MM), [half_turn]])) / R_mm
+    graded = [0.0, 0.125, 0.25, 0.5, 1.0]
+    uniform = np.arange(2.0, UNIFORM_MM + 1e-9, STEP_MM)
+    grown = UNIFORM_MM * GROWTH ** np.arange(1, int(np.ceil(np.log(max(half_turn / UNIFORM_MM, 1.0)) / np.log(GROWTH))) + 1)
+    s_breaks = np.unique(np.concatenate([graded, uniform, grown, [half_turn]]))
+    s_breaks = s_breaks[s_breaks <= half_turn] / R_mm
     xp, wp = np.polynomial.legendre.leggauss(n_psi)
     out = np.empty(flat.shape)
     for a in range(0, flat.size, block):   # blocks of exit angles: bounded memory
