@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -33,7 +34,8 @@ from meshshade.progress import Progress, kernel_interrupts
 from meshshade.raycast import make_scene
 from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
 from meshshade.transport.farfield import far_field_exitance, far_field_exitance_direct, far_field_radius
-from meshshade.transport.hierarchical import FarFieldUnsupported, SurfaceTransport, vertex_power
+from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
+                                              vertex_power)
 from meshshade.transport.gather import PairStream, Stopwatch, chunk_size, cutoff_radii, gather
 from meshshade.transport.models import MODELS
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, source_frames, source_patch_radius
@@ -147,6 +149,18 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     core, why = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
                                    direct_options=direct_options,
                                    cutoff_tol=cutoff_tol, auto_options=auto_options, rtol=rtol, progress=progress)
+    verified = None
+    if core is not None:
+        M, hstats = core.exitance(vertex_power(samples, mesh.n_vertices), progress=progress)
+        if transport == "auto":  # the far field's distances on this light's configuration, or the direct sum
+            t_v = time.perf_counter()
+            verified = verify_far_field(core, M, vertex_power(samples, mesh.n_vertices))
+            hstats["timings"]["far-field check"] = time.perf_counter() - t_v
+            if verified["mean"] > VERIFY_TOL[0] or verified["max"] > VERIFY_TOL[1]:
+                why = (f"hierarchical far field not accurate for this light: arc-distance error of M at "
+                       f"{verified['receivers']} receivers mean {verified['mean']:.2g}, max {verified['max']:.2g}")
+                log.info("meshshade: %s; using the direct sum", why)
+                core = None
     if core is None:
         M, beam_distance, stats, plan, kstats = _direct(mesh, material, lights, samples, curv, cut, model, clock,
                                                         far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol,
@@ -157,14 +171,13 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
             clock.timings[k] = clock.timings.get(k, 0.0) + v
         clock.lap("")
         clock.timings.pop("", None)
-        M, hstats = core.exitance(vertex_power(samples, mesh.n_vertices), progress=progress)
         for k, v in hstats.pop("timings").items():
             clock.timings[k] = clock.timings.get(k, 0.0) + v
         clock.lap("")
         clock.timings.pop("", None)
         point = samples.vertex < 0
         stats = {"entry_samples": len(samples), "cutoff_mm": cut.tolist(), **samples.stats, **core.stats, **hstats,
-                 "transport": "hierarchical"}
+                 "transport": "hierarchical", **({"far_field_verified": verified} if verified else {})}
         plan, beam_distance, kstats = core.sample_plan(samples), None, {}
         if np.any(point):  # beams: few samples, the direct sum over their whole neighbourhoods
             sub = subset_samples(samples, point)

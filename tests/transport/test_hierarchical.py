@@ -20,7 +20,7 @@ from meshshade.light import BeamLight, DirectionalLight, entry_samples
 from meshshade.materials import material_from_options
 from meshshade.transport.baking import bake
 from meshshade.transport.farfield_kernels import kd_permutation, node_ranges, tree_depth
-from meshshade.transport.hierarchical import FarFieldUnsupported, SurfaceTransport, vertex_power
+from meshshade.transport.hierarchical import VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field, vertex_power
 from meshshade.transport.hierarchy_kernels import cluster_geometry
 
 SKIN = material_from_options("skin1")
@@ -207,3 +207,20 @@ def test_cli_transport_option(tmp_path, capsys):
     rc = main(["bake", str(mesh), "--material", "skin1", "--light", "directional:0,0,-1", "--transport", "fast",
                "--out", str(tmp_path / "x.ply")])
     assert rc == 2 and "--transport" in capsys.readouterr().err
+
+
+def test_the_far_field_verification_sees_the_arc_errors_of_a_lit_configuration(sphere3):
+    """verify_far_field (receiver side, actual powers) is small on a sphere (arcs exact) and large on the thin
+    torus (arcs across the hole; conservative there: the dipole's far share is small at this resolution)."""
+    res = bake(sphere3, SKIN, [SUN], model="dipole", transport="auto")
+    assert res.stats["transport"] == "hierarchical"
+    v = res.stats["far_field_verified"]
+    assert v["receivers"] == 24 and v["mean"] < 2e-3
+    mesh = Mesh(*torus(4.0, 2.5, 48, 24))
+    core = SurfaceTransport.build(mesh, SKIN, "dipole", near_patch_radii=5.0)
+    samples = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, [SUN], eta=SKIN.eta)
+    pv = vertex_power(samples, mesh.n_vertices)
+    M, _ = core.exitance(pv)
+    v = verify_far_field(core, M, pv)
+    assert v["mean"] > 5 * VERIFY_TOL[0]
+    assert bake(mesh, SKIN, [SUN], model="dipole").stats["transport"].startswith("direct (")
