@@ -151,10 +151,11 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
                                    cutoff_tol=cutoff_tol, auto_options=auto_options, rtol=rtol, progress=progress)
     verified = None
     if core is not None:
-        M, hstats = core.exitance(vertex_power(samples, mesh.n_vertices), progress=progress)
+        pv = vertex_power(samples, mesh.n_vertices)
+        M, hstats = core.exitance(pv, progress=progress)
         if transport == "auto":  # the far field's distances on this light's configuration, or the direct sum
             t_v = time.perf_counter()
-            verified = verify_far_field(core, M, vertex_power(samples, mesh.n_vertices))
+            verified = verify_far_field(core, M, pv)
             hstats["timings"]["far-field check"] = time.perf_counter() - t_v
             if verified["mean"] > VERIFY_TOL[0] or verified["max"] > VERIFY_TOL[1]:
                 why = (f"hierarchical far field not accurate for this light: arc-distance error of M at "
@@ -167,14 +168,9 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
                                                         auto_options, progress)
         stats["transport"] = "direct" + (f" ({why})" if why else "")
     else:
-        for k, v in core.timings.items():
-            clock.timings[k] = clock.timings.get(k, 0.0) + v
-        clock.lap("")
-        clock.timings.pop("", None)
-        for k, v in hstats.pop("timings").items():
-            clock.timings[k] = clock.timings.get(k, 0.0) + v
-        clock.lap("")
-        clock.timings.pop("", None)
+        if not isinstance(transport, SurfaceTransport):  # built by this bake: its stages count here
+            clock.charge(core.timings)
+        clock.charge(hstats.pop("timings"))
         point = samples.vertex < 0
         stats = {"entry_samples": len(samples), "cutoff_mm": cut.tolist(), **samples.stats, **core.stats, **hstats,
                  "transport": "hierarchical", **({"far_field_verified": verified} if verified else {})}
@@ -253,7 +249,7 @@ def merge_plans(vertex_plan, point_plan, point):
     return AutoPlan(**out)
 
 
-def _surface_transport(transport, mesh, material, model, samples, curv, **kw):
+def _surface_transport(transport, mesh, material, model, samples, curv, *, direct_options=False, **kw):
     """``(SurfaceTransport or None, reason)``: the hierarchical transport of the vertex samples, or None for the
     direct sum (asked for, no vertex samples, or ``transport="auto"`` on a mesh where it is not accurate)."""
     if isinstance(transport, SurfaceTransport):
@@ -264,12 +260,10 @@ def _surface_transport(transport, mesh, material, model, samples, curv, **kw):
         return transport, None
     if transport == "direct":
         return None, None
-    if transport == "auto" and kw.pop("direct_options", False):
+    if transport == "auto" and direct_options:
         return None, "direct-sum options given"
     if not np.any(samples.vertex >= 0):
         return None, "no vertex samples"
-    kw = dict(kw)
-    kw.pop("direct_options", None)
     if transport == "hierarchical":
         try:
             return SurfaceTransport.build(mesh, material, model, curvature=curv, **kw), None

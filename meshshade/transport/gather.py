@@ -81,6 +81,12 @@ class Stopwatch:
         self.timings[name] = self.timings.get(name, 0.0) + t - self._t0
         self._t0 = t
 
+    def charge(self, timings: dict) -> None:
+        """Add stage times measured elsewhere (``{stage: seconds}``) and restart the lap there."""
+        for name, seconds in timings.items():
+            self.timings[name] = self.timings.get(name, 0.0) + seconds
+        self._t0 = time.perf_counter()
+
 
 def chunk_size(mesh, src_cut) -> int:
     """Sources per chunk: PAIRS_PER_CHUNK over the expected neighbours per source (the area of its gather disc,

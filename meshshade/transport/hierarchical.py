@@ -94,6 +94,42 @@ class FarFieldUnsupported(MeshshadeError):
                          f"{FAR_DISTANCE_TOL[1]:g}); use the direct transport")
 
 
+def arc_distances(chord, k_chord):
+    """Array twin of :func:`~meshshade.transport.hierarchy_kernels.arc_length` (the far field's surface distance)."""
+    w = np.minimum(np.abs(k_chord), 1.0)
+    return np.where(w < 1e-4, chord * (1.0 + w * w / 6.0), chord * np.arcsin(w) / np.maximum(w, 1e-300))
+
+
+def _exact_and_arc(mesh, idx, rmax):
+    """For each vertex x of ``idx``: ``(i, x, cand, s, chord, arc)`` over the vertices ``cand`` within the chord
+    ``rmax`` of x: exact geodesic distances ``s`` (inf beyond the geodesic radius rmax), chords and the far
+    field's arcs (eq. (59), normals of both ends). One exact query for all of ``idx``; distances are symmetric."""
+    V, N = mesh.vertices, mesh.vertex_normals
+    nb = neighbourhood_solver("exact", mesh).query(V[idx], np.full(idx.size, -1), np.full((idx.size, 3), np.nan),
+                                                    idx, N[idx], rmax)
+    src = nb.source_index()
+    ball = cKDTree(V).query_ball_point(V[idx], rmax)
+    dist = np.full(mesh.n_vertices, np.inf)
+    for i, x in enumerate(idx):
+        mine = src == i
+        dist[nb.vertex[mine]] = nb.distance[mine]
+        dist[x] = 0.0
+        cand = np.asarray(ball[i], dtype=np.int64)
+        s = dist[cand]
+        dist[nb.vertex[mine]] = np.inf
+        chord = np.linalg.norm(V[cand] - V[x], axis=1)
+        kc = np.einsum("ij,ij->i", N[x] - N[cand], V[x] - V[cand]) / np.maximum(chord, 1e-300) * 0.5
+        yield i, x, cand, s, chord, arc_distances(chord, kc)
+
+
+def _dipole_mm(material: Material, c: int, r):
+    """The planar dipole of channel c at distances r [mm] (inf allowed: 0), 1/mm^2."""
+    ch = material.channel(c)
+    st = ch["sigma_t_prime"]
+    R = dipole_profile(np.where(np.isfinite(r), r, 0.0) * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"]) * st * st
+    return np.where(np.isfinite(r), R, 0.0)
+
+
 def far_distance_check(mesh, material: Material, cut, patch, *, candidates=NEAR_PATCH_RADII,
                        n_sources: int = DISTANCE_CHECK_SOURCES, tol=FAR_DISTANCE_TOL, seed: int = 0) -> dict:
     """Measure the far field's distance model on ``mesh`` and pick the near radius (in patch radii).
@@ -107,41 +143,22 @@ def far_distance_check(mesh, material: Material, cut, patch, *, candidates=NEAR_
 
     the error the far field's distances make in the exitance a lit source u causes (its patch radius a_u),
     were its far pairs summed exactly. The smallest candidate f with mean_u e_u <= tol[0] and max_u e_u <= tol[1]
-    (worst channel) is chosen. Returns ``{"near_patch_radii": f or None, "errors": [{"near_patch_radii", "mean",
-    "max"}, ...]}`` (one row per candidate tried, in order).
+    (worst channel) is chosen. The comparison covers the pairs within the radius holding all but CHECK_CUTOFF_TOL
+    of the dipole's total and about CHECK_MAX_PAIRS vertices (``radius_mm``). Returns ``{"near_patch_radii": f or
+    None, "radius_mm": ..., "errors": [{"near_patch_radii", "mean", "max"}, ...]}`` (one row per candidate tried).
     """
     n = mesh.n_vertices
     rng = np.random.default_rng(seed)
     idx = np.sort(rng.choice(n, size=min(n, n_sources), replace=False))
-    V, N = mesh.vertices, mesh.vertex_normals
-    solver = neighbourhood_solver("exact", mesh)
     cut = np.minimum(cut, cutoff_radii(material, CHECK_CUTOFF_TOL))  # the part of the kernel that matters
     # and at most about CHECK_MAX_PAIRS exact geodesics per source (window propagation slows down on fine meshes)
-    r_pairs = float(np.sqrt(CHECK_MAX_PAIRS * np.median(mesh.vertex_areas) / np.pi))
-    cut = np.minimum(cut, r_pairs)
+    cut = np.minimum(cut, np.sqrt(CHECK_MAX_PAIRS * np.median(mesh.vertex_areas) / np.pi))
     rmax = float(np.max(cut))
-    nb = solver.query(V[idx], np.full(idx.size, -1), np.full((idx.size, 3), np.nan), idx, N[idx], rmax)
-    src = nb.source_index()
-    ball = cKDTree(V).query_ball_point(V[idx], rmax)
     err = np.zeros((len(candidates), idx.size, 3))
-    dist = np.full(n, np.inf)
-    for i, u in enumerate(idx):
-        mine = src == i
-        dist[nb.vertex[mine]] = nb.distance[mine]
-        dist[u] = 0.0
-        cand = np.asarray(ball[i], dtype=np.int64)
-        s = dist[cand]
-        dist[nb.vertex[mine]] = np.inf
-        chord = np.linalg.norm(V[cand] - V[u], axis=1)
-        kc = np.einsum("ij,ij->i", N[cand] - N[u], V[cand] - V[u]) / np.maximum(chord, 1e-300) * 0.5
-        w = np.minimum(np.abs(kc), 1.0)
-        arc = np.where(w < 1e-4, chord, chord * np.arcsin(w) / np.maximum(w, 1e-300))
+    for i, u, cand, s, chord, arc in _exact_and_arc(mesh, idx, rmax):
         for c in range(3):
-            ch = material.channel(c)
-            st = ch["sigma_t_prime"]
-            Rs = np.where(s <= cut[c], dipole_profile(np.where(np.isfinite(s), s, 0.0) * st,
-                                                      albedo_prime=ch["albedo_prime"], eta=ch["eta"]), 0.0)
-            Ra = np.where(arc <= cut[c], dipole_profile(arc * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"]), 0.0)
+            Rs = np.where(s <= cut[c], _dipole_mm(material, c, s), 0.0)
+            Ra = np.where(arc <= cut[c], _dipole_mm(material, c, arc), 0.0)
             tot = Rs.sum()
             for j, f in enumerate(candidates):
                 far = chord > f * patch[u]
@@ -526,35 +543,14 @@ def verify_far_field(core: "SurfaceTransport", M, vertex_power, *, n_receivers: 
         return {"mean": 0.0, "max": 0.0, "receivers": 0}
     rng = np.random.default_rng(seed)
     idx = np.sort(rng.choice(lit, size=min(lit.size, n_receivers), replace=False))
-    V, N = mesh.vertices, mesh.vertex_normals
     # within the cutoff and about CHECK_MAX_PAIRS vertices of each receiver (time, as far_distance_check)
     cut = np.minimum(core.cutoff_mm, np.sqrt(CHECK_MAX_PAIRS * np.median(mesh.vertex_areas) / np.pi))
-    rmax = float(np.max(cut))
-    nb = neighbourhood_solver("exact", mesh).query(V[idx], np.full(idx.size, -1), np.full((idx.size, 3), np.nan),
-                                                    idx, N[idx], rmax)
-    src = nb.source_index()
-    ball = cKDTree(V).query_ball_point(V[idx], rmax)
-    dist = np.full(mesh.n_vertices, np.inf)
     err = np.zeros((idx.size, 3))
-    for i, x in enumerate(idx):
-        mine = src == i
-        dist[nb.vertex[mine]] = nb.distance[mine]
-        cand = np.asarray(ball[i], dtype=np.int64)
-        cand = cand[pv[cand] > 0]
-        s = dist[cand]
-        dist[nb.vertex[mine]] = np.inf
-        chord = np.linalg.norm(V[cand] - V[x], axis=1)
-        kc = np.einsum("ij,ij->i", N[x] - N[cand], V[x] - V[cand]) / np.maximum(chord, 1e-300) * 0.5
-        w = np.minimum(np.abs(kc), 1.0)
-        arc = np.where(w < 1e-4, chord, chord * np.arcsin(w) / np.maximum(w, 1e-300))
-        far = chord > core.near_mm[cand]
+    for i, x, cand, s, chord, arc in _exact_and_arc(mesh, idx, float(np.max(cut))):
+        far = (chord > core.near_mm[cand]) & (pv[cand] > 0)
         for c in range(3):
-            ch = core.material.channel(c)
-            st = ch["sigma_t_prime"]
-            R = lambda r: dipole_profile(np.where(np.isfinite(r), r, 0.0) * st, albedo_prime=ch["albedo_prime"],  # noqa: E731
-                                         eta=ch["eta"]) * st * st
-            a = (pv[cand] * np.where(arc <= cut[c], R(arc), 0.0))[far].sum()
-            b = (pv[cand] * np.where(s <= cut[c], R(s), 0.0))[far].sum()
+            a = (pv[cand] * np.where(arc <= cut[c], _dipole_mm(core.material, c, arc), 0.0))[far].sum()
+            b = (pv[cand] * np.where(s <= cut[c], _dipole_mm(core.material, c, s), 0.0))[far].sum()
             err[i, c] = abs(a - b) / M[x, c] if M[x, c] > 0 else 0.0
     worst = err.max(axis=1)
     return {"mean": float(worst.mean()), "max": float(worst.max()), "receivers": int(idx.size)}

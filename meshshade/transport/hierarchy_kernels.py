@@ -35,7 +35,10 @@ KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_CURVED, KIND_SPHERE = 0, 1, 2, 3
 @njit(cache=True, inline="always")
 def arc_length(chord, k_chord):
     """Surface distance of a pair from its chord (mm) and the normal-section curvature estimate
-    ``k_chord = k c / 2`` (eq. (59)): ``c asin(u)/u`` with ``u = min(|k c/2|, 1)``."""
+    ``k_chord = k c / 2`` (eq. (59)): ``c asin(u)/u`` with ``u = min(|k c/2|, 1)``. Unlike the arc geodesics'
+    ``geometry.geodesics.arc._arc``, which marks |k c/2| >= 1 invalid for its Dijkstra fallback, the far field
+    needs a value for every pair: a half circle, pi c / 2. :func:`meshshade.transport.hierarchical.arc_distances`
+    is the array twin the distance checks use."""
     u = min(abs(k_chord), 1.0)
     if u < 1e-4:
         return chord * (1.0 + u * u / 6.0)
@@ -145,7 +148,9 @@ def rotated_shape(S, row, a0, a1, a2, b0, b1, b2, out, orow, w):
 
 @njit(cache=True, parallel=True)
 def cluster_geometry(pos, nrm, shape, power, patch, near, sph, logr, lo, hi):
-    """Per node of the tree (rows in tree order): total power P, sigma points (4, 3), mean unit normal, the cosine
+    """Per node of the tree (rows in tree order): total power P, sigma points (4, 3), their normals (4, 3: the mean
+    normal turned by the mean shape operator, dn = S dx, so a sigma point is a point of the smooth surface) and
+    shape operators (4, 6: the mean carried to each sigma point's normal), mean unit normal, the cosine
     of its normal cone (min over members of n_j . n_mean), power-weighted mean shape operator (6), bounding
     radius about the centroid (including the members' patch radii), the largest near radius of its members and a
     representative sphere-table row (``sph``, the member whose log local radius ``logr`` is nearest the

@@ -416,7 +416,8 @@ def test_sigint_leaves_no_partial_output(tmp_path, cli, level):
     """SIGINT 1 s of the child's own CPU time into the work (counted from the mesh line it prints when the bake
     starts): exit 130 (or 2), one line, nothing left.
 
-    Level 5 (10 242 vertices) with marble and a directional light takes minutes of CPU, so the run is always
+    Level 5 (10 242 vertices) with marble, a directional light and the direct sum (``--transport direct``; the
+    hierarchical transport bakes this sphere in about 2 s) takes minutes of CPU, so the run is always
     interrupted mid-bake; the slow variant uses 40 962 vertices and interrupts after 3 s of CPU. Both points are
     events of the child's progress, not wall-clock delays, so a loaded machine only makes the test slower."""
     mesh = _sphere_ply(tmp_path, level)
@@ -425,8 +426,8 @@ def test_sigint_leaves_no_partial_output(tmp_path, cli, level):
     env = dict(os.environ, PYTHONUNBUFFERED="1",
                PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen([sys.executable, "-m", "meshshade.cli", "bake", str(mesh), "--material", "marble",
-                             "--light", "directional:0.3,-0.5,-1", "--model", "curved", "--out", str(out),
-                             "--npz", str(npz)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                             "--light", "directional:0.3,-0.5,-1", "--model", "curved", "--transport", "direct",
+                             "--out", str(out), "--npz", str(npz)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
                             cwd=str(tmp_path))
     try:
         first = proc.stdout.readline().decode()  # "mesh: ... transport mean free paths ...": the job started
