@@ -62,7 +62,8 @@ from pathlib import Path
 
 import numpy as np
 
-from meshshade.errors import MeshValidationError, OutputError
+from meshshade import memo
+from meshshade.errors import MeshshadeError, MeshValidationError, OutputError
 from meshshade.geometry.mesh import Mesh, MeshDefectWarning
 from meshshade.units import mm_per_unit
 
@@ -70,7 +71,8 @@ __all__ = ["SUPPORTED_MESH_FORMATS", "load_mesh", "read_mesh_arrays", "read_bake
            "atomic_write", "output_transaction",
            "check_output_path", "output_dir", "discard_stdout",
            "write_ply", "write_mesh_ply", "write_npz", "write_text", "write_json", "write_figure", "PLY_RESERVED_NAMES",
-           "write_exr", "write_png", "read_exr"]
+           "write_exr", "write_png", "read_exr", "read_toml", "read_json", "read_json_lines", "write_json_lines",
+           "file_sha256", "folder_files", "job_folder", "remove_stale_parts", "detached"]
 
 #: file extension -> format name
 SUPPORTED_MESH_FORMATS = {".obj": "obj", ".ply": "ply", ".off": "off", ".stl": "stl", ".glb": "glb",
@@ -708,23 +710,39 @@ def load_mesh(path, units: str = "mm") -> Mesh:
     """
     mm_per_unit(units)  # an unknown unit fails before the file is read
     path = Path(path)
+    try:  # inside memo.reuse() (a batch worker) a file read before, unchanged since, is not read again
+        st = path.stat()
+        key = (str(path.resolve()), st.st_size, st.st_mtime_ns, str(units))
+    except OSError:
+        key = None
+    if key is None:
+        mesh, caught = _load_mesh(path, units)
+    else:
+        mesh, caught = memo.cached("mesh", key, lambda: _load_mesh(path, units))
+    for w in caught:  # shown as they would have been, under the caller's filters
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return mesh
+
+
+def _load_mesh(path: Path, units: str):
+    """(Mesh, warnings caught while reading it) of :func:`load_mesh`."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MeshDefectWarning)
         V, F = read_mesh_arrays(path)
-    for w in caught:  # shown as they would have been, under the caller's filters
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     notes = tuple(str(w.message) for w in caught if issubclass(w.category, MeshDefectWarning))
-    if path.suffix.lower() in (".glb", ".gltf") and str(units).strip().lower() != "m":
-        warnings.warn(f"{path}: glTF positions are metres by specification, but units={units!r} was given",
-                      UserWarning, stacklevel=2)
-    try:
-        mesh = Mesh.from_arrays(V, F, units=units, source=str(path))
-    except MeshValidationError as exc:
-        raise MeshValidationError(f"{path}: {exc}") from None
+    with warnings.catch_warnings(record=True) as more:
+        warnings.simplefilter("always")
+        if path.suffix.lower() in (".glb", ".gltf") and str(units).strip().lower() != "m":
+            warnings.warn(f"{path}: glTF positions are metres by specification, but units={units!r} was given",
+                          UserWarning, stacklevel=2)
+        try:
+            mesh = Mesh.from_arrays(V, F, units=units, source=str(path))
+        except MeshValidationError as exc:
+            raise MeshValidationError(f"{path}: {exc}") from None
     if notes:
         mesh = dataclasses.replace(mesh, defects=dataclasses.replace(mesh.defects,
                                                                      warnings=notes + mesh.defects.warnings))
-    return mesh
+    return mesh, list(caught) + list(more)
 
 
 #: vertex properties of a bake's PLY (``meshshade bake``, :func:`meshshade.output.bake_file.write_bake`)
@@ -995,6 +1013,17 @@ def output_transaction():
     finally:
         _TRANSACTION.reset(token)
     txn.commit()
+
+
+@contextlib.contextmanager
+def detached():
+    """Run the block outside any :func:`output_transaction`: what it writes lands at once (a batch's manifest and
+    job folders, which must survive the batch being stopped half-way)."""
+    token = _TRANSACTION.set(None)
+    try:
+        yield
+    finally:
+        _TRANSACTION.reset(token)
 
 
 def _no_space_hint(directory: Path, exc: BaseException | str) -> str:
@@ -1276,3 +1305,133 @@ def read_exr(path) -> tuple[np.ndarray, dict]:
     finally:
         inp.close()
     return np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels), meta
+
+
+# ----------------------------------------------------------------------------------------------- batch folders
+#: a job folder being written: ``.<name>.part-<random>`` beside the final ``<name>`` (meshshade.batch)
+_PART = re.compile(r"^\.(.+)\.part-[0-9a-f]{8}$")
+
+
+def read_toml(path) -> dict:
+    """A TOML file (a batch's job file) as a dict; MeshshadeError with one line naming the file and the problem."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+        import tomli as tomllib
+    path = Path(path)
+    if not path.is_file():
+        raise MeshshadeError(f"job file not found: {path}" if not path.exists() else f"{path} is not a file")
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise MeshshadeError(f"{path}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise MeshshadeError(f"cannot read {path}: {exc.strerror or _one_line(exc)}") from None
+
+
+def read_json_lines(path) -> list[dict]:
+    """The records of a JSON-lines file (a batch manifest); [] when it does not exist. A line that is not a JSON
+    object (a torn last line) is skipped."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return []
+    except OSError as exc:
+        raise MeshshadeError(f"cannot read {path}: {exc.strerror or _one_line(exc)}") from None
+    out = []
+    for line in text.splitlines():
+        with contextlib.suppress(ValueError):
+            rec = json.loads(line)
+            if isinstance(rec, dict):
+                out.append(rec)
+    return out
+
+
+def write_json_lines(path, records) -> Path:
+    """Write ``records`` (dicts) as JSON lines, atomically."""
+    return write_text(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in records))
+
+
+def read_json(path):
+    """A JSON file's content, or None when it is missing or unreadable."""
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def file_sha256(path) -> str:
+    """SHA-256 of a file's bytes (hex)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def folder_files(folder) -> list[str]:
+    """Relative paths (POSIX) of the regular files under ``folder``, sorted."""
+    folder = Path(folder)
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+def _remove_tree(path: Path) -> None:
+    import shutil
+
+    with _signals_deferred():
+        shutil.rmtree(path, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def job_folder(final):
+    """Write a folder that appears whole or not at all: yields a new empty ``.<name>.part-<random>`` beside
+    ``final``; on success it is renamed to ``final`` (an existing ``final``, from an earlier run with other
+    parameters, is replaced only then); on any exception, KeyboardInterrupt included, it is removed. A process
+    killed meanwhile leaves only the ``.part`` folder, which :func:`remove_stale_parts` removes."""
+    final = Path(final)
+    for _ in range(100):
+        tmp = final.parent / f".{final.name}.part-{secrets.token_hex(4)}"
+        try:
+            os.mkdir(tmp)
+            break
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise OutputError(f"cannot create a folder in {final.parent}: "
+                              f"{_no_space_hint(final.parent, exc)}") from None
+    else:  # pragma: no cover
+        raise OutputError(f"cannot create a temporary folder in {final.parent}")
+    try:
+        yield tmp
+        with _signals_deferred():
+            if final.exists():
+                old = final.parent / f".{final.name}.part-{secrets.token_hex(4)}"
+                os.replace(final, old)
+                os.replace(tmp, final)
+                import shutil
+
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                os.replace(tmp, final)
+    except BaseException:
+        _remove_tree(tmp)
+        raise
+
+
+def remove_stale_parts(folder, names=None) -> list[str]:
+    """Remove the ``.<name>.part-*`` folders under ``folder`` left by killed jobs (only those of ``names`` when
+    given); returns the removed folders' names."""
+    folder = Path(folder)
+    removed = []
+    if not folder.is_dir():
+        return removed
+    for p in folder.iterdir():
+        m = _PART.match(p.name)
+        if m and p.is_dir() and (names is None or m.group(1) in names):
+            _remove_tree(p)
+            removed.append(p.name)
+    return removed

@@ -165,3 +165,13 @@ def mc_work_clock(monkeypatch):
         return clock
 
     return start
+
+
+@pytest.fixture(scope="session")
+def dask_client():
+    """A real local Dask cluster of 2 worker processes (one task thread and one numba thread each), shared by the
+    tests that only submit work to it. A test that kills workers starts its own cluster."""
+    from meshshade.batch.cluster import open_client
+
+    with open_client(workers=2, quiet=True) as client:
+        yield client

@@ -16,7 +16,8 @@ CHECK = "--check" in sys.argv[1:]
 
 # page -> (package, preferred order of modules / subpackages; the rest follow alphabetically)
 PAGES = {
-    "meshshade": ("meshshade", ["errors", "units", "materials", "io", "check", "profiles", "demo"]),
+    "meshshade": ("meshshade", ["errors", "units", "materials", "io", "memo", "check", "profiles",
+                                        "demo"]),
     "kernels": ("meshshade.kernels", ["optics", "fresnel", "dipole", "sphere", "cylinder", "curvature",
                                       "auxiliary", "coefficients", "table", "policies", "profile"]),
     "geometry": ("meshshade.geometry", ["mesh", "topology", "procedural", "curvature", "convexity", "geodesics",
@@ -29,8 +30,9 @@ PAGES = {
     "montecarlo": ("meshshade.montecarlo", ["simulation", "engine", "emitter", "sampling", "direct_walk", "kernels",
                                             "interior", "tallies", "wavefront_oracle"]),
     "bench": ("meshshade.bench", ["scenes", "plan", "runner", "references", "report"]),
+    "batch": ("meshshade.batch", ["runner", "jobs", "cluster"]),
     "cli": ("meshshade.cli", ["main", "options", "demo", "profile", "check", "bake", "render", "compare", "mc",
-                              "bench"]),
+                              "bench", "batch", "jobs"]),
 }
 SUBPAGES = {"meshshade": False}  # the top-level page lists only top-level modules (subpackages have pages)
 

@@ -28,7 +28,7 @@ import threading
 import warnings
 
 from meshshade import __version__
-from meshshade.cli import bake, bench, check, compare, demo, mc, profile, render
+from meshshade.cli import bake, batch, bench, check, compare, demo, mc, profile, render
 from meshshade.errors import MeshshadeError
 from meshshade.io import discard_stdout, output_transaction
 
@@ -42,6 +42,7 @@ COMMANDS = {
     "compare": (compare.add_compare_args, compare.run_compare, compare.HELP),
     "demo": (demo.add_demo_args, demo.run_demo, demo.HELP),
     "bench": (bench.add_bench_args, bench.run_bench, bench.HELP),
+    "batch": (batch.add_batch_args, batch.run_batch, batch.HELP),
 }
 
 #: signals that stop a run like Ctrl-C does (temporary files removed, exit code 128 + number)

@@ -158,6 +158,15 @@ def add_transport_arg(p: argparse.ArgumentParser) -> None:
                         "hierarchical where its distance check passes on the mesh, else direct)")
 
 
+def add_cluster_args(p: argparse.ArgumentParser) -> None:
+    """``--scheduler ADDRESS`` / ``--workers N``: run on Dask distributed (:mod:`meshshade.batch.cluster`)."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on an existing Dask scheduler (tcp://host:8786, or a scheduler file)")
+    g.add_argument("--workers", type=integer(1), default=None, metavar="N",
+                   help="run on a local Dask cluster of N worker processes")
+
+
 # --- images (render, compare) ------------------------------------------------------------------------
 def add_image_args(p: argparse.ArgumentParser) -> None:
     """Mesh, material, lights, bake knobs and camera/image options of ``render`` and ``compare``."""

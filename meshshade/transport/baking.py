@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from meshshade import memo
 from meshshade.errors import MaterialError, MeshshadeError, ParameterError
 from meshshade.geometry.curvature import principal_curvatures
 from meshshade.geometry.mesh import Mesh
@@ -138,15 +139,19 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
                                    backend=backend, auto_options=auto_options, transport=transport)
     lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
     clock = Stopwatch()
-    curv = principal_curvatures(mesh.vertices, mesh.faces, radius_mm=curvature_radius_mm)
+    # inside memo.reuse() (a batch worker) the mesh's curvature and scene are kept for the next job on this mesh
+    curv = memo.cached("curvature", (id(mesh), curvature_radius_mm),
+                       lambda: principal_curvatures(mesh.vertices, mesh.faces, radius_mm=curvature_radius_mm),
+                       pins=(mesh,))
     clock.lap("curvature")
-    scene = make_scene(mesh.vertices, mesh.faces, backend=backend)  # face ids must index mesh.faces
+    scene = memo.cached("scene", (id(mesh), backend),  # face ids must index mesh.faces
+                        lambda: make_scene(mesh.vertices, mesh.faces, backend=backend), pins=(mesh,))
     samples = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, lights, scene=scene,
                             eta=material.eta)
     clock.lap("rays")
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
     direct_options = far_field_given or far_geodesic != "cluster"
-    core, why = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
+    core, why, built = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
                                    direct_options=direct_options,
                                    cutoff_tol=cutoff_tol, auto_options=auto_options, rtol=rtol, progress=progress)
     verified = None
@@ -168,7 +173,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
                                                         auto_options, progress)
         stats["transport"] = "direct" + (f" ({why})" if why else "")
     else:
-        if not isinstance(transport, SurfaceTransport):  # built by this bake: its stages count here
+        if built:  # built by this bake (not passed in or reused): its stages count here
             clock.charge(core.timings)
         clock.charge(hstats.pop("timings"))
         point = samples.vertex < 0
@@ -250,20 +255,35 @@ def merge_plans(vertex_plan, point_plan, point):
 
 
 def _surface_transport(transport, mesh, material, model, samples, curv, *, direct_options=False, **kw):
-    """``(SurfaceTransport or None, reason)``: the hierarchical transport of the vertex samples, or None for the
-    direct sum (asked for, no vertex samples, or ``transport="auto"`` on a mesh where it is not accurate)."""
+    """``(SurfaceTransport or None, reason, built)``: the hierarchical transport of the vertex samples, or None for
+    the direct sum (asked for, no vertex samples, or ``transport="auto"`` on a mesh where it is not accurate);
+    ``built``: whether this call built it (not passed in, nor reused from :mod:`meshshade.memo`)."""
     if isinstance(transport, SurfaceTransport):
         if (transport.mesh is not mesh or transport.material.describe() != material.describe()
                 or transport.model != model):
             raise ParameterError("the SurfaceTransport passed as transport was built for another mesh, material or "
                                  "model")
-        return transport, None
+        return transport, None, False
     if transport == "direct":
-        return None, None
+        return None, None, False
     if transport == "auto" and direct_options:
-        return None, "direct-sum options given"
+        return None, "direct-sum options given", False
     if not np.any(samples.vertex >= 0):
-        return None, "no vertex samples"
+        return None, "no vertex samples", False
+    # inside memo.reuse() (a batch worker) the transport (or the verdict that it does not apply) is kept for
+    # further lights on this mesh, material and model
+    key = (id(mesh), material.describe(), model, transport, id(curv), repr(sorted(kw.items(), key=str)))
+    built = []
+
+    def build():
+        built.append(True)
+        return _build_transport(transport, mesh, material, model, curv, **kw)
+
+    core, why = memo.cached("transport", key, build, pins=(mesh, curv))
+    return core, why, bool(built)
+
+
+def _build_transport(transport, mesh, material, model, curv, **kw):
     if transport == "hierarchical":
         try:
             return SurfaceTransport.build(mesh, material, model, curvature=curv, **kw), None
