@@ -9,7 +9,7 @@ and moves them. :func:`open_client` gives one:
   Kubernetes operator, ...). Its workers must be able to import meshshade and read the input paths.
 * otherwise a :class:`distributed.LocalCluster` of ``workers`` processes (default: one per core), one task
   thread each; each process's numba kernels get ``cores // workers`` threads (at least 1), so the machine is
-  not oversubscribed.
+  not oversubscribed, and glibc's default memory trimming (Dask's own setting made bakes 20-50 % slower).
 
 Inside a task, :func:`task_threads` sets the numba thread count for the worker it runs on (``MESHSHADE_TASK_THREADS``
 when set, as on the local cluster; otherwise the worker's cores divided by the tasks it runs at once).
@@ -65,6 +65,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *, qui
     check_cluster_options(scheduler, workers)
     import logging
 
+    import dask
     from distributed import Client, LocalCluster
 
     # a worker process that a test (or the OS) kills is reported by the nanny at length: keep it to warnings
@@ -82,8 +83,12 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *, qui
             cores = os.cpu_count() or 1
             n = workers or cores
             threads = max(1, cores // n)
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                   env={THREADS_ENV: str(threads), "OMP_NUM_THREADS": str(threads)})
+            # Dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which makes glibc return memory after every
+            # large free; a bake allocates and frees large arrays all the time and ran 20-50 % slower so
+            # (tools/bench_batch.py). Workers keep glibc's default here.
+            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                       env={THREADS_ENV: str(threads), "OMP_NUM_THREADS": str(threads)})
             client = Client(cluster)
         if not quiet and (line := dashboard_line(client)):
             print(line, file=sys.stderr)

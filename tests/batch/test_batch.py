@@ -352,3 +352,8 @@ def test_a_worker_killed_during_a_job_costs_only_that_job(scene, tmp_path, cli):
                           "--photons", "150000", "--seed", "3", "--out", tmp_path / "ref.ply", "--quiet"])
     assert rc == 0, err
     np.testing.assert_allclose(_radiance(out / "long-mc" / "mc.ply"), _radiance(tmp_path / "ref.ply"), rtol=1e-6)
+
+
+def test_the_example_job_file_is_valid():
+    jobs = read_jobs(Path(__file__).resolve().parents[2] / "examples" / "sweep.toml")
+    assert len(jobs) == 10 and all(Path(j.options["mesh"]).is_file() for j in jobs if "mesh" in j.options)
