@@ -207,13 +207,20 @@ def run_batch(jobs, out, *, client=None, scheduler: str | None = None, workers: 
     if not todo:
         write_manifest()
     else:
-        with contextlib.ExitStack() as stack:
-            if client is None:
-                client = stack.enter_context(open_client(scheduler, workers, quiet=quiet))
-            elif scheduler is not None or workers is not None:
-                raise MeshshadeError("give a client, or a scheduler / number of workers, not both")
-            result.dashboard = getattr(client, "dashboard_link", None)
-            _collect(client, todo, out, records, result, write_manifest, progress, quiet)
+        try:
+            with contextlib.ExitStack() as stack:
+                if client is None:
+                    client = stack.enter_context(open_client(scheduler, workers, quiet=quiet))
+                elif scheduler is not None or workers is not None:
+                    raise MeshshadeError("give a client, or a scheduler / number of workers, not both")
+                result.dashboard = getattr(client, "dashboard_link", None)
+                _collect(client, todo, out, records, result, write_manifest, progress, quiet)
+        except BaseException:
+            # interrupted (or the cluster failed): the jobs still running were cancelled and a local cluster's
+            # workers stopped; their unfinished .part folders go (finished jobs stay: a re-run skips them)
+            with detached():
+                remove_stale_parts(out, {j.name for j in todo})
+            raise
     result.records = [records[j.name] for j in jobs if j.name in records]
     result.seconds = time.perf_counter() - t0
     return result

@@ -357,3 +357,30 @@ def test_a_worker_killed_during_a_job_costs_only_that_job(scene, tmp_path, cli):
 def test_the_example_job_file_is_valid():
     jobs = read_jobs(Path(__file__).resolve().parents[2] / "examples" / "sweep.toml")
     assert len(jobs) == 10 and all(Path(j.options["mesh"]).is_file() for j in jobs if "mesh" in j.options)
+
+
+def test_ctrl_c_stops_the_batch_leaving_finished_jobs_whole_and_no_partial_folder(scene, tmp_path):
+    """SIGINT to ``meshshade batch`` while a long job runs: exit code 130, one line, the finished job's folder
+    and the manifest kept (a re-run skips it), no ``.part`` folder of the interrupted one."""
+    import subprocess
+    import sys
+
+    (tmp_path / "jobs.toml").write_text(
+        f'[[job]]\nname = "first"\ncommand = "profile"\nmaterial = "skin1"\n'
+        f'[[job]]\nname = "long"\ncommand = "mc"\nmaterial = "skin1"\nmesh = "{scene / "ball.ply"}"\n'
+        f'light = "directional:0,0,-1"\nphotons = 5e6\n')
+    out = tmp_path / "res"
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2]))
+    proc = subprocess.Popen([sys.executable, "-m", "meshshade.cli", "batch", tmp_path / "jobs.toml", "--out", out,
+                             "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not ((out / "first").is_dir() and any(
+            p.name.startswith(".long.part-") for p in out.iterdir())):
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    err = err.decode()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("meshshade: interrupted"), err
+    assert sorted(p.name for p in out.iterdir()) == ["first", MANIFEST]
+    assert _manifest(out)["first"]["status"] == "ok"
