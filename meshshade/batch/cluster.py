@@ -25,7 +25,7 @@ from meshshade.errors import MeshshadeError
 __all__ = ["open_client", "check_cluster_options", "task_threads", "dashboard_line"]
 
 #: seconds to wait for a remote scheduler before a one-line error
-CONNECT_TIMEOUT = 20
+CONNECT_TIMEOUT = 10
 #: environment variable: numba threads per task, set by :func:`open_client` for its local workers (numba reads
 #: NUMBA_NUM_THREADS once, at import, which in a spawned worker may come before the cluster's environment)
 THREADS_ENV = "MESHSHADE_TASK_THREADS"

@@ -99,8 +99,8 @@ def _pixel_hits(mesh, camera, width):
 
 
 class _Runner:
-    def __init__(self, seed, mc_photons, log):
-        self.seed, self.mc_photons, self.log = seed, mc_photons, log
+    def __init__(self, seed, mc_photons, log, client=None):
+        self.seed, self.mc_photons, self.log, self.client = seed, mc_photons, log, client
         self.meshes, self.refs, self.mc = {}, {}, {}
         self.ref_seconds = {}
 
@@ -118,7 +118,8 @@ class _Runner:
         light = sc.make_light(mesh)
         t = time.perf_counter()
         if sc.reference == "mc":
-            mc = self.simulate(mesh, light, self.mc_photons, self.seed)[0]
+            # the reference may be split across Dask workers (the same tallies); timed runs below stay here
+            mc = self.simulate(mesh, light, self.mc_photons, self.seed, client=self.client)[0]
             ref = mc_reference(mesh, light, mc, patch_mm=sc.patch_mm)
         elif sc.shape == "sphere":
             ref = exact_sphere_reference(mesh, light, R_mm=sc.size_mm, material=MATERIAL)
@@ -133,12 +134,12 @@ class _Runner:
         self.refs[key] = ref
         return ref
 
-    def simulate(self, mesh, light, photons, seed):
+    def simulate(self, mesh, light, photons, seed, client=None):
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = simulate(mesh, MATERIAL, [light], photons=int(photons), seed=int(seed), keep_beam_exits=False,
-                           beam_distances=False)
+                           beam_distances=False, client=client)
         return res, time.perf_counter() - t
 
     def run(self, r: Run) -> dict | None:
@@ -191,10 +192,14 @@ def machine_info() -> dict:
             "numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__}
 
 
-def run_bench(plan, *, seed: int = 0, mc_photons: int | None = None, quick: bool = False, progress=None
-              ) -> BenchResult:
+def run_bench(plan, *, seed: int = 0, mc_photons: int | None = None, quick: bool = False, progress=None,
+              client=None) -> BenchResult:
     """Execute ``plan`` (from :func:`~meshshade.bench.plan.bench_plan`); ``progress(str)`` receives one line
     per step (or None).
+
+    ``client``: a :class:`distributed.Client` on which the Monte Carlo *references* are split
+    (:mod:`meshshade.montecarlo.distributed`; the same tallies as in one process up to the order of the sums);
+    every timed run (bakes, and Monte Carlo as a model) stays in this process so its time means the same.
 
     ``mc_photons``: photons of each MC reference (default: the mode's, 1M quick / 4M full).
     Returns a :class:`BenchResult`: ``rows`` (dicts with :data:`COLUMNS`) and ``metadata`` (machine, load
@@ -214,7 +219,7 @@ def run_bench(plan, *, seed: int = 0, mc_photons: int | None = None, quick: bool
 
     warm = _warm_up(models, log_fail)
     log(f"warm-up {warm:.1f} s (numba compilation excluded from every timing)")
-    runner = _Runner(seed, cfg.mc_photons if mc_photons is None else mc_photons, log_fail)
+    runner = _Runner(seed, cfg.mc_photons if mc_photons is None else mc_photons, log_fail, client=client)
     rows = []
     for i, r in enumerate(plan):
         try:
@@ -238,5 +243,6 @@ def run_bench(plan, *, seed: int = 0, mc_photons: int | None = None, quick: bool
                       "mc_max_rel_stderr": MC_MAX_REL_STDERR, "reference_rtol": REFERENCE_RTOL},
             "scenes": {r.scene.name: asdict(r.scene) for r in plan},
             "reference_seconds": runner.ref_seconds, "failures": failures, "runs_planned": len(plan),
+            "mc_reference_workers": (len(client.scheduler_info().get("workers", {})) if client is not None else 0),
             "rows": len(rows)}
     return BenchResult(rows, meta)

@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
+from meshshade.batch.cluster import check_cluster_options, open_client
 from meshshade.bench.plan import bench_plan
 from meshshade.bench.report import write_bench
 from meshshade.bench.runner import run_bench as run_benchmark
-from meshshade.cli.options import integer, parse_names
+from meshshade.cli.options import add_cluster_args, integer, parse_names
 from meshshade.io import output_dir
 from meshshade.errors import MeshshadeError
 
@@ -24,6 +26,7 @@ def add_bench_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--models", metavar="LIST", help="comma list of models (default: every model of the bake)")
     p.add_argument("--mc-photons", type=integer(16), default=None, metavar="N",
                    help="photons of each Monte Carlo reference (default 1000000 quick, 4000000 full)")
+    add_cluster_args(p)   # the references are split on Dask; every timed run stays in this process
 
 
 def _progress(line: str) -> None:
@@ -35,10 +38,14 @@ def run_bench(args) -> int:
         raise MeshshadeError("--mc-photons must be at least 16")
     if args.seed < 0:
         raise MeshshadeError(f"--seed must be >= 0, got {args.seed}")
+    check_cluster_options(args.scheduler, args.workers)
     plan = bench_plan(quick=args.quick, scenes=parse_names(args.scenes), models=parse_names(args.models))
     out = output_dir(args.out)
-    result = run_benchmark(plan, seed=args.seed, mc_photons=args.mc_photons, quick=args.quick,
-                           progress=None if args.quiet else _progress)
+    with contextlib.ExitStack() as stack:
+        client = (stack.enter_context(open_client(args.scheduler, args.workers, quiet=args.quiet))
+                  if args.scheduler is not None or args.workers is not None else None)
+        result = run_benchmark(plan, seed=args.seed, mc_photons=args.mc_photons, quick=args.quick,
+                               progress=None if args.quiet else _progress, client=client)
     paths = write_bench(result, out)
     if not args.quiet:
         print(f"{len(result.rows)} measurements in {result.metadata['wall_time_s']:.0f} s; wrote "

@@ -1,11 +1,15 @@
 """``meshshade mc``: Monte Carlo reference random walk inside a mesh (thin layer over
-:func:`meshshade.montecarlo.simulation.simulate` and :func:`meshshade.output.mc_file.write_mc`)."""
+:func:`meshshade.montecarlo.simulation.simulate` and :func:`meshshade.output.mc_file.write_mc`); with
+``--workers N`` or ``--scheduler ADDRESS`` the photons are split across Dask workers (the same result)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 
-from meshshade.cli.options import (add_light_arg, add_material_args, add_mesh_args, integer, lights_from_args,
-                                   mesh_and_material, number)
+from meshshade.batch.cluster import check_cluster_options, open_client
+from meshshade.cli.options import (add_cluster_args, add_light_arg, add_material_args, add_mesh_args, integer,
+                                   lights_from_args, mesh_and_material, number)
+from meshshade.errors import MeshshadeError
 from meshshade.io import check_output_path
 from meshshade.montecarlo import describe_mc, simulate
 from meshshade.montecarlo.simulation import check_mc_options
@@ -31,6 +35,7 @@ def add_mc_args(p: argparse.ArgumentParser) -> None:
                    help="PLY with radiance_r/g/b (W/mm^2), stderr_r/g/b and tone-mapped red/green/blue")
     p.add_argument("--npz", metavar="OUT.npz", help="also save face/vertex powers, stderrs, beam distance")
     p.add_argument("--summary", metavar="OUT.json", help="totals with standard errors, photons, events, seconds")
+    add_cluster_args(p)
 
 
 def run_mc(args) -> int:
@@ -40,10 +45,17 @@ def run_mc(args) -> int:
         check_output_path(o, [args.mesh, *(x for x, _, _ in outs[:i])], suffixes=(suffix,), option=option)
     photons = args.photons if args.photons is not None else (None if args.time_budget else 100_000)
     check_mc_options(photons, seed=args.seed, time_budget=args.time_budget, pool=args.pool)
+    split = args.scheduler is not None or args.workers is not None
+    check_cluster_options(args.scheduler, args.workers)
+    if split and args.time_budget is not None:
+        raise MeshshadeError("--time-budget cannot be split across Dask workers (the split needs a photon count); "
+                             "give --photons without --time-budget")
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
-    result = simulate(mesh, material, lights, photons=photons, seed=args.seed,
-                      time_budget=args.time_budget, pool=args.pool, progress=not args.quiet)
+    with contextlib.ExitStack() as stack:
+        client = stack.enter_context(open_client(args.scheduler, args.workers, quiet=args.quiet)) if split else None
+        result = simulate(mesh, material, lights, photons=photons, seed=args.seed, time_budget=args.time_budget,
+                          pool=args.pool, progress=not args.quiet, client=client)
     write_mc(result, mesh, args.out, npz=args.npz, summary=args.summary)
     if not args.quiet:
         print(describe_mc(result))

@@ -127,13 +127,20 @@ class PoolWalk:
         return [np.ascontiguousarray(pos), np.ascontiguousarray(dirs), w_in, spec, inc, light.astype(np.int64),
                 start + np.arange(k, dtype=np.int64)]
 
-    def run(self, n_photons, *, pool=None, time_budget=None, progress=None):
-        """Walk ``n_photons`` photons (fewer if ``time_budget`` seconds run out); returns the number emitted."""
+    def run(self, n_photons, *, pool=None, time_budget=None, progress=None, chunks=None):
+        """Walk ``n_photons`` photons (fewer if ``time_budget`` seconds run out); returns the number emitted.
+
+        ``chunks=(c0, c1)``: walk only the photons of entry chunks c0 <= c < c1 (photons ``c0 * ENTRY_CHUNK`` up to
+        ``min(c1 * ENTRY_CHUNK, n_photons)``) of the run of ``n_photons``: the same paths and weights as in the
+        whole run, so the tallies of a partition of the chunks add up to the whole run's (a run split across
+        workers, :mod:`meshshade.montecarlo.distributed`).
+        """
         t0 = time.perf_counter()
-        P = int(min(pool or DEFAULT_POOL, n_photons))
+        c0, n_chunks = (0, -(-n_photons // ENTRY_CHUNK)) if chunks is None else (int(chunks[0]), int(chunks[1]))
+        in_range = max(0, min(n_chunks * ENTRY_CHUNK, n_photons) - c0 * ENTRY_CHUNK)
+        P = int(max(1, min(pool or DEFAULT_POOL, in_range)))
         st = _PoolState(P)
-        queue, e, chunk = None, 0, 0   # the current chunk of pre-sampled entries and its next entry
-        n_chunks = -(-n_photons // ENTRY_CHUNK)
+        queue, e, chunk = None, 0, c0   # the current chunk of pre-sampled entries and its next entry
         emitted = 0
         stop = False
         max_live = P if time_budget is None else min(P, BUDGET_START_LIVE)

@@ -22,6 +22,10 @@ Channels: one walk per distinct (sigma_s', sigma_a) pair; channels with equal co
 share one walk and are copied. (Per-channel weights on one path are only valid when sigma_t is equal across
 channels; separate walks are simpler and always correct.)
 
+Where: in this process, or split across the workers of a Dask client (``client=``,
+:mod:`meshshade.montecarlo.distributed`; the same result for any number of workers). The set-up and the walk of one
+channel group over a range of photons are :mod:`meshshade.montecarlo.walks`, shared by both.
+
 Engines: the default pooled engine (:mod:`meshshade.montecarlo.engine`) walks a regenerating pool of photons
 with numba kernels, certifies short free flights with a safe-distance grid and asks Embree only for the others;
 ``fast_interior=False`` selects the baseline numpy wavefront (:mod:`meshshade.montecarlo.wavefront_oracle`, one Embree
@@ -47,17 +51,14 @@ import numpy as np
 
 from meshshade.errors import MaterialError, MeshshadeError
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
-from meshshade.geometry.mesh import MeshDefectWarning
 from meshshade.light import BeamLight
 from meshshade.light.samples import check_exitance
 from meshshade.materials import Material
+from meshshade.montecarlo.distributed import walk_on_client
 from meshshade.montecarlo.emitter import Emitter
-from meshshade.montecarlo.engine import PoolWalk
-from meshshade.montecarlo.interior import SafeDistanceGrid, open_surface_warning
-from meshshade.montecarlo.wavefront_oracle import WavefrontWalk
+from meshshade.montecarlo.walks import channel_groups, prepare_walks, walk_group
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
-from meshshade.raycast.embree_direct import DirectEmbreeScene
 
 __all__ = ["DEFAULT_BATCHES", "TOTAL_KEYS", "MCResult", "batch_stats", "check_mc_options", "simulate"]
 
@@ -199,7 +200,7 @@ def check_mc_options(photons=100_000, *, seed=0, time_budget=None, n_batches=DEF
 def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000, seed: int = 0,
              time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int | None = None,
              keep_beam_exits: bool = True, beam_distances: bool = True, fast_interior: bool = True,
-             engine: str = "auto", progress: bool | str = False) -> MCResult:
+             engine: str = "auto", progress: bool | str = False, client=None) -> MCResult:
     """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
 
     Parameters
@@ -226,6 +227,11 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         Embree library can be bound, else batched). Both give the same photon paths up to float32 ties.
     progress : False, True or the task named in the progress lines (default "mc"): photons emitted, as a bar on
         a terminal and as periodic lines otherwise (:class:`meshshade.progress.Progress`)
+    client : a :class:`distributed.Client`: split the photons across its workers in tasks of whole entry chunks
+        (:mod:`meshshade.montecarlo.distributed`). The split depends only on the photon count and the partial
+        tallies are added in a fixed order, so the result is bitwise the same for any number of workers, and
+        the same as without a client up to the order of the sums (~1e-15). Needs a photon count (no
+        ``time_budget``) and the pooled engine. ``seconds`` is then the wall time of the split run.
 
     Returns
     -------
@@ -234,6 +240,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     Raises
     ------
     MeshshadeError
+        A time budget or ``fast_interior=False`` with a client.
         An argument outside its domain (:func:`check_mc_options`), checked before any work, including a photon
         count that cannot finish (more than ``MAX_PHOTONS``, or, without a time budget, a run estimated at more
         than ``MAX_RUN_SECONDS``).
@@ -242,38 +249,47 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     """
     if not isinstance(material, Material):
         raise MaterialError(f"Monte Carlo needs a Material, got {type(material).__name__}")
+    groups = channel_groups(material)
     photons, seed, time_budget, n_batches, pool = check_mc_options(
         photons, seed=seed, time_budget=time_budget, n_batches=n_batches, pool=pool, engine=engine,
-        groups=len({(a, b) for a, b in zip(material.sigma_s_prime.tolist(), material.sigma_a.tolist())}))
+        groups=len(groups))
+    if client is not None:
+        if time_budget is not None:
+            raise MeshshadeError("a time budget cannot be split across Dask workers (the split needs a photon "
+                                 "count); give photons without time_budget")
+        if not fast_interior:
+            raise MeshshadeError("fast_interior=False (the baseline wavefront) runs in one process only; drop the "
+                                 "client or use the pooled engine")
     t_start = time.perf_counter()
     n_photons = int(photons) if photons is not None else 1 << 62
+    # photons emitted: a bar on a terminal, periodic lines otherwise (meshshade.progress)
+    bar = Progress(progress if isinstance(progress, str) else "mc",
+                   None if photons is None else n_photons * len(groups), "photons", enabled=bool(progress))
+    try:
+        if client is not None:
+            # the lights are checked here, before any task (a beam that misses is one line, as in one process)
+            emitter = Emitter(mesh.vertices, mesh.faces, mesh.face_normals, mesh.face_areas, lights,
+                              make_scene(mesh.vertices, mesh.faces), material.eta)
+            t0, c0 = time.perf_counter(), time.process_time()
+            tallies = walk_on_client(client, mesh, material, lights, n_photons, seed=seed, n_batches=n_batches,
+                                     pool=pool, keep_beam=keep_beam_exits, engine=engine, progress=bar)
+        else:
+            setup = prepare_walks(mesh, material, lights, engine=engine, fast_interior=fast_interior,
+                                  half_space_certificates=time_budget is None)
+            emitter = setup.emitter
+            children = np.random.SeedSequence(seed).spawn(len(groups))
+            t0, c0 = time.perf_counter(), time.process_time()
+            tallies = []
+            for gi in range(len(groups)):
+                budget = None
+                if time_budget is not None:  # what is left, shared by the remaining groups
+                    budget = max(time_budget - (time.perf_counter() - t_start), 0.0) / (len(groups) - gi)
+                tallies.append(walk_group(setup, gi, n_photons, seed=seed, n_batches=n_batches, pool=pool,
+                                          keep_beam=keep_beam_exits, time_budget=budget, progress=bar,
+                                          rng=np.random.default_rng(children[gi])))
+    finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
+        bar.close()
     V, F = mesh.vertices, mesh.faces
-    normals, areas = mesh.face_normals, mesh.face_areas
-    scene = make_scene(V, F)
-    grid = direct = None
-    if engine not in ("auto", "direct", "batched"):
-        raise MeshshadeError(f"engine must be 'auto', 'direct' or 'batched', got {engine!r}")
-    if not fast_interior and (msg := open_surface_warning(F)):  # the fast engine says it when building its grid
-        warnings.warn(msg, MeshDefectWarning, stacklevel=2)
-    if fast_interior:
-        sigma_t_max = float(np.max(material.sigma_s_prime / (1.0 - material.g) + material.sigma_a))
-        # no half-space certificates under a time budget: their set-up would be spent before the first photon
-        use_planes = sigma_t_max > 0 and time_budget is None
-        grid = SafeDistanceGrid(V, F, mean_free_path=1.0 / sigma_t_max if use_planes else None)
-        if engine != "batched" and getattr(scene, "backend", "") == "embree":
-            try:
-                direct = DirectEmbreeScene(V, F, scene.center)
-            except (RuntimeError, OSError) as exc:
-                if engine == "direct":
-                    raise MeshshadeError(f"engine='direct' is not available here ({exc}); use 'batched'") from exc
-    emitter = Emitter(V, F, normals, areas, lights, scene, material.eta)
-    g = material.g
-    sigma_s = material.sigma_s_prime / (1.0 - g)
-    groups: dict = {}
-    for c in range(3):
-        groups.setdefault((float(sigma_s[c]), float(material.sigma_a[c])), []).append(c)
-    children = np.random.SeedSequence(seed).spawn(len(groups))
-    t0, c0 = time.perf_counter(), time.process_time()
     face_p = np.zeros((F.shape[0], 3)); face_se = np.zeros_like(face_p)
     vert_p = np.zeros((V.shape[0], 3)); vert_se = np.zeros_like(vert_p)
     tot = np.zeros((7, 3)); tot_se = np.zeros((7, 3))
@@ -281,50 +297,32 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     events = boundary = rays = 0
     emitted_max = 0
     exits = [None] * 3
-    # photons emitted: a bar on a terminal, periodic lines otherwise (meshshade.progress)
-    bar = Progress(progress if isinstance(progress, str) else "mc",
-                   None if photons is None else n_photons * len(groups), "photons", enabled=bool(progress))
-    try:
-        for gi, (((ss, sa), chans), child) in enumerate(zip(groups.items(), children)):
-            common = dict(sigma_s=ss, sigma_a=sa, g=g, eta=material.eta, n_batches=n_batches,
-                          keep_beam=keep_beam_exits)
-            budget = None
-            if time_budget is not None:  # what is left, shared by the remaining groups
-                budget = max(time_budget - (time.perf_counter() - t_start), 0.0) / (len(groups) - gi)
-            if fast_interior:
-                walk = PoolWalk(V, F, normals, emitter, scene, grid, seed=seed, group=gi, direct=direct, **common)
-                emitted = walk.run(n_photons, pool=pool, time_budget=budget, progress=bar)
-                rays += walk.rays
-            else:
-                walk = WavefrontWalk(V, F, normals, emitter, scene, **common)
-                emitted = walk.run(n_photons, np.random.default_rng(child), pool=pool or 1 << 16,
-                                   time_budget=budget, progress=bar)
-                rays += walk.rays
-            emitted_max = max(emitted_max, emitted)
-            scale = n_photons / emitted if emitted else 1.0
-            # photon weights were P/n_photons: rescale when the time budget stopped emission early
-            fp, fse = batch_stats(walk.face * scale)
-            vp, vse = batch_stats(walk.face_vert * scale)
-            tt, tse = batch_stats(walk.tot * scale)
-            inc = walk.tot[:, 5]
-            ratios = walk.tot[:, :5] / np.where(inc > 0, inc, np.nan)[:, None]          # (B, 5) per batch
-            fr = tt[:5] / tt[5] if tt[5] > 0 else np.zeros(5)
-            with warnings.catch_warnings():   # a budget run with fewer photons than batches: NaN, not a warning
-                warnings.simplefilter("ignore", RuntimeWarning)
-                fse_tot = np.nanstd(ratios, axis=0, ddof=1) / np.sqrt(n_batches)
-            group_exits = None
-            if keep_beam_exits and walk.exits["face"]:
-                group_exits = {k: np.concatenate(v) for k, v in walk.exits.items()}
-                group_exits["weight"] = group_exits["weight"] * scale
-            for c in chans:
-                face_p[:, c], face_se[:, c], vert_p[:, c], vert_se[:, c] = fp, fse, vp, vse
-                tot[:, c], tot_se[:, c], frac[:, c], frac_se[:, c] = tt, tse, fr, fse_tot
-                if keep_beam_exits and walk.exits["face"]:
-                    exits[c] = group_exits   # channels of one group share the (read-only) arrays
-            events += walk.events
-            boundary += walk.boundary
-    finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
-        bar.close()
+    for ((_ss, _sa), chans), walk in zip(groups, tallies):
+        emitted = walk.emitted
+        rays += walk.rays
+        emitted_max = max(emitted_max, emitted)
+        scale = n_photons / emitted if emitted else 1.0
+        # photon weights were P/n_photons: rescale when the time budget stopped emission early
+        fp, fse = batch_stats(walk.face * scale)
+        vp, vse = batch_stats(walk.face_vert * scale)
+        tt, tse = batch_stats(walk.tot * scale)
+        inc = walk.tot[:, 5]
+        ratios = walk.tot[:, :5] / np.where(inc > 0, inc, np.nan)[:, None]          # (B, 5) per batch
+        fr = tt[:5] / tt[5] if tt[5] > 0 else np.zeros(5)
+        with warnings.catch_warnings():   # a budget run with fewer photons than batches: NaN, not a warning
+            warnings.simplefilter("ignore", RuntimeWarning)
+            fse_tot = np.nanstd(ratios, axis=0, ddof=1) / np.sqrt(n_batches)
+        group_exits = None
+        if keep_beam_exits and walk.exits["face"]:
+            group_exits = {k: np.concatenate(v) for k, v in walk.exits.items()}
+            group_exits["weight"] = group_exits["weight"] * scale
+        for c in chans:
+            face_p[:, c], face_se[:, c], vert_p[:, c], vert_se[:, c] = fp, fse, vp, vse
+            tot[:, c], tot_se[:, c], frac[:, c], frac_se[:, c] = tt, tse, fr, fse_tot
+            if group_exits is not None:
+                exits[c] = group_exits   # channels of one group share the (read-only) arrays
+        events += walk.events
+        boundary += walk.boundary
     seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
     va = mesh.vertex_areas
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -1,0 +1,125 @@
+"""The walks of one Monte Carlo run: what they need (:class:`WalkSetup`), one channel group's walk over a range of
+entry chunks (:func:`walk_group`) and its per-batch tallies (:class:`GroupTally`, which add up).
+
+:func:`meshshade.montecarlo.simulation.simulate` walks every group over all its photons in this process;
+:mod:`meshshade.montecarlo.distributed` walks ranges of entry chunks on Dask workers and adds the tallies. Photon
+``i`` of group ``k`` draws every random number from a stream keyed by (seed, k, i) and its entry from entry chunk
+``i // ENTRY_CHUNK`` (:mod:`meshshade.montecarlo.engine`), so a range walked anywhere gives the photons the whole run
+would give them.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from meshshade.errors import MeshshadeError
+from meshshade.geometry.mesh import MeshDefectWarning
+from meshshade.materials import Material
+from meshshade.montecarlo.emitter import Emitter
+from meshshade.montecarlo.engine import PoolWalk
+from meshshade.montecarlo.interior import SafeDistanceGrid, open_surface_warning
+from meshshade.montecarlo.wavefront_oracle import WavefrontWalk
+from meshshade.raycast import make_scene
+from meshshade.raycast.embree_direct import DirectEmbreeScene
+
+__all__ = ["WalkSetup", "GroupTally", "channel_groups", "prepare_walks", "walk_group"]
+
+
+def channel_groups(material: Material) -> list[tuple[tuple[float, float], list[int]]]:
+    """``[((sigma_s, sigma_a), [channels]), ...]``: one walk per distinct pair, in channel order."""
+    sigma_s = material.sigma_s_prime / (1.0 - material.g)
+    groups: dict = {}
+    for c in range(3):
+        groups.setdefault((float(sigma_s[c]), float(material.sigma_a[c])), []).append(c)
+    return list(groups.items())
+
+
+@dataclass
+class WalkSetup:
+    """Everything the walks of one (mesh, lights, material) need besides the photons: the mesh arrays, the Embree
+    scene, the safe-distance grid (pooled engine), the direct Embree binding (or None) and the emitter."""
+
+    V: np.ndarray
+    F: np.ndarray
+    normals: np.ndarray
+    scene: object
+    grid: object
+    direct: object
+    emitter: Emitter
+    material: Material
+    groups: list
+    fast_interior: bool
+
+
+def prepare_walks(mesh, material: Material, lights, *, engine: str = "auto", fast_interior: bool = True,
+                  half_space_certificates: bool = True, stacklevel: int = 3) -> WalkSetup:
+    """Build the scene, grid and emitter of a run (the set-up :func:`simulate` does before its first photon).
+
+    half_space_certificates : also certify free paths inside local half-spaces (a set-up cost that pays back
+        except under a short time budget).
+    """
+    if engine not in ("auto", "direct", "batched"):
+        raise MeshshadeError(f"engine must be 'auto', 'direct' or 'batched', got {engine!r}")
+    V, F = mesh.vertices, mesh.faces
+    normals, areas = mesh.face_normals, mesh.face_areas
+    scene = make_scene(V, F)
+    grid = direct = None
+    if not fast_interior and (msg := open_surface_warning(F)):  # the fast engine says it when building its grid
+        warnings.warn(msg, MeshDefectWarning, stacklevel=stacklevel)
+    if fast_interior:
+        sigma_t_max = float(np.max(material.sigma_s_prime / (1.0 - material.g) + material.sigma_a))
+        use_planes = sigma_t_max > 0 and half_space_certificates
+        grid = SafeDistanceGrid(V, F, mean_free_path=1.0 / sigma_t_max if use_planes else None)
+        if engine != "batched" and getattr(scene, "backend", "") == "embree":
+            try:
+                direct = DirectEmbreeScene(V, F, scene.center)
+            except (RuntimeError, OSError) as exc:
+                if engine == "direct":
+                    raise MeshshadeError(f"engine='direct' is not available here ({exc}); use 'batched'") from exc
+    emitter = Emitter(V, F, normals, areas, lights, scene, material.eta)
+    return WalkSetup(V, F, normals, scene, grid, direct, emitter, material, channel_groups(material), fast_interior)
+
+
+@dataclass
+class GroupTally:
+    """Per-batch tallies of one channel group's walk (W): ``face`` (B, m), ``face_vert`` (B, n), ``tot`` (B, 7)
+    (specular, diffuse, transmitted, absorbed, lost, incident, entering), counts, and the exits of the first beam's
+    photons (lists of arrays ``face``, ``bary``, ``weight``, ``batch``). ``a + b`` is the tally of both walks."""
+
+    face: np.ndarray
+    face_vert: np.ndarray
+    tot: np.ndarray
+    emitted: int = 0
+    events: int = 0
+    boundary: int = 0
+    rays: int = 0
+    exits: dict = field(default_factory=lambda: {"face": [], "bary": [], "weight": [], "batch": []})
+
+    def __add__(self, other: "GroupTally") -> "GroupTally":
+        return GroupTally(self.face + other.face, self.face_vert + other.face_vert, self.tot + other.tot,
+                          self.emitted + other.emitted, self.events + other.events, self.boundary + other.boundary,
+                          self.rays + other.rays, {k: self.exits[k] + other.exits[k] for k in self.exits})
+
+
+def walk_group(setup: WalkSetup, gi: int, n_photons: int, *, seed: int, n_batches: int, pool: int | None,
+               keep_beam: bool, time_budget: float | None = None, progress=None, chunks=None,
+               rng=None) -> GroupTally:
+    """Walk channel group ``gi`` of ``setup`` (photons of entry chunks ``chunks=(c0, c1)``, default all, of a run
+    of ``n_photons``); weights are those of the whole run (P / n_photons). ``rng``: the baseline wavefront's
+    generator (``fast_interior=False``, which walks whole runs only)."""
+    (ss, sa), _chans = setup.groups[gi]
+    m = setup.material
+    common = dict(sigma_s=ss, sigma_a=sa, g=m.g, eta=m.eta, n_batches=n_batches, keep_beam=keep_beam)
+    if setup.fast_interior:
+        walk = PoolWalk(setup.V, setup.F, setup.normals, setup.emitter, setup.scene, setup.grid, seed=seed, group=gi,
+                        direct=setup.direct, **common)
+        emitted = walk.run(n_photons, pool=pool, time_budget=time_budget, progress=progress, chunks=chunks)
+    else:
+        if chunks is not None:
+            raise MeshshadeError("the baseline wavefront (fast_interior=False) walks whole runs only")
+        walk = WavefrontWalk(setup.V, setup.F, setup.normals, setup.emitter, setup.scene, **common)
+        emitted = walk.run(n_photons, rng, pool=pool or 1 << 16, time_budget=time_budget, progress=progress)
+    return GroupTally(walk.face, walk.face_vert, walk.tot, int(emitted), int(walk.events), int(walk.boundary),
+                      int(walk.rays), {k: list(v) for k, v in walk.exits.items()})
