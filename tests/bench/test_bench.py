@@ -165,3 +165,26 @@ def test_cli_bench_quick_full_run(tmp_path, capsys):
     assert all(math.isfinite(float(r["error_mean"])) for r in rows)
     assert (out / FILES["plot"]).stat().st_size > 0 and (out / FILES["metadata"]).exists()
 
+
+
+def test_mc_references_split_on_dask_give_the_same_errors(dask_client):
+    """bench --workers/--scheduler: the Monte Carlo reference is split across workers (the same tallies up to the
+    order of the sums), so every error row matches the single-process bench; timed runs stay in-process."""
+    tiny = bench.BenchConfig(scenes=(TINY_TORUS,), levels={}, rtol=(1e-4,), rtol_scenes=(), photons=(4000,),
+                             photon_scenes=("tiny_torus_beam",), mc_photons=40_000)
+    plan = bench.bench_plan(config=tiny, models=("dipole",))
+    here = bench.run_bench(plan, seed=3, mc_photons=tiny.mc_photons)
+    split = bench.run_bench(plan, seed=3, mc_photons=tiny.mc_photons, client=dask_client)
+    assert split.metadata["mc_reference_workers"] == 2 and here.metadata["mc_reference_workers"] == 0
+    assert [(r["model"], r["knob"], r["value"]) for r in here.rows] == \
+        [(r["model"], r["knob"], r["value"]) for r in split.rows]
+    for a, b in zip(here.rows, split.rows):
+        for k in ("error_max", "error_mean", "error_energy"):
+            assert b[k] == pytest.approx(a[k], rel=1e-9, abs=1e-15), (a["model"], a["knob"], k)
+
+
+def test_cli_bench_cluster_options_are_checked(tmp_path, capsys):
+    assert main(["bench", "--out", str(tmp_path / "o"), "--workers", "0"]) == 2
+    assert main(["bench", "--out", str(tmp_path / "o"), "--workers", "2", "--scheduler", "tcp://x:1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(e.startswith("meshshade: error:") for e in err) and not (tmp_path / "o").exists()
