@@ -72,7 +72,7 @@ __all__ = ["SUPPORTED_MESH_FORMATS", "load_mesh", "read_mesh_arrays", "read_bake
            "check_output_path", "output_dir", "discard_stdout",
            "write_ply", "write_mesh_ply", "write_npz", "write_text", "write_json", "write_figure", "PLY_RESERVED_NAMES",
            "write_exr", "write_png", "read_exr", "read_toml", "read_json", "read_json_lines", "write_json_lines",
-           "file_sha256", "folder_files", "job_folder", "remove_stale_parts", "detached"]
+           "file_sha256", "folder_files", "job_folder", "remove_stale_parts", "detached", "write_bytes", "write_usd"]
 
 #: file extension -> format name
 SUPPORTED_MESH_FORMATS = {".obj": "obj", ".ply": "ply", ".off": "off", ".stl": "stl", ".glb": "glb",
@@ -1222,6 +1222,24 @@ def write_npz(path, **arrays) -> Path:
     with atomic_write(path) as tmp:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
+    return path
+
+
+def write_bytes(path, data: bytes) -> Path:
+    """Write ``data`` (a GLB, say) atomically."""
+    path = Path(path)
+    with atomic_write(path) as tmp:
+        tmp.write_bytes(data)
+    return path
+
+
+def write_usd(path, stage) -> Path:
+    """Write a ``Usd.Stage`` (:mod:`meshshade.output.usd`) atomically: ``.usda`` as text, ``.usd`` and ``.usdc`` as
+    binary crate files (the temporary file keeps the extension, from which USD picks the format)."""
+    path = Path(path)
+    with atomic_write(path) as tmp:
+        if not stage.GetRootLayer().Export(str(tmp)):
+            raise OutputError(f"could not write {path}: USD refused to export the stage")
     return path
 
 

@@ -1,27 +1,83 @@
-"""The bake's files: a PLY with the radiance and tone-mapped vertex colours, and optionally an NPZ of its arrays.
+"""The bake's files: the baked mesh (PLY, glTF/GLB or USD) with the radiance and tone-mapped vertex colours, and
+optionally an NPZ of its arrays.
 
-Builds the content from a :class:`~meshshade.transport.baking.BakeResult`; :mod:`meshshade.io` writes it.
+Builds the content from a :class:`~meshshade.transport.baking.BakeResult`; :mod:`meshshade.io` writes it. The
+format follows the extension of ``out`` (:data:`BAKE_FORMATS`):
+
+* ``.ply``: ``radiance_r/g/b`` (float W/mm^2) and ``red/green/blue`` (uchar, sRGB), positions in source units
+  (MeshLab, Blender);
+* ``.glb`` / ``.gltf``: :mod:`meshshade.output.gltf` (``COLOR_0`` linear display colour, ``_RADIANCE``; metres;
+  three.js, game engines, Blender's importer);
+* ``.usd`` / ``.usdc`` / ``.usda``: :mod:`meshshade.output.usd` (``primvars:displayColor``,
+  ``primvars:meshshade:radiance``; source units with ``metersPerUnit``; film pipelines).
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 from meshshade import io
-from meshshade.output.tonemap import tonemap
+from meshshade.io import write_bytes, write_text
+from meshshade.errors import OutputError
+from meshshade.light.sources import describe_light
+from meshshade.output.gltf import glb_bytes, gltf_document, gltf_text
+from meshshade.output.tonemap import to_uint8, tonemap_linear
+from meshshade.output.usd import pxr_modules, usd_stage
 from meshshade.transport.baking import BakeResult
 
+#: extension -> format of :func:`write_bake`
+BAKE_FORMATS = {".ply": "ply", ".glb": "glb", ".gltf": "gltf", ".usd": "usd", ".usdc": "usd", ".usda": "usd"}
 
-def write_bake(result: BakeResult, mesh, out, *, npz=None) -> None:
-    """Write the PLY ``out`` (radiance_r/g/b float W/mm^2 + uchar red/green/blue, Drago tone-mapped) and, when
-    ``npz`` is given, an NPZ with radiance (n, 3) W/mm^2, k1, k2 (n,) 1/mm, d1, d2 (n, 3), vertex_areas (n,) mm^2,
-    cutoff_mm (3,), entry_positions (k, 3) mm, entry_power (k,) W, beam_distance (n,) mm (with a beam) and the
-    auto plan's auto_kernel (k,) / auto_exact_geodesic (k,) (``model="auto"``)."""
+
+def bake_format(out) -> str:
+    """The format :func:`write_bake` writes to ``out`` (from its extension); OutputError naming the choices."""
+    suffix = Path(out).suffix.lower()
+    if suffix not in BAKE_FORMATS:
+        raise OutputError(f"--out {out}: a bake is written as {', '.join(BAKE_FORMATS)} (from the extension)")
+    return BAKE_FORMATS[suffix]
+
+
+def check_bake_output(out) -> str:
+    """Before a bake: the format of ``out``, and for USD that usd-core can be imported (one-line OutputError)."""
+    fmt = bake_format(out)
+    if fmt == "usd":
+        pxr_modules()
+    return fmt
+
+
+def write_bake(result: BakeResult, mesh, out, *, npz=None, lights=None) -> None:
+    """Write the baked mesh ``out`` in the format of its extension (module docstring; the PLY holds
+    radiance_r/g/b float W/mm^2 + uchar red/green/blue, Drago tone-mapped) and, when ``npz`` is given, an NPZ
+    with radiance (n, 3) W/mm^2, k1, k2 (n,) 1/mm, d1, d2 (n, 3), vertex_areas (n,) mm^2, cutoff_mm (3,),
+    entry_positions (k, 3) mm, entry_power (k,) W, beam_distance (n,) mm (with a beam) and the auto plan's
+    auto_kernel (k,) / auto_exact_geodesic (k,) (``model="auto"``). ``lights`` (optional) are recorded in the
+    glTF and USD metadata."""
     M = result.radiance
-    props = {"radiance_r": M[:, 0], "radiance_g": M[:, 1], "radiance_b": M[:, 2]}
-    colours = tonemap(M, operator="drago")
-    comments = [f"meshshade model {result.model}", f"meshshade material {result.material.describe()}",
-                "meshshade radiance_r/g/b: linear radiant exitance in W/mm^2 per unit light power/irradiance"]
+    fmt = bake_format(out)
+    display = tonemap_linear(M, operator="drago")
+    meta = {"model": result.model, "material": result.material.describe(),
+            "units": f"positions: {'m' if fmt in ('glb', 'gltf') else f'{mesh.mm_per_unit!r} mm per unit'}"}
+    if lights:
+        meta["lights"] = "; ".join(describe_light(lt, i) for i, lt in enumerate(lights))
     if result.plan is not None:
-        comments.append(f"meshshade {result.plan.describe()}")
-    io.write_mesh_ply(out, mesh, props, colours, comments=comments)
+        meta["auto_plan"] = result.plan.describe()
+    if mesh.source and Path(mesh.source).exists():
+        io.check_output_path(out, [mesh.source])
+    if fmt == "ply":
+        props = {"radiance_r": M[:, 0], "radiance_g": M[:, 1], "radiance_b": M[:, 2]}
+        comments = [f"meshshade model {result.model}", f"meshshade material {result.material.describe()}",
+                    "meshshade radiance_r/g/b: linear radiant exitance in W/mm^2 per unit light power/irradiance"]
+        if result.plan is not None:
+            comments.append(f"meshshade {result.plan.describe()}")
+        io.write_mesh_ply(out, mesh, props, to_uint8(display), comments=comments)
+    elif fmt in ("glb", "gltf"):
+        doc, data = gltf_document(mesh.vertices, mesh.faces, display, M, extras=meta)
+        if fmt == "glb":
+            write_bytes(out, glb_bytes(doc, data))
+        else:
+            write_text(out, gltf_text(doc, data))
+    else:
+        io.write_usd(out, usd_stage(mesh.vertices_in_source_units(), mesh.faces, display, M,
+                                    mm_per_unit=mesh.mm_per_unit, metadata=meta))
     if npz:
         arrays = dict(radiance=M, k1=result.k1, k2=result.k2, d1=result.d1, d2=result.d2,
                       vertex_areas=mesh.vertex_areas, cutoff_mm=result.cutoff_mm,
