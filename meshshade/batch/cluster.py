@@ -70,7 +70,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *, qui
 
     # a worker process that a test (or the OS) kills is reported by the nanny at length: keep it to warnings
     for name in ("distributed", "distributed.nanny", "distributed.scheduler", "distributed.worker"):
-        logging.getLogger(name).setLevel(logging.ERROR)
+        logging.getLogger(name).setLevel(logging.CRITICAL)
     cluster = None
     try:
         if scheduler is not None:
@@ -86,7 +86,10 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *, qui
             # Dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which makes glibc return memory after every
             # large free; a bake allocates and frees large arrays all the time and ran 20-50 % slower so
             # (tools/bench_batch.py). Workers keep glibc's default here.
-            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+            # Worker processes log to stderr; at shutdown after an interrupt they report lost connections with
+            # tracebacks. A job's own errors are in its record, so worker logs are kept to critical ones.
+            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+                                  "distributed.nanny.pre-spawn-environ.DASK_LOGGING__DISTRIBUTED": "critical"}):
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                        env={THREADS_ENV: str(threads), "OMP_NUM_THREADS": str(threads)})
             client = Client(cluster)
