@@ -1,10 +1,19 @@
 """Materials: per-channel (RGB) reduced scattering and absorption in 1/mm, index of refraction, anisotropy.
 
-The 12 measured presets are from Table 2 of H. W. Jensen, S. R. Marschner, M. Levoy, P. Hanrahan,
-"A Practical Model for Subsurface Light Transport", Proc. SIGGRAPH 2001, pp. 511-518, given there in mm^-1
-for the R, G, B channels (the same values as pbrt-v3/v4's measured-media table, which cites that paper).
-All were measured with eta = 1.3 (Jensen et al. 2001, section 5). Mitsuba 0.6's copy of the table differs in
-a chicken sigma_a entry and stores the values in 1/cm-like scaled form; neither is repeated here.
+Measured presets (:data:`PRESETS`, every one in mm^-1 for the R, G, B channels):
+
+* 12 from Table 2 of H. W. Jensen, S. R. Marschner, M. Levoy, P. Hanrahan, "A Practical Model for Subsurface
+  Light Transport", Proc. SIGGRAPH 2001, pp. 511-518 (the same values as pbrt-v3/v4's measured-media table,
+  which cites that paper). All were measured with eta = 1.3 (Jensen et al. 2001, section 5). Mitsuba 0.6's copy
+  of the table differs in a chicken sigma_a entry and stores the values in 1/cm-like scaled form; neither is
+  repeated here.
+* 30 from S. G. Narasimhan, M. Gupta, C. Donner, R. Ramamoorthi, S. K. Nayar, H. W. Jensen, "Acquiring Scattering
+  Properties of Participating Media by Dilution", ACM Trans. Graph. 25(3) (Proc. SIGGRAPH 2006), pp. 1003-1012,
+  Table 1, as sigma_s' = sigma_s (1 - g) and sigma_a: the values pbrt-v3/v4 ship in their measured-media table
+  (pbrt-v4 src/pbrt/media.cpp). The paper measured liquids diluted in water; the index here is water's, 1.33
+  (pbrt's default for these media too). Five of the table's media are left out: Coke, Pepsi, Merlot, Coors Light
+  beer and grape juice have sigma_s' = 0 in at least one channel (clear liquids that scatter almost nothing:
+  nothing a diffusion model can shade; :data:`NARASIMHAN_2006_LEFT_OUT`).
 """
 from __future__ import annotations
 
@@ -16,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshshade.errors import DiffusionValidityWarning, MaterialError
+from meshshade.kernels.dipole import dipole_total_reflectance
 from meshshade.kernels.optics import ETA_FIT_ACCURATE, ETA_MAX, check_eta, diffusion_params
 
 CHANNELS = ("r", "g", "b")
@@ -36,6 +46,61 @@ JENSEN_2001_PRESETS = {
     "wholemilk": ((2.55, 3.21, 3.77), (0.0011, 0.0024, 0.014)),
 }
 JENSEN_2001_ETA = 1.3
+
+#: name -> (sigma_s' [1/mm] RGB, sigma_a [1/mm] RGB); Narasimhan et al. 2006, Table 1 (as pbrt-v3/v4's table)
+NARASIMHAN_2006_PRESETS = {
+    "lowfat-milk": ((0.89187, 1.5136, 2.532), (0.002875, 0.00575, 0.0115)),
+    "reduced-milk": ((2.4858, 3.1669, 4.5214), (0.0025556, 0.0051111, 0.012778)),
+    "regular-milk": ((4.5513, 5.8294, 7.136), (0.0015333, 0.0046, 0.019933)),
+    "espresso": ((0.72378, 0.84557, 1.0247), (4.7984, 6.5751, 8.8493)),
+    "mint-mocha-coffee": ((0.31602, 0.38538, 0.48131), (3.772, 5.8228, 7.82)),
+    "lowfat-soy-milk": ((0.30576, 0.34233, 0.61664), (0.0014375, 0.0071875, 0.035937)),
+    "regular-soy-milk": ((0.59223, 0.73866, 1.4693), (0.0019167, 0.0095833, 0.065167)),
+    "lowfat-chocolate-milk": ((0.64925, 0.83916, 1.1057), (0.0115, 0.0368, 0.1564)),
+    "regular-chocolate-milk": ((1.4585, 2.1289, 2.9527), (0.010063, 0.043125, 0.14375)),
+    "sprite": ((6.0306e-06, 6.4139e-06, 6.5504e-06), (0.001886, 0.0018308, 0.0020025)),
+    "gatorade": ((0.0024574, 0.003007, 0.0037325), (0.024794, 0.019289, 0.008878)),
+    "chardonnay": ((1.7982e-05, 1.3758e-05, 1.2023e-05), (0.010782, 0.011855, 0.023997)),
+    "white-zinfandel": ((1.7501e-05, 1.9069e-05, 1.288e-05), (0.012072, 0.016184, 0.019843)),
+    "budweiser-beer": ((2.4356e-05, 2.4079e-05, 1.0564e-05), (0.011492, 0.024911, 0.057786)),
+    "clorox": ((0.0024035, 0.0031373, 0.003991), (0.0033542, 0.014892, 0.026297)),
+    "apple-juice": ((0.00013612, 0.00015836, 0.000227), (0.012957, 0.023741, 0.052184)),
+    "cranberry-juice": ((0.00010402, 0.00011646, 7.8139e-05), (0.039437, 0.094223, 0.12426)),
+    "ruby-grapefruit-juice": ((0.011002, 0.010927, 0.011036), (0.085867, 0.18314, 0.25262)),
+    "white-grapefruit-juice": ((0.22826, 0.23998, 0.32748), (0.0138, 0.018831, 0.056781)),
+    "shampoo": ((0.0007176, 0.0008303, 0.0009016), (0.014107, 0.045693, 0.061717)),
+    "strawberry-shampoo": ((0.00015671, 0.00015947, 1.518e-05), (0.01449, 0.05796, 0.075823)),
+    "head-and-shoulders-shampoo": ((0.023805, 0.028804, 0.034306), (0.084621, 0.15688, 0.20365)),
+    "lemon-tea-powder": ((0.040224, 0.045264, 0.051081), (2.4288, 4.5757, 7.2127)),
+    "orange-powder": ((0.00015617, 0.00017482, 0.0001762), (0.001449, 0.003441, 0.007863)),
+    "pink-lemonade-powder": ((0.00012103, 0.00013073, 0.00012528), (0.001165, 0.002366, 0.003195)),
+    "cappuccino-powder": ((1.8436, 2.5851, 2.1662), (35.844, 49.547, 61.084)),
+    "salt-powder": ((0.027333, 0.032451, 0.031979), (0.28415, 0.3257, 0.34148)),
+    "sugar-powder": ((0.00022272, 0.00025513, 0.000271), (0.012638, 0.031051, 0.050124)),
+    "suisse-mocha-powder": ((2.7979, 3.5452, 4.3365), (17.502, 27.004, 35.433)),
+    "pacific-ocean-surface-water": ((0.0001764, 0.00032095, 0.00019617), (0.031845, 0.031324, 0.030147)),
+}
+#: water, the medium the dilutions were measured in
+NARASIMHAN_2006_ETA = 1.33
+#: media of Narasimhan et al. 2006 (in pbrt's table) that are not presets, and why
+NARASIMHAN_2006_LEFT_OUT = {name: "sigma_s' = 0 in at least one channel (a clear liquid: no diffusion)"
+                            for name in ("coke", "pepsi", "merlot", "coors-light-beer", "grape-juice")}
+
+#: every preset: name -> (sigma_s' RGB, sigma_a RGB, eta, source), Jensen et al. 2001 first
+PRESETS = {
+    **{k: (s, a, JENSEN_2001_ETA, "Jensen et al. 2001") for k, (s, a) in JENSEN_2001_PRESETS.items()},
+    **{k: (s, a, NARASIMHAN_2006_ETA, "Narasimhan et al. 2006") for k, (s, a) in NARASIMHAN_2006_PRESETS.items()},
+}
+
+
+def _preset_key(name) -> str:
+    """Case, spaces, hyphens, underscores, '&' and 'and' do not matter: 'Head & Shoulders Shampoo' finds
+    'head-and-shoulders-shampoo'."""
+    text = str(name).strip().lower().replace("&", "and")
+    return "".join(ch for ch in text if ch.isalnum())
+
+
+_PRESET_KEYS = {_preset_key(k): k for k in PRESETS}
 
 #: below this reduced albedo diffusion theory is a poor model (absorption comparable to scattering)
 LOW_ALBEDO_WARNING = 0.5
@@ -133,16 +198,21 @@ class Material:
     # --- constructors -------------------------------------------------------------------------------
     @classmethod
     def preset(cls, name: str, *, eta: float | None = None, g: float = 0.0) -> "Material":
-        """One of the 12 measured materials of Jensen et al. 2001 (case-insensitive name)."""
-        key = str(name).strip().lower().replace("-", "").replace("_", "").replace(" ", "")
-        if key not in JENSEN_2001_PRESETS:
-            close = difflib.get_close_matches(key, JENSEN_2001_PRESETS, n=1, cutoff=0.5)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise MaterialError(
-                f"unknown material {name!r}{hint} (presets: {', '.join(sorted(JENSEN_2001_PRESETS))})"
-            )
-        s, a = JENSEN_2001_PRESETS[key]
-        return cls(s, a, JENSEN_2001_ETA if eta is None else eta, g, key)
+        """A measured material (:data:`PRESETS`: Jensen et al. 2001, Narasimhan et al. 2006); the name is matched
+        ignoring case, spaces, hyphens and underscores. ``eta`` defaults to the preset's (1.3 or 1.33)."""
+        key = _preset_key(name)
+        if key not in _PRESET_KEYS:
+            left_out = {_preset_key(k): (k, why) for k, why in NARASIMHAN_2006_LEFT_OUT.items()}
+            if key in left_out:
+                raise MaterialError(f"{left_out[key][0]} (Narasimhan et al. 2006) is not a preset: "
+                                    f"{left_out[key][1]}")
+            close = difflib.get_close_matches(key, _PRESET_KEYS, n=1, cutoff=0.5)
+            hint = f"; did you mean {_PRESET_KEYS[close[0]]!r}?" if close else ""
+            raise MaterialError(f"unknown material {name!r}{hint} (meshshade materials lists the {len(PRESETS)} "
+                                "presets)")
+        name = _PRESET_KEYS[key]
+        s, a, default_eta, _source = PRESETS[name]
+        return cls(s, a, default_eta if eta is None else eta, g, name)
 
     @property
     def is_grey(self) -> bool:
@@ -229,3 +299,26 @@ def material_from_options(name=None, *, sigma_s_prime=None, sigma_a=None, eta=No
     if sigma_s_prime is None or sigma_a is None:
         raise MaterialError("a material needs a preset name or both --sigma-s-prime and --sigma-a (1/mm)")
     return Material(sigma_s_prime, sigma_a, 1.3 if eta is None else eta, g)
+
+
+def preset_table() -> list[dict]:
+    """One row per preset (:data:`PRESETS`, in order): ``name``, ``source``, ``eta``, and per channel (r, g, b)
+    ``sigma_s_prime`` and ``sigma_a`` [1/mm], the reduced albedo ``albedo_prime``, the depth of the dipole's real
+    source ``z_r`` = 1/sigma_t' [mm], the diffusion length ``diffusion_length`` = 1/sigma_tr [mm] (inf without
+    absorption) and ``R_d``, the planar dipole's total diffuse reflectance (the colour of a flat half-space of the
+    material under white light, docs/physics.md eq. (16)).
+    """
+    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DiffusionValidityWarning)   # low-albedo media are listed, not shaded
+        for name, (_s, _a, _eta, source) in PRESETS.items():
+            m = Material.preset(name)
+            with np.errstate(divide="ignore"):
+                length = np.where(m.sigma_tr > 0, 1.0 / np.where(m.sigma_tr > 0, m.sigma_tr, 1.0), np.inf)
+            rows.append({"name": name, "source": source, "eta": m.eta,
+                         "sigma_s_prime": m.sigma_s_prime.tolist(), "sigma_a": m.sigma_a.tolist(),
+                         "albedo_prime": m.albedo_prime.tolist(), "z_r": m.z_r.tolist(),
+                         "diffusion_length": length.tolist(),
+                         "R_d": [float(dipole_total_reflectance(albedo_prime=a, eta=m.eta))
+                                 for a in m.albedo_prime]})
+    return rows

@@ -78,7 +78,8 @@ def test_preset_unknown_suggests_close_name():
 
 
 def test_preset_unknown_without_match_lists_presets():
-    with pytest.raises(MaterialError, match=r"unknown material 'xyzzy' \(presets: apple, chicken1") as info:
+    with pytest.raises(MaterialError, match=r"unknown material 'xyzzy' \(meshshade materials lists the 42 presets\)") \
+            as info:
         Material.preset("xyzzy")
     assert "did you mean" not in str(info.value)
 
@@ -306,3 +307,41 @@ def test_mm_per_unit_unknown(bad):
     with pytest.raises(UnitsError, match=r"unknown length unit .*; choose one of mm, cm, m, in"):
         mm_per_unit(bad)
     assert issubclass(UnitsError, MeshshadeError)
+
+
+# --- Narasimhan et al. 2006 -------------------------------------------------------------------------------------
+#: rows of Narasimhan et al. 2006 Table 1 as the paper gives them, sigma_s (not reduced), sigma_a [1/mm] and g per
+#: channel, from an independent transcription (the csrt renderer's parser/medium_lut.cpp, values rounded to 5-6
+#: significant digits): the presets hold pbrt's sigma_s' = sigma_s (1 - g), so the two copies must agree to that
+#: rounding
+NARASIMHAN_TABLE1_ROWS = {
+    "lowfat-milk": ((13.1157, 15.4445, 17.9572), (0.00287, 0.00575, 0.01150), (0.932, 0.902, 0.859)),
+    "espresso": ((7.78262, 8.13050, 8.53875), (4.79838, 6.57512, 8.84925), (0.907, 0.896, 0.880)),
+    "regular-soy-milk": ((4.66325, 5.20183, 8.74575), (0.00192, 0.00958, 0.06517), (0.873, 0.858, 0.832)),
+    "white-grapefruit-juice": ((0.50499, 0.52742, 0.75282), (0.01380, 0.01883, 0.05678), (0.548, 0.545, 0.565)),
+    "cappuccino-powder": ((12.2094, 16.4659, 29.2727), (35.8441, 49.5470, 61.0844), (0.849, 0.843, 0.926)),
+    "suisse-mocha-powder": ((30.0848, 33.4452, 38.7191), (17.5020, 27.0044, 35.4334), (0.907, 0.894, 0.888)),
+    "pacific-ocean-surface-water": ((0.00180, 0.00183, 0.00228), (0.03184, 0.03132, 0.03015),
+                                    (0.902, 0.825, 0.914)),
+}
+
+
+@pytest.mark.filterwarnings("ignore::meshshade.errors.DiffusionValidityWarning")  # espresso, cappuccino: low albedo
+@pytest.mark.parametrize("name", sorted(NARASIMHAN_TABLE1_ROWS))
+def test_narasimhan_presets_agree_with_an_independent_copy_of_table_1(name):
+    sigma_s, sigma_a, g = (np.array(v) for v in NARASIMHAN_TABLE1_ROWS[name])
+    m = Material.preset(name)
+    # g is given to 3 decimals, so (1 - g) carries up to 0.5e-3 / (1 - g) of relative rounding
+    np.testing.assert_allclose(m.sigma_s_prime, sigma_s * (1 - g), rtol=0.5e-3 / (1 - g).min() + 1e-4)
+    np.testing.assert_allclose(m.sigma_a, sigma_a, rtol=2e-3, atol=6e-6)
+    assert m.eta == 1.33 and m.name == name
+
+
+def test_presets_are_found_by_any_spelling_and_clear_liquids_are_refused():
+    from meshshade.materials import NARASIMHAN_2006_LEFT_OUT, PRESETS
+
+    assert len(PRESETS) == 42 and Material.preset("Head & Shoulders Shampoo").name == "head-and-shoulders-shampoo"
+    assert Material.preset("lowfat_milk").name == "lowfat-milk" and Material.preset("skin1").eta == 1.3
+    for name in NARASIMHAN_2006_LEFT_OUT:
+        with pytest.raises(MaterialError, match="not a preset: sigma_s' = 0"):
+            Material.preset(name.replace("-", " ").title())

@@ -28,7 +28,7 @@ import threading
 import warnings
 
 from meshshade import __version__
-from meshshade.cli import bake, batch, bench, check, compare, demo, mc, profile, render
+from meshshade.cli import bake, batch, bench, check, compare, demo, materials, mc, profile, render
 from meshshade.errors import MeshshadeError
 from meshshade.io import discard_stdout, output_transaction
 
@@ -38,6 +38,7 @@ COMMANDS = {
     "bake": (bake.add_bake_args, bake.run_bake, bake.HELP),
     "profile": (profile.add_profile_args, profile.run_profile, profile.HELP),
     "check": (check.add_check_args, check.run_check, check.HELP),
+    "materials": (materials.add_materials_args, materials.run_materials, materials.HELP),
     "render": (render.add_render_args, render.run_render, render.HELP),
     "compare": (compare.add_compare_args, compare.run_compare, compare.HELP),
     "demo": (demo.add_demo_args, demo.run_demo, demo.HELP),

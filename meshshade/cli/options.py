@@ -80,10 +80,12 @@ def parse_names(text: str | None) -> list[str] | None:
 def add_material_args(p: argparse.ArgumentParser, *, with_g: bool = False) -> None:
     g = p.add_argument_group("material (a preset, or coefficients in 1/mm)")
     g.add_argument("--material", metavar="NAME",
-                   help="measured preset of Jensen et al. 2001: " + ", ".join(sorted(JENSEN_2001_PRESETS)))
+                   help="measured preset (Jensen et al. 2001, Narasimhan et al. 2006; `meshshade materials` lists "
+                        "them): " + ", ".join(sorted(JENSEN_2001_PRESETS)) + ", lowfat-milk, espresso, ...")
     g.add_argument("--sigma-s-prime", metavar="S", help="reduced scattering [1/mm]: one value or R,G,B")
     g.add_argument("--sigma-a", metavar="A", help="absorption [1/mm]: one value or R,G,B")
-    g.add_argument("--eta", type=number, help="relative index of refraction (default 1.3)")
+    g.add_argument("--eta", type=number, help="relative index of refraction (default: the preset's, 1.3 or 1.33; "
+                                              "1.3 for coefficients)")
     if with_g:
         g.add_argument("--g", type=number, default=0.0, help="Henyey-Greenstein anisotropy (Monte Carlo only)")
 
