@@ -17,7 +17,7 @@ CHECK = "--check" in sys.argv[1:]
 # page -> (package, preferred order of modules / subpackages; the rest follow alphabetically)
 PAGES = {
     "meshshade": ("meshshade", ["errors", "units", "materials", "io", "memo", "check", "profiles",
-                                        "demo"]),
+                                        "preview", "demo"]),
     "kernels": ("meshshade.kernels", ["optics", "fresnel", "dipole", "sphere", "cylinder", "curvature",
                                       "auxiliary", "coefficients", "table", "policies", "profile"]),
     "geometry": ("meshshade.geometry", ["mesh", "topology", "procedural", "curvature", "convexity", "geodesics",

@@ -57,6 +57,7 @@ from meshshade.materials import Material
 from meshshade.montecarlo.distributed import walk_on_client
 from meshshade.montecarlo.emitter import Emitter
 from meshshade.montecarlo.walks import channel_groups, prepare_walks, walk_group
+from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
 
@@ -106,6 +107,18 @@ class MCResult:
     @property
     def events_per_second(self) -> float:
         return self.events / max(self.seconds, 1e-12)
+
+    def __repr__(self) -> str:
+        t = self.totals
+        return (f"<MCResult {self.material.name}: {self.photons} photons per channel group, {self.events} events in "
+                f"{self.seconds:.3g} s; diffuse reflectance {t['diffuse_reflectance'][0]:.4g} "
+                f"± {t['diffuse_reflectance_stderr'][0]:.2g} (r)>")
+
+    def plot(self, mesh, **kwargs):
+        """A matplotlib figure of ``mesh`` (the mesh of the run) coloured by the Monte Carlo exitance
+        (:func:`meshshade.preview.mesh_preview`; keyword arguments go there)."""
+        kwargs.setdefault("title", f"Monte Carlo, {self.material.name}, {self.photons} photons")
+        return mesh_preview(mesh.vertices, mesh.faces, self.radiance, **kwargs)
 
 
 def batch_stats(per_batch):

@@ -31,6 +31,7 @@ from meshshade.light import BeamLight, entry_samples
 from meshshade.light.samples import check_exitance
 from meshshade.light.sources import light_list
 from meshshade.materials import Material
+from meshshade.preview import mesh_preview
 from meshshade.progress import Progress, kernel_interrupts
 from meshshade.raycast import make_scene
 from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
@@ -76,6 +77,21 @@ class BakeResult:
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
     plan: object = None
+
+    def __repr__(self) -> str:
+        n = self.radiance.shape[0]
+        peak = self.radiance.max(axis=0)
+        total = sum(self.timings.values())
+        transport = str(self.stats.get("transport", "")).split(" (")[0]
+        return (f"<BakeResult {self.model}, {self.material.name}: {n} vertices, {len(self.samples)} entry samples"
+                + (f", {transport} transport" if transport else "")
+                + f"; peak exitance {peak[0]:.4g}/{peak[1]:.4g}/{peak[2]:.4g} W/mm^2 (r/g/b); {total:.3g} s>")
+
+    def plot(self, mesh, **kwargs):
+        """A matplotlib figure of ``mesh`` (the mesh that was baked) coloured by the exitance
+        (:func:`meshshade.preview.mesh_preview`; keyword arguments go there)."""
+        kwargs.setdefault("title", f"{self.model}, {self.material.name}")
+        return mesh_preview(mesh.vertices, mesh.faces, self.radiance, **kwargs)
 
 
 def describe_scale(mesh, material: Material) -> str:
