@@ -30,13 +30,16 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
+import threading
 import time
 import warnings
 
 from tqdm import tqdm
 
-__all__ = ["Progress", "DEFAULT_INTERVAL", "INTERVAL_ENV", "format_duration", "interrupt_in", "kernel_interrupts"]
+__all__ = ["Progress", "DEFAULT_INTERVAL", "INTERVAL_ENV", "format_duration", "interrupt_in", "kernel_interrupts",
+           "polled_interrupts"]
 
 #: seconds between two progress lines when stderr is not a terminal
 DEFAULT_INTERVAL = 30.0
@@ -236,3 +239,54 @@ def kernel_interrupts():
         if interrupt is None:
             raise
         raise interrupt from None
+
+
+#: the signals that stop a run (as the CLI's)
+_STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+@contextlib.contextmanager
+def polled_interrupts():
+    """Inside the block, SIGINT, SIGTERM and SIGHUP only note themselves; the ``poll()`` it yields raises the
+    interrupt (through the handler installed before: KeyboardInterrupt, or the CLI's SIGTERM/SIGHUP exception)
+    where the caller calls it, and leaving the block raises one that arrived after the last poll.
+
+    For a thread that waits on worker threads: a KeyboardInterrupt raised at an arbitrary bytecode can land
+    while the waiting thread holds a lock of ``threading`` or ``concurrent.futures`` (``wait`` takes every
+    future's lock, ``submit`` the pool's semaphore) and leave it held, and the workers then block on it forever
+    (seen: 1 render in ~60 froze after Ctrl-C). Polled, the interrupt is raised between those calls. Outside the
+    main thread (where Python runs no signal handlers) the block runs as it is and ``poll()`` does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: None
+        return
+    noted: list = []
+
+    def note(signum, frame):
+        noted.append(signum)
+
+    previous = {s: signal.signal(s, note) for s in _STOP_SIGNALS}
+
+    def deliver(signum):
+        handler = previous[signum]
+        if callable(handler):
+            handler(signum, None)
+        elif handler == signal.SIG_DFL:
+            if signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+
+    def poll():
+        if noted:
+            signum = noted[0]
+            noted.clear()
+            deliver(signum)
+
+    try:
+        yield poll
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    if noted:
+        deliver(noted[0])

@@ -347,3 +347,62 @@ def test_window_kernel_returns_at_once_when_told_to_stop():
     full = solver._run_block(*args)[0]
     stopped = solver._run_block(*args, stop=np.ones(1, np.int64))[0]
     assert full.min() > 100 and stopped.max() <= 1, (full, stopped)
+
+
+# ------------------------------------------------------------------------------------------------ polled interrupts
+def test_polled_interrupts_raise_only_at_poll_and_restore_the_handlers():
+    import os
+    import signal as sig
+
+    from meshshade.progress import polled_interrupts
+
+    before = sig.getsignal(sig.SIGINT)
+    with pytest.raises(KeyboardInterrupt):
+        with polled_interrupts() as poll:
+            os.kill(os.getpid(), sig.SIGINT)
+            time.sleep(0.01)                 # the signal arrives: noted, nothing raised here
+            reached = True
+            poll()
+            reached = False
+    assert reached and sig.getsignal(sig.SIGINT) is before
+    with pytest.raises(KeyboardInterrupt):   # one that arrives after the last poll is raised on leaving
+        with polled_interrupts() as poll:
+            poll()
+            os.kill(os.getpid(), sig.SIGINT)
+            time.sleep(0.01)
+    with polled_interrupts() as poll:        # nothing noted: nothing raised
+        poll()
+
+    class Term(Exception):
+        pass
+
+    def raise_term(signum, frame):
+        raise Term(signum)
+
+    old = sig.signal(sig.SIGTERM, raise_term)   # the CLI's own SIGTERM handler is what poll() calls
+    try:
+        with pytest.raises(Term):
+            with polled_interrupts() as poll:
+                os.kill(os.getpid(), sig.SIGTERM)
+                time.sleep(0.01)
+                poll()
+        assert sig.getsignal(sig.SIGTERM) is raise_term
+    finally:
+        sig.signal(sig.SIGTERM, old)
+
+
+def test_polled_interrupts_outside_the_main_thread_do_nothing():
+    import threading
+
+    from meshshade.progress import polled_interrupts
+
+    seen = []
+
+    def body():
+        with polled_interrupts() as poll:
+            seen.append(poll())
+
+    t = threading.Thread(target=body)
+    t.start()
+    t.join()
+    assert seen == [None]

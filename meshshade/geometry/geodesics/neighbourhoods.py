@@ -47,7 +47,7 @@ from meshshade.geometry.geodesics import _window_kernels as _k
 from meshshade.geometry.geodesics._saddle_kernels import _build_fans
 from meshshade.geometry.mesh import face_geometry, face_normals
 from meshshade.geometry.topology import vertex_adjacency
-from meshshade.progress import kernel_interrupts
+from meshshade.progress import kernel_interrupts, polled_interrupts
 
 __all__ = ["GeodesicNeighbourhoods", "Neighbourhoods", "geodesic_neighbourhoods", "geodesic_distances_from",
            "tangent_azimuth", "METHODS"]
@@ -290,6 +290,10 @@ class Pacer:
         r["work"] = 0.8 * r.get("work", 0.0) + self.work(a, b)
 
 
+#: seconds between two looks for an interrupt while run_paced waits on its worker threads
+POLL_SECONDS = 0.02
+
+
 def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, stop=None) -> list:
     """``run(a, b)`` over consecutive blocks ``a:b`` of ``k`` sources chosen by ``pacer``; the results in source
     order.
@@ -329,29 +333,32 @@ def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, s
 
     ex = ThreadPoolExecutor(max_workers=n_threads)
     pending: dict = {}
-    try:
-        a = 0
-        while a < k or pending:
-            while a < k and len(pending) < 2 * n_threads:
-                b = first if a == 0 else pacer.next(a)
-                pending[ex.submit(timed, a, b)] = (a, b)
-                a = b
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for f in finished:
-                a0, b0 = pending.pop(f)
-                results[a0], seconds = f.result()
-                pacer.record(a0, b0, seconds)
-                done += b0 - a0
-                if progress is not None:
-                    progress(done, k)
-    except BaseException:
-        if stop is not None:
-            stop[0] = 1  # kernels that watch it return at their next step
-        raise
-    finally:  # on an interrupt or error: queued blocks are dropped, running ones finish (or stop early)
-        for f in pending:
-            f.cancel()
-        ex.shutdown(wait=True)
+    # signals are polled between the executor's calls, never raised inside them (progress.polled_interrupts)
+    with polled_interrupts() as poll:
+        try:
+            a = 0
+            while a < k or pending:
+                while a < k and len(pending) < 2 * n_threads:
+                    b = first if a == 0 else pacer.next(a)
+                    pending[ex.submit(timed, a, b)] = (a, b)
+                    a = b
+                finished, _ = wait(pending, timeout=POLL_SECONDS, return_when=FIRST_COMPLETED)
+                poll()
+                for f in finished:
+                    a0, b0 = pending.pop(f)
+                    results[a0], seconds = f.result()
+                    pacer.record(a0, b0, seconds)
+                    done += b0 - a0
+                    if progress is not None:
+                        progress(done, k)
+        except BaseException:
+            if stop is not None:
+                stop[0] = 1  # kernels that watch it return at their next step
+            raise
+        finally:  # on an interrupt or error: queued blocks are dropped, running ones finish (or stop early)
+            for f in pending:
+                f.cancel()
+            ex.shutdown(wait=True)
     return [results[a] for a in sorted(results)]
 
 
