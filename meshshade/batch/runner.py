@@ -200,7 +200,11 @@ def run_batch(jobs, out, *, client=None, scheduler: str | None = None, workers: 
                 records[job.name] = previous[job.name]   # a failure of an earlier run, until this run's outcome
     result = BatchResult(out=out, records=[], skipped=skipped)
 
-    def write_manifest():
+    def write_manifest(final: bool = False):
+        if final:  # a job whose folder a worker completed before this process heard of it (an interrupt)
+            for j in todo:
+                if j.name not in result.ran and (rec := job_status(j, out)) is not None:
+                    records[j.name] = rec
         with detached():
             write_json_lines(out / MANIFEST, [records[j.name] for j in jobs if j.name in records])
 
@@ -258,4 +262,4 @@ def _collect(client, todo, out, records, result, write_manifest, progress, quiet
         raise
     finally:
         bar.close()
-        write_manifest()
+        write_manifest(final=True)
