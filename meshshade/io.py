@@ -57,6 +57,7 @@ import secrets
 import signal
 import stat
 import sys
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -1453,3 +1454,49 @@ def remove_stale_parts(folder, names=None) -> list[str]:
             _remove_tree(p)
             removed.append(p.name)
     return removed
+
+
+# ------------------------------------------------------------------------------------------------ scratch space
+def scratch_folder(prefix: str = "meshshade-") -> Path:
+    """A new private folder in the system's temporary directory; the caller removes it (:func:`remove_folder`)."""
+    try:
+        return Path(tempfile.mkdtemp(prefix=prefix))
+    except OSError as exc:
+        raise OutputError(f"cannot create a temporary folder: {_one_line(exc)}") from None
+
+
+def remove_folder(path) -> None:
+    """Remove ``path`` and everything in it (missing: nothing to do)."""
+    _remove_tree(Path(path))
+
+
+def temp_path(name: str) -> Path:
+    """``name`` in the system's temporary directory."""
+    return Path(tempfile.gettempdir()) / name
+
+
+def append_text(path, text: str) -> bool:
+    """Append ``text`` to the log file ``path``; False (and nothing raised) when it cannot be written."""
+    try:
+        with open(path, "a", encoding="utf-8") as fh:
+            fh.write(text)
+        return True
+    except OSError:
+        return False
+
+
+def write_obj(path, vertices, faces, *, comment: str | None = None) -> Path:
+    """Write an OBJ (atomically) of ``vertices`` (n, 3), every float64 written exactly (17 significant digits, so
+    :func:`load_mesh` reads back the same numbers), and 0-based triangle ``faces`` (m, 3)."""
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64)
+    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
+        raise ValueError(f"vertices and faces must be (n, 3) and (m, 3), got {V.shape} and {F.shape}")
+    path = check_output_path(path, suffixes=(".obj",), option="OBJ output")
+    with atomic_write(path) as tmp:
+        with open(tmp, "w", encoding="ascii") as fh:
+            if comment:
+                fh.write("".join(f"# {line}\n" for line in comment.splitlines()))
+            np.savetxt(fh, V, fmt="v %.17g %.17g %.17g")
+            np.savetxt(fh, F + 1, fmt="f %d %d %d")
+    return path

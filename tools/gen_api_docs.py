@@ -31,8 +31,9 @@ PAGES = {
                                             "interior", "tallies", "wavefront_oracle"]),
     "bench": ("meshshade.bench", ["scenes", "plan", "runner", "references", "report"]),
     "batch": ("meshshade.batch", ["runner", "jobs", "cluster"]),
+    "blender": ("meshshade.blender", ["convert", "job", "addon"]),
     "cli": ("meshshade.cli", ["main", "options", "demo", "profile", "check", "bake", "render", "compare", "mc",
-                              "bench", "batch", "jobs"]),
+                              "bench", "batch", "jobs", "blender"]),
 }
 SUBPAGES = {"meshshade": False}  # the top-level page lists only top-level modules (subpackages have pages)
 

@@ -28,7 +28,7 @@ import threading
 import warnings
 
 from meshshade import __version__
-from meshshade.cli import bake, batch, bench, check, compare, demo, materials, mc, profile, render
+from meshshade.cli import bake, batch, bench, blender, check, compare, demo, materials, mc, profile, render
 from meshshade.errors import MeshshadeError
 from meshshade.io import discard_stdout, output_transaction
 
@@ -44,6 +44,7 @@ COMMANDS = {
     "demo": (demo.add_demo_args, demo.run_demo, demo.HELP),
     "bench": (bench.add_bench_args, bench.run_bench, bench.HELP),
     "batch": (batch.add_batch_args, batch.run_batch, batch.HELP),
+    "blender": (blender.add_blender_args, blender.run_blender, blender.HELP),
 }
 
 #: signals that stop a run like Ctrl-C does (temporary files removed, exit code 128 + number)

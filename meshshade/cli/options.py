@@ -21,7 +21,8 @@ from meshshade.transport import MODELS, describe_scale
 from meshshade.units import mm_per_unit
 
 LIGHT_HELP = ("light SPEC (repeatable), positions in the mesh's units: beam:ox,oy,oz:dx,dy,dz[:power W[:radius]] | "
-              "directional:dx,dy,dz[:irradiance W/mm^2] | point:x,y,z[:intensity W/sr]")
+              "directional:dx,dy,dz[:irradiance W/mm^2] | point:x,y,z[:intensity W/sr] | "
+              "spot:x,y,z:dx,dy,dz[:intensity W/sr[:cone deg[:blend]]]")
 
 
 # --- numbers ---------------------------------------------------------------------------------------------

@@ -391,5 +391,7 @@ def _vertex_samples(light, i, V, F, N, A, culler, eta, stats) -> dict:
     if target is None:
         irradiance = np.full(idx.size, light.irradiance)          # W/mm^2 across the beam
     else:
-        irradiance = light.intensity / dist_all[idx] ** 2          # W/sr / mm^2
+        irradiance = light.emission(V[idx] - target) / dist_all[idx] ** 2   # W/sr / mm^2
+        keep = irradiance > 0.0        # outside a spot's cone: no sample
+        idx, irradiance = idx[keep], irradiance[keep]
     return _vertex_part(i, V, N, A, idx, cos_all[idx], irradiance, eta)

@@ -23,7 +23,7 @@ import numpy as np
 from meshshade.errors import LightError
 from meshshade.geometry.topology import winding_number
 
-__all__ = ["BEAM_SAMPLES", "MAX_LIGHT_STRENGTH", "BeamLight", "DirectionalLight", "PointLight", "Light",
+__all__ = ["BEAM_SAMPLES", "MAX_LIGHT_STRENGTH", "BeamLight", "DirectionalLight", "PointLight", "Spot", "Light",
            "LIGHT_TYPES", "light_list", "check_outside_mesh", "describe_light"]
 
 #: upper bound of a light's power [W], irradiance [W/mm^2] or intensity [W/sr] (module docstring)
@@ -140,15 +140,71 @@ class DirectionalLight:
 
 
 @dataclass(frozen=True)
+class Spot:
+    """The cone of a spot light: ``axis`` (normalised), full cone ``angle`` in (0, pi] rad and edge ``blend`` in
+    [0, 1], as Blender's ``spot_size`` and ``spot_blend``.
+
+    :meth:`falloff` is the fraction of the axial intensity emitted at an angle theta from the axis: with
+    c = cos(angle / 2) and t = (cos theta - c) / ((1 - c) blend), smoothstep(t) = 3t^2 - 2t^3 clamped to [0, 1]
+    (1 inside the cone and 0 outside when ``blend`` = 0): Cycles' spot attenuation, so a Blender spot bakes as
+    Cycles renders it.
+    """
+
+    axis: tuple[float, float, float]
+    angle: float = math.pi
+    blend: float = 0.0
+
+    def __post_init__(self):
+        object.__setattr__(self, "axis", _direction(self.axis, "spot axis"))
+        angle = _number(self.angle, "spot cone angle")
+        if not 0.0 < angle <= math.pi:
+            raise LightError(f"spot cone angle must be in (0, pi] rad, got {angle!r}")
+        blend = _number(self.blend, "spot blend")
+        if not 0.0 <= blend <= 1.0:
+            raise LightError(f"spot blend must be in [0, 1], got {blend!r}")
+        object.__setattr__(self, "angle", angle)
+        object.__setattr__(self, "blend", blend)
+
+    def falloff(self, cos_theta):
+        """Fraction in [0, 1] of the axial intensity at ``cos_theta`` (array) from the axis."""
+        x = np.asarray(cos_theta, dtype=np.float64)
+        c = math.cos(0.5 * self.angle)
+        width = (1.0 - c) * self.blend   # 0 also for a blend so small that the product underflows: a hard edge
+        if not width > 0.0:
+            return np.where(x >= c, 1.0, 0.0)
+        t = np.clip((x - c) / width, 0.0, 1.0)
+        return t * t * (3.0 - 2.0 * t)
+
+    def towards(self, delta):
+        """:meth:`falloff` for the (k, 3) vectors ``delta`` from the light to the lit points."""
+        d = np.asarray(delta, dtype=np.float64)
+        n = np.linalg.norm(d, axis=-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cos = np.where(n > 0.0, d @ np.array(self.axis) / n, 1.0)
+        return self.falloff(cos)
+
+
+@dataclass(frozen=True)
 class PointLight:
-    """An isotropic point source at ``position`` (mm) of radiant ``intensity`` W/sr."""
+    """A point source at ``position`` (mm) of radiant ``intensity`` W/sr: isotropic, or, with ``spot`` (a
+    :class:`Spot`), ``intensity`` along the spot's axis times :meth:`Spot.falloff` away from it."""
 
     position: tuple[float, float, float]
     intensity: float = 1.0
+    spot: Spot | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "position", _vec3(self.position, "point light position"))
         object.__setattr__(self, "intensity", _strength(self.intensity, "point light intensity", "W/sr"))
+        if self.spot is not None and not isinstance(self.spot, Spot):
+            raise LightError(f"a point light's spot must be a Spot, got {self.spot!r}")
+
+    def emission(self, delta):
+        """W/sr towards the (k, 3) vectors ``delta`` from the light: ``intensity``, times the spot's falloff."""
+        k = np.asarray(delta).shape[0]
+        if self.spot is None:
+            return np.full(k, self.intensity)
+        return self.intensity * self.spot.towards(delta)
 
 
 Light = Union[BeamLight, DirectionalLight, PointLight]
@@ -190,6 +246,10 @@ def describe_light(light: Light, index: int) -> str:
     if isinstance(light, DirectionalLight):
         return (f"directional light {index} (travelling along {_fmt_vec(light.direction)}, "
                 f"irradiance {light.irradiance:.6g} W/mm^2)")
+    if light.spot is not None:
+        sp = light.spot
+        return (f"spot light {index} (at {_fmt_vec(light.position)} mm along {_fmt_vec(sp.axis)}, intensity "
+                f"{light.intensity:.6g} W/sr, cone {math.degrees(sp.angle):.6g} deg, blend {sp.blend:.6g})")
     return f"point light {index} (at {_fmt_vec(light.position)} mm, intensity {light.intensity:.6g} W/sr)"
 
 

@@ -85,7 +85,7 @@ class Emitter:
                 delta = pos - c
                 r2 = np.einsum("ij,ij->i", delta, delta)
                 cos = np.einsum("ij,ij->i", normals, delta) / np.sqrt(r2)
-                w = light.intensity * np.clip(cos, 0.0, None) * areas / r2
+                w = light.emission(-delta) * np.clip(cos, 0.0, None) * areas / r2
             total = float(w.sum())
             if not (reached[i] and total > 0.0):   # warned about by entry_samples: it emits nothing
                 w, total = np.zeros_like(w), 0.0
@@ -142,7 +142,7 @@ class Emitter:
                 to_light, t_max = -d, dist
                 # importance weight: true irradiance at the point over the face-centroid value used for sampling
                 cos = np.clip(-np.einsum("ij,ij->i", self.N[f], d), 0.0, None)
-                weight[sel] *= lt.intensity * cos / dist ** 2 * self.A[f] / w_face[f]
+                weight[sel] *= lt.emission(delta) * cos / dist ** 2 * self.A[f] / w_face[f]
             origin = self.scene.offset_origins(p, self.N[f], sign=1.0)
             shadow = self.scene.occluded(origin, to_light, t_max)
             weight[sel[shadow]] = 0.0

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from meshshade.cli import bake, batch, bench, check, compare, demo, materials, mc, options, profile, render
+from meshshade.cli import bake, batch, bench, blender, check, compare, demo, materials, mc, options, profile, render
 from meshshade.cli.main import COMMANDS, build_parser, main
 from meshshade.errors import OutputError
 from meshshade.geometry.procedural import icosphere
@@ -20,7 +20,7 @@ from meshshade.transport import MODELS
 ROOT = Path(__file__).resolve().parents[2]
 CLI = ROOT / "meshshade" / "cli"
 BENCH = ROOT / "meshshade" / "bench"
-MODULES = {"bake": bake, "batch": batch, "bench": bench, "check": check, "compare": compare, "demo": demo, "materials": materials, "mc": mc,
+MODULES = {"bake": bake, "batch": batch, "blender": blender, "bench": bench, "check": check, "compare": compare, "demo": demo, "materials": materials, "mc": mc,
            "profile": profile, "render": render}
 
 

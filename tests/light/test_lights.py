@@ -80,7 +80,7 @@ def test_parse_light_spec_defaults():
 
 
 @pytest.mark.parametrize("spec, fragment", [
-    ("spot:0,0,0:0,0,1", "unknown light type 'spot'"),
+    ("area:0,0,0:0,0,1", "unknown light type 'area'"),
     ("", "empty light spec"),
     ("beam:0,0,0", "must look like beam:ox,oy,oz:dx,dy,dz[:power[:radius]]"),
     ("beam:0,0,0:0,0,1:1:2:3", "must look like beam"),

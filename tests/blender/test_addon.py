@@ -1,0 +1,246 @@
+"""The Blender add-on with a real Blender (the ``bpy`` module, Blender 5.0), headless.
+
+Skipped where ``bpy`` is not importable (the main test environment: bpy pins numpy 1.26); ``tools/test_blender.sh``
+builds a Blender environment and runs them. References come from outside the add-on: the command-line bake of
+the same world-space mesh with lights the test converts by hand from Blender's documented units, Blender's own
+glTF importer, and Cycles renders.
+"""
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+# Blender's user folders (where Preferences > Install from Disk puts add-ons) in a scratch place, set before bpy loads
+_USER = Path(tempfile.mkdtemp(prefix="meshshade-bpy-user-"))
+for _var in ("BLENDER_USER_RESOURCES", "BLENDER_USER_SCRIPTS", "BLENDER_USER_CONFIG"):
+    os.environ.setdefault(_var, str(_USER / _var.lower()))
+
+bpy = pytest.importorskip("bpy", reason="bpy (Blender 5.0 as a Python module) is not installed in this environment; "
+                                         "tools/test_blender.sh runs these tests in one that has it")
+pytestmark = pytest.mark.blender
+
+import meshshade.blender  # noqa: E402
+from meshshade.blender import addon  # noqa: E402
+
+MM_PER_BU = 10.0   # the scenes use 1 Blender unit = 1 cm
+
+
+@pytest.fixture
+def registered():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    meshshade.blender.register()
+    yield
+    meshshade.blender.unregister()
+
+
+def new_light(name, kind, energy, location=(0, 0, 0), rotation=(0, 0, 0), color=(1, 1, 1), **extra):
+    data = bpy.data.lights.new(name, kind)
+    data.energy, data.color = energy, color
+    for k, v in extra.items():
+        setattr(data, k, v)
+    ob = bpy.data.objects.new(name, data)
+    ob.location, ob.rotation_euler = location, rotation
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def build_scene(unit_scale=0.01):
+    sc = bpy.context.scene
+    sc.unit_settings.scale_length = unit_scale
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0, location=(0.2, -0.1, 0.3),
+                                          rotation=(0.4, 0.1, 0.7), scale=(1.2, 1.0, 0.9))
+    ob = bpy.context.active_object
+    new_light("Sun", "SUN", 800.0, rotation=(0.5, 0.3, 0.0), color=(1.0, 0.9, 0.8))
+    new_light("Lamp", "POINT", 20.0, location=(0.5, 0.2, 4.0))
+    new_light("Spot", "SPOT", 50.0, location=(4.0, 0.3, 0.2), rotation=(0.0, -math.pi / 2, 0.0),
+              spot_size=math.radians(40.0), spot_blend=0.3)
+    bpy.context.view_layer.update()
+    return ob
+
+
+def attribute(me, name, width=4):
+    a = me.attributes[name]
+    out = np.empty(len(a.data) * width, dtype=np.float32)
+    a.data.foreach_get("color" if width == 4 else "vector", out)
+    return out.reshape(-1, width)
+
+
+def cli_bake(tmp_path, obj_path, specs, tag, *extra):
+    npz = tmp_path / f"{tag}.npz"
+    cmd = [sys.executable, "-m", "meshshade.cli", "bake", str(obj_path), "--units", "mm", "--material", "marble",
+           "--model", "dipole", "--transport", "direct", "--quiet", "--out", str(tmp_path / f"{tag}.ply"),
+           "--npz", str(npz), *extra]
+    for s in specs:
+        cmd += ["--light", s]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    with np.load(npz) as z:
+        return np.asarray(z["radiance"])
+
+
+def test_register_and_unregister():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    meshshade.blender.register()
+    try:
+        assert hasattr(bpy.types, "OBJECT_OT_meshshade_bake") and hasattr(bpy.types, "MESHSHADE_PT_panel")
+        assert hasattr(bpy.ops.object, "meshshade_bake") and "meshshade" in bpy.types.Object.bl_rna.properties
+        meshshade.blender.register()   # enabling twice (the package and the add-on file) replaces, never fails
+    finally:
+        meshshade.blender.unregister()
+    assert not hasattr(bpy.types, "OBJECT_OT_meshshade_bake")
+    assert "meshshade" not in bpy.types.Object.bl_rna.properties
+
+
+def test_the_addon_file_installs_and_enables_from_preferences(tmp_path):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    path = tmp_path / "meshshade_addon.py"
+    subprocess.run([sys.executable, "-m", "meshshade.cli", "blender", str(path), "--quiet"], check=True)
+    bpy.ops.preferences.addon_install(filepath=str(path))
+    bpy.ops.preferences.addon_enable(module="meshshade_addon")
+    try:
+        assert "meshshade_addon" in bpy.context.preferences.addons
+        assert hasattr(bpy.types, "OBJECT_OT_meshshade_bake")
+        prefs = bpy.context.preferences.addons["meshshade_addon"].preferences
+        assert prefs.python == ""   # the preference "Python for bakes", empty: Blender's own
+        assert addon.bake_python(bpy.context) == sys.executable
+        prefs.python = "/no/such/python"
+        ob = build_scene()
+        with pytest.raises(RuntimeError, match="the Python for bakes does not exist: /no/such/python"):
+            bpy.ops.object.meshshade_bake()
+        assert "meshshade_radiance" not in ob.data.color_attributes
+    finally:
+        bpy.ops.preferences.addon_disable(module="meshshade_addon")
+    assert not hasattr(bpy.types, "OBJECT_OT_meshshade_bake")
+
+
+def test_bake_equals_the_cli_bake_of_the_same_scene(registered, tmp_path):
+    ob = build_scene()
+    result = bpy.ops.object.meshshade_bake(material="marble", model="dipole", transport="direct")
+    assert result == {"FINISHED"}
+    me = ob.data
+    got = attribute(me, "meshshade_radiance")
+    assert me.color_attributes["meshshade_radiance"].data_type == "FLOAT_COLOR"
+    assert me.color_attributes["meshshade_display"].data_type == "BYTE_COLOR"
+    assert me.color_attributes.active_color_name == "meshshade_display"
+    np.testing.assert_array_equal(got[:, 3], 1.0)
+
+    # the same scene by hand: world-space vertices in mm, Blender's units converted from their definitions
+    M = np.array(ob.matrix_world)
+    co = np.array([v.co for v in me.vertices], dtype=np.float64)
+    V = (co @ M[:3, :3].T + M[:3, 3]) * MM_PER_BU
+    me.calc_loop_triangles()
+    F = np.array([t.vertices[:] for t in me.loop_triangles])
+    obj = tmp_path / "world.obj"
+    with open(obj, "w") as fh:
+        fh.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in V)
+        fh.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F)
+    objs = bpy.data.objects
+    sun_dir = -np.array(objs["Sun"].matrix_world)[:3, 2]
+    lamp = np.array(objs["Lamp"].matrix_world)[:3, 3] * MM_PER_BU
+    spot_m = np.array(objs["Spot"].matrix_world)
+    spot_pos, spot_axis = spot_m[:3, 3] * MM_PER_BU, -spot_m[:3, 2]
+    vec = lambda v: ",".join(repr(float(x)) for x in v)   # noqa: E731
+    sun = cli_bake(tmp_path, obj, [f"directional:{vec(sun_dir)}:{800 * 1e-6!r}"], "sun")   # W/m^2 -> W/mm^2
+    white = cli_bake(tmp_path, obj, [f"point:{vec(lamp)}:{20 / (4 * math.pi)!r}",       # W -> W/sr
+                                     f"spot:{vec(spot_pos)}:{vec(spot_axis)}:{50 / (4 * math.pi)!r}:40:0.3"], "white")
+    expected = np.array([1.0, 0.9, 0.8]) * sun + white
+    assert np.all(sun.max(axis=0) > 0) and np.all(white.max(axis=0) > 0)
+    np.testing.assert_allclose(got[:, :3], expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())
+
+
+def test_errors_are_reports_not_tracebacks(registered):
+    bpy.context.scene.unit_settings.scale_length = 0.01
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=1.0)
+    ob = bpy.context.active_object
+    with pytest.raises(RuntimeError) as info:      # bpy turns an operator's ERROR report into a RuntimeError
+        bpy.ops.object.meshshade_bake()
+    assert "no sun, point or spot light" in str(info.value) and "Traceback" not in str(info.value)
+    new_light("Area", "AREA", 10.0, location=(0, 0, 5))
+    with pytest.raises(RuntimeError, match=r"no sun, point or spot light .*area 'Area'"):
+        bpy.ops.object.meshshade_bake()
+    new_light("Sun", "SUN", 1000.0)
+    bpy.ops.object.mode_set(mode="EDIT")
+    with pytest.raises(RuntimeError, match="switch to Object Mode"):
+        bpy.ops.object.meshshade_bake()
+    bpy.ops.object.mode_set(mode="OBJECT")
+    with pytest.raises(RuntimeError, match=r"the bake failed \(exit 2\): sigma_s_prime must be finite and > 0"):
+        bpy.ops.object.meshshade_bake(material="CUSTOM", sigma_s_prime=(0.0, 0.0, 0.0), sigma_a=(0.0, 0.0, 0.0))
+    assert "meshshade_radiance" not in ob.data.color_attributes
+    bpy.ops.object.select_all(action="DESELECT")
+    bpy.context.view_layer.objects.active = bpy.data.objects["Sun"]
+    assert not bpy.ops.object.meshshade_bake.poll()
+
+
+def test_the_display_material_renders_the_exitance_on_cycles_scale(registered, tmp_path):
+    """Cycles: an emission of strength E renders as E, a white Lambertian plane under a sun of strength S as S/π;
+    so the material's exitance M W/mm² must render as M 1e6/π (addon.EMISSION_PER_W_PER_MM2)."""
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device, sc.cycles.samples = "CPU", 64
+    sc.render.resolution_x = sc.render.resolution_y = 8
+    sc.view_settings.view_transform = "Standard"
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    bpy.ops.mesh.primitive_plane_add(size=100)
+    plane = bpy.context.active_object
+    new_light("Sun", "SUN", 2.0, angle=0.0)
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    cam.location = (0, 0, 10)
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+
+    def render():
+        sc.render.filepath = str(tmp_path / "r.exr")
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(str(tmp_path / "r.exr"), check_existing=False)
+        px = np.array(img.pixels[:]).reshape(-1, 4)
+        bpy.data.images.remove(img)
+        return px[:, :3].mean(axis=0)
+
+    diffuse = bpy.data.materials.new("white")
+    nodes = diffuse.node_tree.nodes
+    nodes.clear()
+    bsdf = nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (1, 1, 1, 1)
+    diffuse.node_tree.links.new(bsdf.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    plane.data.materials.append(diffuse)
+    # rtol: Cycles' sampling noise on 64 pixels (about 1 %); what is checked is the factor pi (or its absence)
+    np.testing.assert_allclose(render(), 2.0 / math.pi, rtol=0.03)   # no world light: factory scene, use_empty
+
+    M = 3e-6   # W/mm^2 everywhere on the plane
+    addon.apply_result(plane, np.full((len(plane.data.vertices), 3), M), make_material=True)
+    assert plane.active_material.name == addon.MATERIAL_NAME
+    np.testing.assert_allclose(render(), M * 1e6 / math.pi, rtol=0.03)
+
+
+def test_glb_of_the_cli_reads_back_in_blenders_gltf_importer(registered, tmp_path):
+    from scipy.spatial import cKDTree
+
+    from meshshade.geometry.procedural import icosphere
+    from meshshade.io import write_obj
+
+    V, F = icosphere(10.0, 3)
+    obj = write_obj(tmp_path / "s.obj", V, F)
+    radiance = cli_bake(tmp_path, obj, ["directional:0.2,0.1,-1:1e-3"], "g")
+    glb = tmp_path / "s.glb"
+    subprocess.run([sys.executable, "-m", "meshshade.cli", "bake", str(obj), "--units", "mm", "--material", "marble",
+                    "--model", "dipole", "--transport", "direct", "--light", "directional:0.2,0.1,-1:1e-3", "--quiet",
+                    "--out", str(glb)], check=True)
+    assert bpy.ops.import_scene.gltf(filepath=str(glb)) == {"FINISHED"}
+    ob = next(o for o in bpy.context.scene.objects if o.type == "MESH")
+    me = ob.data
+    assert len(me.vertices) == V.shape[0] and len(me.polygons) == F.shape[0]
+    pos = np.array([ob.matrix_world @ v.co for v in me.vertices]) * 1000.0   # glTF metres -> mm
+    pos = pos[:, [0, 2, 1]] * [1.0, 1.0, -1.0]   # the importer turns glTF's +Y up into Blender's +Z up
+    dist, idx = cKDTree(V).query(pos)
+    assert dist.max() < 1e-3
+    assert me.attributes["_RADIANCE"].data_type == "FLOAT_VECTOR"
+    got = attribute(me, "_RADIANCE", width=3)
+    np.testing.assert_allclose(got, radiance[idx].astype(np.float32), rtol=1e-6, atol=1e-9)
+    colour = me.color_attributes[0]   # COLOR_0, as the importer names it
+    assert colour.domain in ("POINT", "CORNER") and len(colour.data) > 0

@@ -1,0 +1,99 @@
+"""The add-on's bake beside Blender (meshshade.blender.job): ``meshshade bake`` in a child process, its result the
+Python API's, its progress read, its cancellation clean. No bpy needed: these run in every environment.
+
+The reference is an independent route to the same numbers: :func:`meshshade.transport.bake` called in this
+process on the same mesh and lights, the colour groups summed by the test.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from meshshade.blender.job import BakeJob, BakeJobError, BakeSettings, light_spec
+from meshshade.geometry.mesh import Mesh
+from meshshade.geometry.procedural import icosphere
+from meshshade.light import BeamLight, DirectionalLight, PointLight, parse_light_spec
+from meshshade.light.sources import Spot
+from meshshade.materials import Material
+from meshshade.transport import bake
+
+
+@pytest.mark.parametrize("light", [DirectionalLight((0.1, 0.2, -1.0), 1.234567890123e-3),
+                                   PointLight((1 / 3, 2.5, 30.0), 0.7957747154594767),
+                                   PointLight((0, 0, 30.0), 2.0, spot=Spot((0.1, 0, -1), 0.6, 0.15)),
+                                   BeamLight((0, 0, 30.0), (0, 0, -1), 0.5, 0.25)])
+def test_light_specs_read_back_exactly(light):
+    assert parse_light_spec(light_spec(light)) == light
+
+
+def scene():
+    V, F = icosphere(8.0, 3)
+    V = V + np.array([1.0, -2.0, 0.5])
+    groups = [(np.array([1.0, 0.8, 0.6]), [DirectionalLight((0.3, 0.1, -1.0), 1e-3),
+                                          PointLight((1.0, -2.0, 40.0), 0.5)]),
+              (np.array([0.0, 0.5, 1.0]), [PointLight((30.0, 0.0, 0.0), 2.0,
+                                                      spot=Spot((-1.0, 0.0, 0.0), math.radians(40.0), 0.3))])]
+    return V, F, groups
+
+
+def test_job_equals_the_python_api_weighted_by_colour():
+    V, F, groups = scene()
+    settings = BakeSettings(preset="marble", model="dipole", transport="direct")
+    job = BakeJob(V, F, groups, settings)
+    seen = []
+    radiance = job.wait(on_progress=lambda f, m: seen.append((f, m)), interval=0.02)
+    mesh = Mesh.from_arrays(V, F)
+    expected = sum(c * bake(mesh, Material.preset("marble"), lights, model="dipole", transport="direct").radiance
+                   for c, lights in groups)
+    np.testing.assert_allclose(radiance, expected, rtol=1e-12, atol=0)
+    assert job.fraction == 1.0 and job._dir is None            # the scratch folder is gone
+    assert seen and all(0.0 <= f <= 1.0 for f, _ in seen) and seen[0][1].startswith("bake 1/2")
+    assert any("mesh:" in line for line in job.summary)
+
+
+def test_custom_coefficients_are_passed_exactly():
+    V, F, groups = scene()
+    settings = BakeSettings(preset=None, sigma_s_prime=(1.1, 0.9, 0.7), sigma_a=(0.011, 0.02, 1 / 30), eta=1.41,
+                            model="dipole", transport="direct")
+    radiance = BakeJob(V, F, groups[:1], settings).wait()
+    expected = groups[0][0] * bake(Mesh.from_arrays(V, F), Material((1.1, 0.9, 0.7), (0.011, 0.02, 1 / 30), 1.41),
+                                   groups[0][1], model="dipole", transport="direct").radiance
+    np.testing.assert_allclose(radiance, expected, rtol=1e-12)
+
+
+def test_a_mistake_is_the_commands_one_line_error(tmp_path):
+    V, F, groups = scene()
+    job = BakeJob(V, F, groups, BakeSettings(preset="no-such-medium"), log=tmp_path / "log.txt")
+    with pytest.raises(BakeJobError) as info:
+        job.wait()
+    text = str(info.value)
+    assert "\n" not in text and "no-such-medium" in text and "exit 2" in text and "Traceback" not in text
+    assert job._dir is None
+    assert "no-such-medium" in (tmp_path / "log.txt").read_text()
+
+
+def test_a_missing_python_is_refused():
+    V, F, groups = scene()
+    with pytest.raises(BakeJobError, match="does not exist"):
+        BakeJob(V, F, groups, BakeSettings(), python="/no/such/python").start()
+
+
+def test_cancel_stops_the_child_at_once_and_leaves_nothing():
+    V, F = icosphere(20.0, 6)   # 41k vertices, exact geodesics: long enough to be cancelled mid-way
+    job = BakeJob(V, F, [(np.ones(3), [DirectionalLight((0, 0, -1), 1e-3)])],
+                  BakeSettings(preset="skin1", model="curved", transport="direct")).start()
+    folder, proc = job._dir, job._runs[0].proc
+    assert folder.is_dir()
+    time.sleep(1.0)
+    assert not job.poll()
+    t0 = time.monotonic()
+    job.cancel()
+    assert time.monotonic() - t0 < 5.0
+    assert proc.poll() is not None and not folder.exists()
+    with pytest.raises(BakeJobError, match="cancelled"):
+        job.poll()
