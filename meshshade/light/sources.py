@@ -147,7 +147,7 @@ class Spot:
     :meth:`falloff` is the fraction of the axial intensity emitted at an angle theta from the axis: with
     c = cos(angle / 2) and t = (cos theta - c) / ((1 - c) blend), smoothstep(t) = 3t^2 - 2t^3 clamped to [0, 1]
     (1 inside the cone and 0 outside when ``blend`` = 0): Cycles' spot attenuation, so a Blender spot bakes as
-    Cycles renders it.
+    Cycles renders it (checked against a Cycles render in tests/blender/test_addon.py).
     """
 
     axis: tuple[float, float, float]

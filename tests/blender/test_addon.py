@@ -244,3 +244,49 @@ def test_glb_of_the_cli_reads_back_in_blenders_gltf_importer(registered, tmp_pat
     np.testing.assert_allclose(got, radiance[idx].astype(np.float32), rtol=1e-6, atol=1e-9)
     colour = me.color_attributes[0]   # COLOR_0, as the importer names it
     assert colour.domain in ("POINT", "CORNER") and len(colour.data) > 0
+
+
+def test_spot_falloff_and_point_watts_are_cycles_own(registered, tmp_path):
+    """A Cycles render of a white Lambertian plane under a Blender spot (1000 W, 60 deg cone, blend 0.5, 10 units
+    above) against the add-on's reading of it: radiance = P/(4π) f(θ) cos θ / d² / π with meshshade's
+    Spot.falloff. This checks the P/(4π) W/sr of a point light and the smoothstep edge against Blender itself."""
+    from meshshade.light.sources import Spot
+
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device, sc.cycles.samples = "CPU", 32
+    sc.render.resolution_x = sc.render.resolution_y = 64
+    sc.view_settings.view_transform = "Standard"
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    bpy.ops.mesh.primitive_plane_add(size=40)
+    plane = bpy.context.active_object
+    mat = bpy.data.materials.new("white")
+    nodes = mat.node_tree.nodes
+    nodes.clear()
+    bsdf = nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (1, 1, 1, 1)
+    mat.node_tree.links.new(bsdf.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    plane.data.materials.append(mat)
+    new_light("Spot", "SPOT", 1000.0, location=(0, 0, 10), spot_size=math.radians(60.0), spot_blend=0.5,
+              shadow_soft_size=0.0)
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    cam.data.type, cam.data.ortho_scale = "ORTHO", 16.0
+    cam.location = (0, 0, 20)
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    sc.render.filepath = str(tmp_path / "spot.exr")
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(str(tmp_path / "spot.exr"))
+    px = np.array(img.pixels[:]).reshape(64, 64, 4)[:, :, 0]
+    xs = (np.arange(64) + 0.5) / 64 * 16.0 - 8.0
+    r = np.hypot(*np.meshgrid(xs, xs))
+    d = np.hypot(r, 10.0)
+    cos = 10.0 / d
+    light = addon.convert_lights(addon.scene_lights(bpy.context), 1.0)[0][0][0]
+    assert light.spot is not None and light.intensity == pytest.approx(1000.0 / (4 * math.pi))
+    f = Spot((0, 0, -1), math.radians(60.0), 0.5).falloff(cos)
+    expected = light.intensity * f * cos / d ** 2 / math.pi
+    for ring in (0.5, 2.0, 3.0, 4.0, 4.5, 5.0):   # the blend zone is r = 3.9 to 5.8
+        sel = np.abs(r - ring) < 0.2
+        assert px[sel].mean() == pytest.approx(expected[sel].mean(), rel=0.02), ring
+    assert np.all(px[r > 6.2] < 1e-3 * px.max())   # outside the cone
