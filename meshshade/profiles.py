@@ -15,6 +15,10 @@ cylinder   (1/R, 0)            R_d(chord of the helix)                exact infi
 saddle     (1/R, -1/R)         R_d(s)                                 (none)                     k1/k2 kernel
 point      (--k1, --k2)        R_d(s)                                 (none)                     k1/k2 kernel
 =========  ==================  =====================================  =========================  ===========
+
+``mc`` is Monte Carlo on the exact plane, sphere or cylinder (:func:`meshshade.montecarlo.shapes.shape_mc_profile`:
+exact exit distances, rings of half-width max(0.1 s, 0.05 / min sigma_t'), a pencil beam at normal incidence,
+``photons`` per channel, reproducible for a ``seed``); its rows carry the standard error.
 """
 from __future__ import annotations
 
@@ -30,7 +34,7 @@ from meshshade.kernels.cylinder import cylinder_exact_profile
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import CHANNELS, Material
-from meshshade.montecarlo import mc_profile
+from meshshade.montecarlo.shapes import shape_mc_profile
 from meshshade.transport.baking import RTOL_RANGE
 
 SHAPES = ("plane", "sphere", "cylinder", "saddle", "point")
@@ -141,8 +145,20 @@ def profile_distances(max_distance_mm=20.0, samples=41) -> np.ndarray:
     return np.linspace(0.0, top, int(samples))
 
 
+#: Monte Carlo photons per channel of a profile (the ring stderr near the source is then ~1 %)
+MC_PHOTONS = 1_000_000
+
+
+def _mc(material, s, shape, azimuth_deg, photons, seed):
+    if shape.kind not in ("plane", "sphere", "cylinder"):
+        raise ParameterError(f"Monte Carlo profiles are exact on a plane, sphere or cylinder, not a {shape.kind}")
+    return shape_mc_profile(material, s, shape=shape.kind, radius_mm=shape.radius_mm, azimuth_deg=azimuth_deg,
+                            photons=photons, seed=seed)
+
+
 def reflectance_profile(material: Material, distances_mm, *, model: str = "dipole", shape: Shape | None = None,
-                        azimuth_deg: float = 0.0, rtol: float = 1e-10) -> np.ndarray:
+                        azimuth_deg: float = 0.0, rtol: float = 1e-10, photons: int = MC_PHOTONS,
+                        seed: int = 0) -> np.ndarray:
     """Diffuse reflectance per unit power entering the medium [mm^-2], shape (3, n): channels r, g, b.
 
     Parameters
@@ -153,6 +169,7 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     shape : Shape (default: plane)
     azimuth_deg : angle of the exit direction from the first principal direction [degrees], finite
     rtol : relative tolerance of the exact series, in [1e-15, 0.1] (``RTOL_RANGE``)
+    photons, seed : Monte Carlo photons per channel and seed (``model="mc"``)
 
     Every argument is checked first (MeshshadeError, one line naming it, its value and the allowed range).
     """
@@ -166,7 +183,7 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     phi = np.deg2rad(_check_azimuth(azimuth_deg))
     rtol = _check_rtol(rtol)
     if model == "mc":
-        return mc_profile(material, s, shape=shape)
+        return _mc(material, s, shape, azimuth_deg, photons, seed).reflectance
     out = np.empty((3, s.size))
     done: dict = {}
     for c in range(3):
@@ -207,8 +224,10 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
     raise ParameterError(f"no exact solution for shape {shape.kind!r}; use --models dipole,curved")
 
 
-def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_deg=(0.0,), rtol=1e-10):
-    """All (model, radius, azimuth, channel) curves as rows of dicts, for the CSV, table and plot.
+def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_deg=(0.0,), rtol=1e-10,
+                 photons: int = MC_PHOTONS, seed: int = 0):
+    """All (model, radius, azimuth, channel) curves as rows of dicts, for the CSV, table and plot; Monte Carlo
+    rows (``mc``, ``photons`` per channel, ``seed``) also hold ``stderr_per_mm2``.
 
     ``models``: a non-empty list of distinct names among ``MODELS``; ``shapes``: a non-empty list of
     :class:`Shape`; ``azimuths_deg``: a non-empty list of finite angles; ``distances_mm`` and ``rtol`` as
@@ -236,8 +255,14 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
                 raise ParameterError(f"no requested distance lies on the sphere of radius {shape.radius_mm:g} mm")
         for az in azimuths_deg:
             for model in models:
-                R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol)
+                err = None
+                if model == "mc":
+                    res = _mc(material, s, shape, az, photons, seed)
+                    R, err = res.reflectance, res.stderr
+                else:
+                    R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol)
                 for c, ch in enumerate(CHANNELS):
                     rows.append({"model": model, "channel": ch, "radius_mm": shape.radius_mm,
-                                 "azimuth_deg": az, "distance_mm": s, "reflectance_per_mm2": R[c]})
+                                 "azimuth_deg": az, "distance_mm": s, "reflectance_per_mm2": R[c],
+                                 "stderr_per_mm2": None if err is None else err[c]})
     return rows

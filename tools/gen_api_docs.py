@@ -27,7 +27,7 @@ PAGES = {
     "transport": ("meshshade.transport", ["baking", "models", "pair_kernel", "gather", "zones", "auto", "clusters",
                                           "farfield", "farfield_kernels"]),
     "output": ("meshshade.output", ["bake_file", "render", "tonemap", "compare", "report"]),
-    "montecarlo": ("meshshade.montecarlo", ["simulation", "engine", "emitter", "sampling", "direct_walk", "kernels",
+    "montecarlo": ("meshshade.montecarlo", ["simulation", "engine", "emitter", "sampling", "direct_walk", "kernels", "shapes",
                                             "interior", "tallies", "wavefront_oracle"]),
     "bench": ("meshshade.bench", ["scenes", "plan", "runner", "references", "report"]),
     "batch": ("meshshade.batch", ["runner", "jobs", "cluster"]),

@@ -9,7 +9,7 @@ import numpy as np
 from meshshade.cli.options import add_material_args, integer, material_from_args, number, parse_floats
 from meshshade.io import check_output_path, write_figure, write_text
 from meshshade.output.report import format_profile_table, profile_csv_text, profile_figure
-from meshshade.profiles import Shape, profile_distances, profile_rows
+from meshshade.profiles import MC_PHOTONS, Shape, profile_distances, profile_rows
 
 HELP = "reflectance vs geodesic distance on a plane, sphere, cylinder, saddle or curvature pair"
 
@@ -24,13 +24,18 @@ def add_profile_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--azimuth", default="0", metavar="DEG",
                    help="exit direction from the first principal direction [deg]; several: 0,45,90")
     p.add_argument("--models", default="dipole,exact",
-                   help="comma list among dipole,exact,curved,mc (default dipole,exact)")
+                   help="comma list among dipole,exact,curved,mc (default dipole,exact); mc: Monte Carlo on the "
+                        "exact plane, sphere or cylinder, with error bars")
     p.add_argument("--distances", metavar="LIST", help="geodesic distances [mm], e.g. 0.1,0.5,1")
     p.add_argument("--max-distance", type=number, default=None, metavar="MM",
                    help="with --samples: evenly spaced distances 0..MM (default 20 mm)")
     p.add_argument("--samples", type=integer(2), default=41, metavar="N", help="number of distances (default 41)")
     p.add_argument("--rtol", type=number, default=1e-10, help="relative tolerance of the exact series")
-    p.add_argument("--csv", metavar="FILE", help="write model,channel,distance_mm,reflectance_per_mm2 rows")
+    p.add_argument("--photons", type=integer(16), default=MC_PHOTONS, metavar="N",
+                   help=f"Monte Carlo photons per channel for --models mc (default {MC_PHOTONS:.0e})")
+    p.add_argument("--seed", type=integer(0), default=0, help="Monte Carlo seed (default 0)")
+    p.add_argument("--csv", metavar="FILE", help="write model,channel,distance_mm,reflectance_per_mm2 rows "
+                                                 "(and stderr_per_mm2 with mc)")
     p.add_argument("--plot", metavar="FILE.png", help="plot log reflectance vs geodesic distance")
 
 
@@ -51,7 +56,7 @@ def run_profile(args) -> int:
         radii = parse_floats(args.radius, "--radius") if args.radius is not None else [None]
         shapes = [Shape.make(args.shape, r) for r in radii]
     rows = profile_rows(material, distances, models=models, shapes=shapes, azimuths_deg=azimuths,
-                        rtol=args.rtol)
+                        rtol=args.rtol, photons=args.photons, seed=args.seed)
     extra = (["radius_mm"] if len(shapes) > 1 else []) + (
         ["azimuth_deg"] if len(azimuths) > 1 or shapes[0].kind in ("cylinder", "saddle", "point") else [])
     if args.csv:

@@ -194,16 +194,11 @@ def _check(shape_kind, radius_mm, s, lo, hi, azimuth, photons, n_batches, sector
         raise ParameterError(f"a {shape_kind} needs a radius > 0 mm, got {radius_mm!r}")
     if not (isinstance(photons, (int, np.integer)) and photons >= n_batches):
         raise ParameterError(f"photons must be an integer >= the {n_batches} batches, got {photons!r}")
-    if shape_kind == "sphere" and np.any(hi > np.pi * radius_mm):
-        raise ParameterError(f"rings beyond half the circumference ({np.pi * radius_mm:.6g} mm) do not exist on "
-                             f"this sphere")
-    if shape_kind == "cylinder":
-        if not 0.0 < sector_deg <= 45.0:
-            raise ParameterError(f"the cylinder's sector half-width must be in (0, 45] deg, got {sector_deg!r}")
-        lo_ang = max(0.0, min(azimuth, math.pi / 2) - math.radians(sector_deg))
-        if np.any(hi * math.cos(lo_ang) > np.pi * radius_mm):
-            raise ParameterError(f"rings reach half the circumference ({np.pi * radius_mm:.6g} mm around the "
-                                 f"cylinder) at azimuth {math.degrees(azimuth):g} deg: use smaller distances")
+    if shape_kind == "sphere" and np.any(s > np.pi * radius_mm):
+        raise ParameterError(f"distances beyond half the circumference ({np.pi * radius_mm:.6g} mm) do not exist "
+                             f"on this sphere")
+    if shape_kind == "cylinder" and not 0.0 < sector_deg <= 45.0:
+        raise ParameterError(f"the cylinder's sector half-width must be in (0, 45] deg, got {sector_deg!r}")
 
 
 def shape_mc_profile(material: Material, distances_mm, *, shape: str = "plane", radius_mm: float | None = None,
@@ -214,7 +209,9 @@ def shape_mc_profile(material: Material, distances_mm, *, shape: str = "plane", 
     ``photons`` per channel (channels with equal coefficients share one run), a unit pencil beam entering at
     normal incidence (``reflectance`` is per unit *entering* power), rings [max(s - h, 0), s + h] with
     h = ``halfwidth_mm`` (default :func:`ring_halfwidth`); on the cylinder only exits within ``sector_deg`` of
-    ``azimuth_deg`` (folded into [0, 90] deg by symmetry) count. ``progress``: a callable(photons done) or None.
+    ``azimuth_deg`` (folded into [0, 90] deg by symmetry) count, and a ring whose sector reaches half the girth
+    around the cylinder (where the unrolled surface would overlap itself) is NaN; on the sphere the last ring may
+    be the cap around the antipode. ``progress``: a callable(photons done) or None.
     """
     if not isinstance(material, Material):
         raise ParameterError(f"material must be a Material, got {type(material).__name__}")
@@ -232,6 +229,9 @@ def shape_mc_profile(material: Material, distances_mm, *, shape: str = "plane", 
     _check(kind, radius_mm, s, lo, hi, az_f, photons, n_batches, sector_deg)
     R = float(radius_mm) if kind != "plane" else 0.0
     sector = (max(0.0, az_f - math.radians(sector_deg)), min(math.pi / 2, az_f + math.radians(sector_deg)))
+    if kind == "sphere":
+        hi = np.minimum(hi, np.pi * R)   # the ring at the antipode is a cap
+    wraps = (hi * math.cos(sector[0]) > np.pi * R) if kind == "cylinder" else np.zeros(s.size, dtype=bool)
     area = ring_area(kind, R, lo, hi, sector)
     code = SHAPE_KINDS.index(kind)
     g = float(material.g)
@@ -283,5 +283,7 @@ def shape_mc_profile(material: Material, distances_mm, *, shape: str = "plane", 
         out["S"][ch], out["Se"][ch] = batch_stats(ring1 / area / photons)
         t_sum, t_err = batch_stats((total / photons)[:, None])
         tot[ch], tot_e[ch] = t_sum[0], t_err[0]
+    for k in out:   # a cylinder's sector that reaches half the girth around it: the unrolled area does not hold
+        out[k][:, wraps] = np.nan
     return ShapeProfile(kind, R if kind != "plane" else None, s, lo, hi, float(azimuth_deg), out["R"], out["Re"],
                         out["S"], out["Se"], tot, tot_e, lost, int(photons), time.perf_counter() - t0)

@@ -11,16 +11,21 @@ PROFILE_COLUMNS = ("model", "channel", "distance_mm", "reflectance_per_mm2")
 
 
 def profile_csv_text(rows, extra_columns=()) -> str:
-    """CSV with the columns ``model,channel,distance_mm,reflectance_per_mm2`` followed by ``extra_columns``
-    (``radius_mm`` when several radii, ``azimuth_deg`` for anisotropic shapes); one line per distance."""
-    cols = list(PROFILE_COLUMNS) + list(extra_columns)
+    """CSV with the columns ``model,channel,distance_mm,reflectance_per_mm2``, then ``stderr_per_mm2`` when a
+    Monte Carlo curve is among the rows (empty for the others), then ``extra_columns`` (``radius_mm`` when
+    several radii, ``azimuth_deg`` for anisotropic shapes); one line per distance."""
+    rows = list(rows)
+    mc = any(r.get("stderr_per_mm2") is not None for r in rows)
+    cols = list(PROFILE_COLUMNS) + (["stderr_per_mm2"] if mc else []) + list(extra_columns)
     out = _stdio.StringIO()
     out.write(",".join(cols) + "\n")
     for row in rows:
-        for s, R in zip(row["distance_mm"], row["reflectance_per_mm2"]):
+        err = row.get("stderr_per_mm2")
+        for k, (s, R) in enumerate(zip(row["distance_mm"], row["reflectance_per_mm2"])):
             vals = {"model": row["model"], "channel": row["channel"], "distance_mm": f"{s:.10g}",
                     "reflectance_per_mm2": f"{R:.17g}", "radius_mm": _fmt(row.get("radius_mm")),
-                    "azimuth_deg": _fmt(row.get("azimuth_deg"))}
+                    "azimuth_deg": _fmt(row.get("azimuth_deg")),
+                    "stderr_per_mm2": "" if err is None else f"{err[k]:.6g}"}
             out.write(",".join(vals[c] for c in cols) + "\n")
     return out.getvalue()
 
@@ -56,7 +61,8 @@ def format_profile_table(rows, *, material, extra_columns=()) -> str:
         if not grey:
             h += f" [{r['channel']}]"
         heads.append(h)
-    width = max([14, *(len(h) + 2 for h in heads)])
+    width = max([14, *(len(h) + 2 for h in heads)] + ([19] if any(c.get("stderr_per_mm2") is not None
+                                                                   for c in curves) else []))
     lines = [f"# {material.describe()}", "# reflectance per unit power entering the medium [1/mm^2]",
              f"{'distance_mm':>12}" + "".join(f"{h:>{width}}" for h in heads)]
     s_all = np.unique(np.concatenate([c["distance_mm"] for c in curves]))
@@ -64,7 +70,14 @@ def format_profile_table(rows, *, material, extra_columns=()) -> str:
         cells = []
         for c in curves:
             hit = np.flatnonzero(c["distance_mm"] == x)
-            cells.append(f"{c['reflectance_per_mm2'][hit[0]]:>{width}.6e}" if hit.size else f"{'-':>{width}}")
+            if not hit.size:
+                cells.append(f"{'-':>{width}}")
+            elif c.get("stderr_per_mm2") is not None:   # Monte Carlo: value and relative standard error
+                v, e = c["reflectance_per_mm2"][hit[0]], c["stderr_per_mm2"][hit[0]]
+                rel = f"±{100 * e / v:.1f}%" if v > 0 else ""
+                cells.append(f"{f'{v:.4e}{rel}':>{width}}")
+            else:
+                cells.append(f"{c['reflectance_per_mm2'][hit[0]]:>{width}.6e}")
         lines.append(f"{x:>12.6g}" + "".join(cells))
     return "\n".join(lines)
 
@@ -90,6 +103,11 @@ def profile_figure(rows, *, material, shapes):
             label = r["model"] + (f", R0 = {r['radius_mm']:g} mm" if r["radius_mm"] is not None else "")
             if len({x["azimuth_deg"] for x in rows}) > 1:
                 label += f", phi = {r['azimuth_deg']:g} deg"
+            if r.get("stderr_per_mm2") is not None:   # Monte Carlo: points with 2-sigma error bars
+                ax.errorbar(r["distance_mm"], R, yerr=2.0 * r["stderr_per_mm2"], fmt="o", ms=3, color=colour,
+                            label=label + " (±2σ)", capsize=2, lw=1.0)
+                ax.set_yscale("log")
+                continue
             ax.semilogy(r["distance_mm"], R, styles.get(r["model"], "-"), color=colour, label=label, lw=1.4)
         ax.set_xlabel("geodesic distance from entry point [mm]")
         ax.set_ylabel("diffuse reflectance R [1/mm$^2$]")

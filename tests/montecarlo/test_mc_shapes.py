@@ -125,7 +125,6 @@ def test_runs_are_reproducible_and_channels_share_runs():
     (dict(shape="saddle"), "exact on plane, sphere, cylinder"),
     (dict(shape="sphere"), "needs a radius"),
     (dict(shape="sphere", radius_mm=1.0), "half the circumference"),
-    (dict(shape="cylinder", radius_mm=1.0), "half the circumference"),
     (dict(photons=3), "photons must be"),
     (dict(shape="cylinder", radius_mm=50.0, sector_deg=60.0), "sector half-width"),
 ])
@@ -148,3 +147,35 @@ def test_sphere_agrees_with_the_mesh_engine_on_an_icosphere():
                            return_stderr=True)
     tol = 4.0 * np.hypot(exact.stderr[0], err[0]) + 0.02 * exact.reflectance[0]
     assert np.all(np.abs(mesh[0] - exact.reflectance[0]) < tol), (mesh[0], exact.reflectance[0], tol)
+
+
+def test_cylinder_rings_that_wrap_around_are_nan():
+    p = shape_mc_profile(Material(1.0, 0.01, 1.3), [1.0, 4.0], shape="cylinder", radius_mm=1.0, photons=2_000)
+    assert np.isfinite(p.reflectance[0, 0]) and np.isnan(p.reflectance[0, 1])   # pi R = 3.14 mm around
+    q = shape_mc_profile(Material(1.0, 0.01, 1.3), [4.0], shape="cylinder", radius_mm=1.0, azimuth_deg=90.0,
+                         photons=2_000)
+    assert np.isfinite(q.reflectance[0, 0])                                         # along the axis: no wrap
+
+
+def test_profile_command_takes_mc_on_plane_sphere_and_cylinder(tmp_path, capsys):
+    from meshshade.cli.main import main
+
+    csv = tmp_path / "p.csv"
+    assert main(["profile", "--sigma-s-prime", "1", "--sigma-a", "0.01", "--models", "dipole,mc", "--distances",
+                 "0.1,1,2", "--photons", "20000", "--seed", "4", "--csv", str(csv)]) == 0
+    lines = csv.read_text().splitlines()
+    assert lines[0] == "model,channel,distance_mm,reflectance_per_mm2,stderr_per_mm2"
+    mc = [ln.split(",") for ln in lines[1:] if ln.startswith("mc,r,")]
+    direct = shape_mc_profile(Material(1.0, 0.01, 1.3), [0.1, 1.0, 2.0], photons=20_000, seed=4)
+    np.testing.assert_allclose([float(r[3]) for r in mc], direct.reflectance[0], rtol=1e-15)
+    np.testing.assert_allclose([float(r[4]) for r in mc], direct.stderr[0], rtol=1e-5)
+    assert all(ln.split(",")[4] == "" for ln in lines[1:] if ln.startswith("dipole,"))
+    capsys.readouterr()
+    for shape in (["--shape", "sphere", "--radius", "10"], ["--shape", "cylinder", "--radius", "10", "--azimuth", "90"]):
+        assert main(["profile", "--material", "marble", "--models", "mc", "--distances", "1,2", "--photons", "5000",
+                     *shape]) == 0
+        assert "±" in capsys.readouterr().out
+    assert main(["profile", "--material", "marble", "--models", "mc", "--shape", "saddle", "--radius", "5",
+                 "--distances", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "exact on a plane, sphere or cylinder" in err and err.count("\n") == 1
