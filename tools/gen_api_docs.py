@@ -18,7 +18,7 @@ CHECK = "--check" in sys.argv[1:]
 PAGES = {
     "meshshade": ("meshshade", ["errors", "units", "materials", "io", "memo", "check", "profiles",
                                         "preview", "demo"]),
-    "kernels": ("meshshade.kernels", ["optics", "fresnel", "dipole", "sphere", "cylinder", "curvature",
+    "kernels": ("meshshade.kernels", ["optics", "fresnel", "dipole", "single_scattering", "beam_diffusion", "sphere", "cylinder", "curvature",
                                       "auxiliary", "coefficients", "table", "policies", "profile"]),
     "geometry": ("meshshade.geometry", ["mesh", "topology", "procedural", "curvature", "convexity", "geodesics",
                                         "exact", "neighbourhoods", "arc"]),
