@@ -39,7 +39,8 @@ def run_compare(args) -> int:
                          progress=False if args.quiet else "compare")
     for p in save_comparison(cmp, out, models=models, metadata=scene.metadata, operator=args.tonemap,
                              bias=args.bias, background=scene.background):
-        print(f"wrote {p}")
+        if not args.quiet:
+            print(f"wrote {p}")
     s = cmp["stats"]
     print(json.dumps({k: s[k] for k in ("max_rel_diff", "mean_rel_diff", "p95_rel_diff")}))
     return 0

@@ -61,10 +61,12 @@ def run_profile(args) -> int:
         ["azimuth_deg"] if len(azimuths) > 1 or shapes[0].kind in ("cylinder", "saddle", "point") else [])
     if args.csv:
         write_text(args.csv, profile_csv_text(rows, extra_columns=extra))
-        print(f"wrote {args.csv}")
+        if not args.quiet:
+            print(f"wrote {args.csv}")
     if args.plot:
         write_figure(args.plot, profile_figure(rows, material=material, shapes=shapes))
-        print(f"wrote {args.plot}")
+        if not args.quiet:
+            print(f"wrote {args.plot}")
     if not args.csv and not args.plot:
         print(format_profile_table(rows, material=material, extra_columns=extra))
     return 0

@@ -77,7 +77,7 @@ def run_render(args) -> int:
     write_png(png, display_rgba(rgb, alpha, operator=args.tonemap, bias=args.bias, background=scene.background))
     if not args.quiet:
         print(describe_result(res))
-    print(f"wrote {exr} and {png}")
+        print(f"wrote {exr} and {png}")
     return 0
 
 
@@ -125,5 +125,5 @@ def _render_baked(args, baked, exr, png) -> int:
     write_png(png, display_rgba(rgb, alpha, operator=args.tonemap, bias=args.bias, background=background))
     if not args.quiet:
         print(f"rendered the radiance baked into {args.mesh} (model {info['model']}, {info['material']})")
-    print(f"wrote {exr} and {png}")
+        print(f"wrote {exr} and {png}")
     return 0

@@ -312,3 +312,26 @@ def test_output_folder_that_cannot_be_made(sphere, cli, command):
                 ["compare", sphere, *SKIN, *SUN, "--width", 16, "--height", 16, "-q"]) + ["--out", out]
         rc, _, err = cli.run(argv)
         cli.assert_clean_failure(rc, err, before, tmp, str(out))
+
+
+def test_quiet_prints_only_what_the_command_exists_to_print(sphere, tmp_path, capsys):
+    """--quiet: no notes and no "wrote ..." lines; profile's table, check's report and compare's statistics stay."""
+    from meshshade.cli.main import main
+
+    runs = [
+        (["bake", str(sphere), "--material", "marble", "--light", "directional:0,0,-1", "--model", "dipole",
+          "--out", str(tmp_path / "b.ply")], None),
+        (["render", str(sphere), "--material", "marble", "--light", "directional:0,0,-1", "--model", "dipole",
+          "--width", "24", "--height", "24", "--out", str(tmp_path / "r")], None),
+        (["profile", "--material", "marble", "--distances", "1,2", "--csv", str(tmp_path / "p.csv")], None),
+        (["compare", str(sphere), "--material", "marble", "--light", "directional:0,0,-1", "--models",
+          "dipole,curved", "--width", "24", "--height", "24", "--out", str(tmp_path / "c")], "max_rel_diff"),
+        (["profile", "--material", "marble", "--distances", "1,2"], "distance_mm"),
+    ]
+    for argv, kept in runs:
+        assert main([argv[0], "--quiet", *argv[1:]]) == 0, argv
+        out = capsys.readouterr().out
+        if kept is None:
+            assert out == "", (argv[0], out)
+        else:
+            assert kept in out and "wrote" not in out, (argv[0], out)
