@@ -16,6 +16,10 @@ saddle     (1/R, -1/R)         R_d(s)                                 (none)    
 point      (--k1, --k2)        R_d(s)                                 (none)                     k1/k2 kernel
 =========  ==================  =====================================  =========================  ===========
 
+``beam`` is the half-space near-field model (:mod:`meshshade.kernels.near_field`: exact single scattering plus the
+beam's fitted diffusion sources, docs/physics.md §13) at the same distance as the dipole's (the chord on the sphere
+and cylinder, s elsewhere): near the light it is the accurate one; it does not know curvature yet.
+
 ``mc`` is Monte Carlo on the exact plane, sphere or cylinder (:func:`meshshade.montecarlo.shapes.shape_mc_profile`:
 exact exit distances, rings of half-width max(0.1 s, 0.05 / min sigma_t'), a pencil beam at normal incidence,
 ``photons`` per channel, reproducible for a ``seed``); its rows carry the standard error.
@@ -32,13 +36,14 @@ from meshshade.errors import ParameterError
 from meshshade.kernels.curvature import curvature_profile
 from meshshade.kernels.cylinder import cylinder_exact_profile
 from meshshade.kernels.dipole import dipole_profile
+from meshshade.kernels.near_field import near_field_profile
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import CHANNELS, Material
 from meshshade.montecarlo.shapes import shape_mc_profile
 from meshshade.transport.baking import RTOL_RANGE
 
 SHAPES = ("plane", "sphere", "cylinder", "saddle", "point")
-MODELS = ("dipole", "exact", "curved", "mc")
+MODELS = ("dipole", "exact", "curved", "beam", "mc")
 
 
 def _real(value) -> float:
@@ -194,8 +199,24 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
         done[key] = c
         st = float(material.sigma_t_prime[c])
         par = {"albedo_prime": float(material.albedo_prime[c]), "eta": material.eta}
+        if model == "beam":
+            out[c] = near_field_profile(_flat_distance(s * st, shape, phi, st), g=material.g, **par) * st * st
+            continue
         out[c] = _profile_opt(s * st, model, shape, phi, st, par, rtol) * st * st
     return out
+
+
+def _flat_distance(r, shape, phi, st):
+    """The distance (optical units) at which a half-space model is evaluated: the chord on the sphere and the
+    cylinder (as the dipole), the geodesic distance elsewhere."""
+    if shape.kind == "sphere":
+        R0 = shape.radius_mm * st
+        return 2.0 * R0 * np.sin(0.5 * np.minimum(r / R0, np.pi))
+    if shape.kind == "cylinder":
+        R0 = shape.radius_mm * st
+        around, along = r * np.cos(phi), r * np.sin(phi)
+        return np.hypot(2.0 * R0 * np.sin(0.5 * around / R0), along)
+    return r
 
 
 def _profile_opt(r, model, shape, phi, st, par, rtol):

@@ -7,7 +7,10 @@ half-space Monte Carlo (meshshade.montecarlo.shapes, all scattering orders) agai
 * ``point``: the planar dipole, one source at z_r = 1/sigma_t' (today's model);
 * ``beam-jensen``, ``beam-better``: photon beam diffusion with Jensen's or d'Eon's dipole per source, plus the
   exact single scattering (meshshade.kernels.beam_diffusion, single_scattering);
-* ``beam-better-ms``: the same without single scattering.
+* ``beam-better-ms``: the same without single scattering;
+* ``fitted``: exact single scattering plus the beam's fitted sources (meshshade.kernels.near_field, the model
+  of physics.md §13 eq. (76); its table was fitted to a Monte Carlo with other seeds, on a grid the media here
+  mostly fall between).
 
 Prints one JSON line per (medium, channel, model) with the relative error per ring and of the total diffuse
 reflectance, then a summary line per model (worst |error| at s >= 0.5 mm, at 0.1 <= s < 0.5 mm, and of the total).
@@ -26,6 +29,7 @@ import numpy as np
 
 from meshshade.kernels.beam_diffusion import beam_diffusion_ring, beam_diffusion_total
 from meshshade.kernels.dipole import dipole_profile, dipole_total_reflectance
+from meshshade.kernels.near_field import near_field_ring, near_field_total
 from meshshade.kernels.single_scattering import single_scattering_ring, single_scattering_total
 from meshshade.materials import Material
 from meshshade.montecarlo.shapes import shape_mc_profile
@@ -33,7 +37,7 @@ from meshshade.montecarlo.shapes import shape_mc_profile
 DISTANCES = np.array([0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0])
 MEDIA = [(f"sa={sa:g} eta={eta:g} g={g:g}", Material(1.0, sa, eta, g))
          for sa in (0.01, 0.1) for eta in (1.0, 1.3) for g in (0.0, 0.8)] + [("skin1", Material.preset("skin1"))]
-MODELS = ("point", "beam-jensen", "beam-better", "beam-better-ms")
+MODELS = ("point", "beam-jensen", "beam-better", "beam-better-ms", "fitted")
 _U, _W = np.polynomial.legendre.leggauss(64)
 
 
@@ -53,6 +57,9 @@ def model_rings(model, lo, hi, m: Material, ch):
     lo_o, hi_o = lo * st, hi * st
     if model == "point":
         ring, total = point_ring(lo_o, hi_o, a, eta), dipole_total_reflectance(albedo_prime=a, eta=eta)
+    elif model == "fitted":
+        ring, total = (near_field_ring(lo_o, hi_o, albedo_prime=a, eta=eta, g=g),
+                       near_field_total(albedo_prime=a, eta=eta, g=g))
     else:
         variant = "jensen" if model == "beam-jensen" else "better"
         ring = beam_diffusion_ring(lo_o, hi_o, albedo_prime=a, eta=eta, variant=variant)

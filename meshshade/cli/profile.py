@@ -24,8 +24,9 @@ def add_profile_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--azimuth", default="0", metavar="DEG",
                    help="exit direction from the first principal direction [deg]; several: 0,45,90")
     p.add_argument("--models", default="dipole,exact",
-                   help="comma list among dipole,exact,curved,mc (default dipole,exact); mc: Monte Carlo on the "
-                        "exact plane, sphere or cylinder, with error bars")
+                   help="comma list among dipole,exact,curved,beam,mc (default dipole,exact); beam: the near-field "
+                        "model (single scattering + fitted beam sources, half-space); mc: Monte Carlo on the exact "
+                        "plane, sphere or cylinder, with error bars")
     p.add_argument("--distances", metavar="LIST", help="geodesic distances [mm], e.g. 0.1,0.5,1")
     p.add_argument("--max-distance", type=number, default=None, metavar="MM",
                    help="with --samples: evenly spaced distances 0..MM (default 20 mm)")

@@ -39,8 +39,8 @@ import numpy as np
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.kernels.optics import check_material, diffusion_params
 
-__all__ = ["DipoleVariant", "dipole_variant", "fresnel_moments", "point_source_reflectance", "beam_diffusion_profile",
-           "beam_diffusion_ring", "beam_diffusion_total", "VARIANTS"]
+__all__ = ["DipoleVariant", "dipole_variant", "fresnel_moments", "point_source_reflectance", "point_source_ring",
+           "point_source_total", "beam_diffusion_profile", "beam_diffusion_ring", "beam_diffusion_total", "VARIANTS"]
 
 VARIANTS = ("jensen", "better")
 
@@ -109,6 +109,41 @@ def point_source_reflectance(r_opt, depth_opt, *, albedo_prime, eta, variant="be
     e = np.exp(-v.mu * d)
     real = v.c_phi * e / (4.0 * math.pi * v.D * d) + v.c_E * t * (1.0 + v.mu * d) * e / (4.0 * math.pi * d ** 3)
     return (real + _image_terms(r, t, v))[()]
+
+
+def _ring_integral(d0, d1, z, v: DipoleVariant, sign: float):
+    """int_{r0}^{r1} 2 pi r [sign C_phi e^{-mu d}/(4 pi D d) + C_E z (1 + mu d) e^{-mu d}/(4 pi d^3)] dr with
+    d^2 = r^2 + z^2 (r dr = d dd), in closed form from d0 to d1."""
+    e0, e1 = np.exp(-v.mu * d0), np.exp(-v.mu * d1)
+    if v.mu > 0:
+        phi = (e0 - e1) / (2.0 * v.D * v.mu)
+    else:
+        phi = (d1 - d0) / (2.0 * v.D)
+    return sign * v.c_phi * phi + v.c_E * 0.5 * z * (e0 / d0 - e1 / d1)
+
+
+def point_source_ring(lo, hi, depth_opt, *, albedo_prime, eta, variant="better"):
+    """Average of :func:`point_source_reflectance` over the ring lo <= r < hi, in closed form (arrays broadcast;
+    depth > 0)."""
+    check_material(albedo_prime, eta)
+    v = dipole_variant(albedo_prime, eta, variant)
+    lo, hi, t = np.broadcast_arrays(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64),
+                                    np.asarray(depth_opt, dtype=np.float64))
+    zv = t + 2.0 * v.z_b
+    real = _ring_integral(np.hypot(lo, t), np.hypot(hi, t), t, v, 1.0)
+    image = _ring_integral(np.hypot(lo, zv), np.hypot(hi, zv), zv, v, -1.0)
+    return ((real + image) / (math.pi * (hi * hi - lo * lo)))[()]
+
+
+def point_source_total(depth_opt, *, albedo_prime, eta, variant="better"):
+    """int R_t 2 pi r dr of a unit point source at depth t: C_E (e^{-mu t} + e^{-mu (t + 2 z_b)}) / 2
+    + C_phi (e^{-mu t} - e^{-mu (t + 2 z_b)}) / (2 D mu)."""
+    check_material(albedo_prime, eta)
+    v = dipole_variant(albedo_prime, eta, variant)
+    t = np.asarray(depth_opt, dtype=np.float64)
+    e_r, e_v = np.exp(-v.mu * t), np.exp(-v.mu * (t + 2.0 * v.z_b))
+    phi = (e_r - e_v) / (2.0 * v.D * v.mu) if v.mu > 0 else 2.0 * v.z_b / (2.0 * v.D) + 0.0 * t
+    return (v.c_E * 0.5 * (e_r + e_v) + v.c_phi * phi)[()]
 
 
 def _image_terms(r, t, v: DipoleVariant):

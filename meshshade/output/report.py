@@ -93,7 +93,7 @@ def profile_figure(rows, *, material, shapes):
     grey = _grey(rows)
     chans = ["r"] if grey else ["r", "g", "b"]
     fig, axes = plt.subplots(1, len(chans), figsize=(5.2 * len(chans), 4.2), squeeze=False)
-    styles = {"dipole": "--", "exact": "-", "curved": "-.", "mc": ":"}
+    styles = {"dipole": "--", "exact": "-", "curved": "-.", "beam": (0, (5, 1, 1, 1)), "mc": ":"}
     radii = sorted({r["radius_mm"] for r in rows if r["radius_mm"] is not None})
     cmap = plt.get_cmap("viridis")
     for ax, ch in zip(axes[0], chans):
@@ -108,7 +108,7 @@ def profile_figure(rows, *, material, shapes):
                             label=label + " (±2σ)", capsize=2, lw=1.0)
                 ax.set_yscale("log")
                 continue
-            ax.semilogy(r["distance_mm"], R, styles.get(r["model"], "-"), color=colour, label=label, lw=1.4)
+            ax.semilogy(r["distance_mm"], R, linestyle=styles.get(r["model"], "-"), color=colour, label=label, lw=1.4)
         ax.set_xlabel("geodesic distance from entry point [mm]")
         ax.set_ylabel("diffuse reflectance R [1/mm$^2$]")
         ax.set_title(("" if grey else f"channel {ch}: ") + ", ".join(sorted({s.kind for s in shapes})))

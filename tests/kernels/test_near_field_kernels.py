@@ -129,3 +129,15 @@ def test_bad_material_is_refused():
         single_scattering_profile(1.0, albedo_prime=0.9, eta=1.3, g=1.0)
     with pytest.raises(MaterialError):
         beam_diffusion_profile(1.0, albedo_prime=0.9, eta=3.0)
+
+
+@pytest.mark.parametrize("a, eta, t", [(0.99, 1.3, 0.03), (0.7, 1.0, 1.0), (0.999, 2.0, 4.0), (0.5, 1.4, 0.01)])
+def test_point_source_ring_and_total_closed_forms(a, eta, t):
+    from meshshade.kernels.beam_diffusion import point_source_ring, point_source_total
+
+    f = lambda r: 2 * math.pi * r * point_source_reflectance(r, t, albedo_prime=a, eta=eta)  # noqa: E731
+    for lo, hi in ((0.0, 0.01), (0.05, 0.15), (2.0, 3.0)):
+        want = quad(f, lo, hi, epsrel=1e-12, limit=200)[0] / (math.pi * (hi * hi - lo * lo))
+        assert point_source_ring(lo, hi, t, albedo_prime=a, eta=eta) == pytest.approx(want, rel=1e-9)
+    total = sum(quad(f, lo, hi, epsrel=1e-12, limit=400)[0] for lo, hi in ((0, t), (t, 10 * t + 1), (10 * t + 1, 2e3)))
+    assert point_source_total(t, albedo_prime=a, eta=eta) == pytest.approx(total, rel=1e-8)
