@@ -231,13 +231,12 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
             raise ParameterError(f"distances beyond half the circumference ({np.pi * shape.radius_mm:.6g} mm) "
                                  "do not exist on this sphere")
         if model == "dipole":
-            return dipole_profile(2.0 * R0 * np.sin(0.5 * theta), **par)
+            return dipole_profile(_flat_distance(r, shape, phi, st), **par)
         return sphere_series_profile(theta, R0_opt=R0, rtol=rtol, **par)
     if shape.kind == "cylinder":
         around, along = r * np.cos(phi), r * np.sin(phi)
         if model == "dipole":
-            chord = np.hypot(2.0 * R0 * np.sin(0.5 * around / R0), along)
-            return dipole_profile(chord, **par)
+            return dipole_profile(_flat_distance(r, shape, phi, st), **par)
         theta = np.mod(around / R0 + np.pi, 2 * np.pi) - np.pi
         # far out (mu s > ~30) the series' absolute error (~1e-14 R(0)) exceeds the value: clamp that noise at 0
         return np.maximum(cylinder_exact_profile(np.abs(theta), np.abs(along), R0_opt=R0, rtol=max(rtol, 1e-13),

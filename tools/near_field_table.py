@@ -21,14 +21,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 
 import numpy as np
 
-from meshshade.kernels.beam_diffusion import beam_diffusion_ring, beam_diffusion_total
-from meshshade.kernels.dipole import dipole_profile, dipole_total_reflectance
+from meshshade.kernels.beam_diffusion import beam_diffusion_ring, beam_diffusion_total, point_source_ring
+from meshshade.kernels.dipole import dipole_total_reflectance
 from meshshade.kernels.near_field import near_field_ring, near_field_total
 from meshshade.kernels.single_scattering import single_scattering_ring, single_scattering_total
 from meshshade.materials import Material
@@ -38,25 +37,14 @@ DISTANCES = np.array([0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0])
 MEDIA = [(f"sa={sa:g} eta={eta:g} g={g:g}", Material(1.0, sa, eta, g))
          for sa in (0.01, 0.1) for eta in (1.0, 1.3) for g in (0.0, 0.8)] + [("skin1", Material.preset("skin1"))]
 MODELS = ("point", "beam-jensen", "beam-better", "beam-better-ms", "fitted")
-_U, _W = np.polynomial.legendre.leggauss(64)
-
-
-def point_ring(lo, hi, a, eta):
-    """Ring average of the planar dipole (optical units) by Gauss-Legendre in r."""
-    out = np.empty(lo.size)
-    for j in range(lo.size):
-        r = lo[j] + (hi[j] - lo[j]) * 0.5 * (_U + 1.0)
-        R = dipole_profile(r, albedo_prime=a, eta=eta)
-        out[j] = np.sum(0.5 * _W * (hi[j] - lo[j]) * 2 * math.pi * r * R) / (math.pi * (hi[j] ** 2 - lo[j] ** 2))
-    return out
-
-
 def model_rings(model, lo, hi, m: Material, ch):
     st = float(m.sigma_t_prime[ch])
     a, eta, g = float(m.albedo_prime[ch]), m.eta, m.g
     lo_o, hi_o = lo * st, hi * st
     if model == "point":
-        ring, total = point_ring(lo_o, hi_o, a, eta), dipole_total_reflectance(albedo_prime=a, eta=eta)
+        # the planar dipole is alpha' times Jensen's point source at depth 1 (closed-form ring average)
+        ring = a * point_source_ring(lo_o, hi_o, 1.0, albedo_prime=a, eta=eta, variant="jensen")
+        total = dipole_total_reflectance(albedo_prime=a, eta=eta)
     elif model == "fitted":
         ring, total = (near_field_ring(lo_o, hi_o, albedo_prime=a, eta=eta, g=g),
                        near_field_total(albedo_prime=a, eta=eta, g=g))

@@ -223,6 +223,12 @@ def radiance_material():
     return mat
 
 
+def _active_mesh(context) -> bool:
+    """Whether the active object is a mesh (the operator's and the panel's poll)."""
+    ob = context.active_object
+    return ob is not None and ob.type == "MESH"
+
+
 def _one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return text if isinstance(exc, MeshshadeError) else f"{type(exc).__name__}: {text}"
@@ -238,8 +244,7 @@ class MESHSHADE_OT_bake(_BakeProperties, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        ob = context.active_object
-        return ob is not None and ob.type == "MESH"
+        return _active_mesh(context)
 
     def _start(self, context):
         ob = context.active_object
@@ -343,8 +348,7 @@ class MESHSHADE_PT_panel(bpy.types.Panel):
 
     @classmethod
     def poll(cls, context):
-        ob = context.active_object
-        return ob is not None and ob.type == "MESH"
+        return _active_mesh(context)
 
     def draw(self, context):
         layout = self.layout
@@ -368,8 +372,7 @@ class MESHSHADE_PT_panel(bpy.types.Panel):
             layout.label(text=f"Size {size[0]:.4g} x {size[1]:.4g} x {size[2]:.4g} mm ({mpu:g} mm per unit)")
         except MeshshadeError as exc:
             layout.label(text=str(exc), icon="ERROR")
-        n = sum(1 for o in context.view_layer.objects if o.type == "LIGHT" and not o.hide_render
-                and o.data.type in ("SUN", "POINT", "SPOT"))
+        n = sum(1 for lt in scene_lights(context) if lt.kind in ("SUN", "POINT", "SPOT"))
         layout.label(text=f"{n} sun/point/spot light(s) in the scene", icon="LIGHT" if n else "ERROR")
         op = layout.operator(MESHSHADE_OT_bake.bl_idname, icon="RENDER_STILL")
         for name in _SETTING_NAMES:

@@ -19,8 +19,8 @@ Point
 Spot
     Blender gives a spot the intensity of a point light of the same power inside its cone (``spot_size`` is the
     full cone angle, ``spot_blend`` softens the edge): I = P / (4π) W/sr along the axis, times Cycles' smoothstep
-    falloff towards the edge (:func:`spot_falloff`; meshshade's :class:`~meshshade.light.sources.PointLight` with
-    a ``spot`` cone).
+    falloff towards the edge (:meth:`meshshade.light.sources.Spot.falloff`; meshshade's
+    :class:`~meshshade.light.sources.PointLight` with a ``spot`` cone).
 
 Colour
     The exitance is linear in each light's strength, per channel, so a light's colour multiplies its share of the
@@ -40,7 +40,7 @@ from meshshade.errors import LightError, UnitsError
 from meshshade.light.sources import DirectionalLight, PointLight, Spot
 
 __all__ = ["BlenderLight", "mm_per_blender_unit", "world_vertices_mm", "world_faces", "light_direction",
-           "sun_irradiance", "point_intensity", "spot_falloff", "convert_lights", "colour_groups"]
+           "sun_irradiance", "point_intensity", "convert_lights", "colour_groups"]
 
 #: W/mm² per W/m²
 W_PER_MM2_PER_W_PER_M2 = 1e-6
@@ -94,12 +94,6 @@ def sun_irradiance(strength_w_per_m2: float) -> float:
 def point_intensity(power_w: float) -> float:
     """W/sr of an isotropic point (or the axis of a spot) light of ``power`` W: P / (4π)."""
     return float(power_w) / (4.0 * math.pi)
-
-
-def spot_falloff(cos_angle, spot_size: float, spot_blend: float):
-    """Cycles' spot attenuation at ``cos_angle`` from the axis, for a cone of full angle ``spot_size`` (rad) and
-    edge softness ``spot_blend`` in [0, 1] (the same function as :meth:`meshshade.light.sources.Spot.falloff`)."""
-    return Spot((0.0, 0.0, 1.0), spot_size, spot_blend).falloff(cos_angle)
 
 
 @dataclass

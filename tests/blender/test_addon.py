@@ -84,6 +84,40 @@ def cli_bake(tmp_path, obj_path, specs, tag, *extra):
         return np.asarray(z["radiance"])
 
 
+def cycles_scene(samples, resolution):
+    """The factory scene set to render with Cycles on the CPU, linear EXR, no view transform."""
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device, sc.cycles.samples = "CPU", samples
+    sc.render.resolution_x = sc.render.resolution_y = resolution
+    sc.view_settings.view_transform = "Standard"
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    return sc
+
+
+def white_plane(size):
+    """A plane with a white Lambertian (Diffuse BSDF) material."""
+    bpy.ops.mesh.primitive_plane_add(size=size)
+    plane = bpy.context.active_object
+    mat = bpy.data.materials.new("white")
+    nodes = mat.node_tree.nodes
+    nodes.clear()
+    bsdf = nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (1, 1, 1, 1)
+    mat.node_tree.links.new(bsdf.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    plane.data.materials.append(mat)
+    return plane
+
+
+def camera_above(height, ortho_scale=None):
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    if ortho_scale is not None:
+        cam.data.type, cam.data.ortho_scale = "ORTHO", ortho_scale
+    cam.location = (0, 0, height)
+    bpy.context.scene.collection.objects.link(cam)
+    bpy.context.scene.camera = cam
+
+
 def test_register_and_unregister():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     meshshade.blender.register()
@@ -180,19 +214,10 @@ def test_errors_are_reports_not_tracebacks(registered):
 def test_the_display_material_renders_the_exitance_on_cycles_scale(registered, tmp_path):
     """Cycles: an emission of strength E renders as E, a white Lambertian plane under a sun of strength S as S/π;
     so the material's exitance M W/mm² must render as M 1e6/π (addon.EMISSION_PER_W_PER_MM2)."""
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device, sc.cycles.samples = "CPU", 64
-    sc.render.resolution_x = sc.render.resolution_y = 8
-    sc.view_settings.view_transform = "Standard"
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    bpy.ops.mesh.primitive_plane_add(size=100)
-    plane = bpy.context.active_object
+    sc = cycles_scene(64, 8)
+    plane = white_plane(100)
     new_light("Sun", "SUN", 2.0, angle=0.0)
-    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-    cam.location = (0, 0, 10)
-    sc.collection.objects.link(cam)
-    sc.camera = cam
+    camera_above(10)
 
     def render():
         sc.render.filepath = str(tmp_path / "r.exr")
@@ -202,13 +227,6 @@ def test_the_display_material_renders_the_exitance_on_cycles_scale(registered, t
         bpy.data.images.remove(img)
         return px[:, :3].mean(axis=0)
 
-    diffuse = bpy.data.materials.new("white")
-    nodes = diffuse.node_tree.nodes
-    nodes.clear()
-    bsdf = nodes.new("ShaderNodeBsdfDiffuse")
-    bsdf.inputs["Color"].default_value = (1, 1, 1, 1)
-    diffuse.node_tree.links.new(bsdf.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
-    plane.data.materials.append(diffuse)
     # rtol: Cycles' sampling noise on 64 pixels (about 1 %); what is checked is the factor pi (or its absence)
     np.testing.assert_allclose(render(), 2.0 / math.pi, rtol=0.03)   # no world light: factory scene, use_empty
 
@@ -252,28 +270,11 @@ def test_spot_falloff_and_point_watts_are_cycles_own(registered, tmp_path):
     Spot.falloff. This checks the P/(4π) W/sr of a point light and the smoothstep edge against Blender itself."""
     from meshshade.light.sources import Spot
 
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device, sc.cycles.samples = "CPU", 32
-    sc.render.resolution_x = sc.render.resolution_y = 64
-    sc.view_settings.view_transform = "Standard"
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    bpy.ops.mesh.primitive_plane_add(size=40)
-    plane = bpy.context.active_object
-    mat = bpy.data.materials.new("white")
-    nodes = mat.node_tree.nodes
-    nodes.clear()
-    bsdf = nodes.new("ShaderNodeBsdfDiffuse")
-    bsdf.inputs["Color"].default_value = (1, 1, 1, 1)
-    mat.node_tree.links.new(bsdf.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
-    plane.data.materials.append(mat)
+    sc = cycles_scene(32, 64)
+    white_plane(40)
     new_light("Spot", "SPOT", 1000.0, location=(0, 0, 10), spot_size=math.radians(60.0), spot_blend=0.5,
               shadow_soft_size=0.0)
-    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-    cam.data.type, cam.data.ortho_scale = "ORTHO", 16.0
-    cam.location = (0, 0, 20)
-    sc.collection.objects.link(cam)
-    sc.camera = cam
+    camera_above(20, ortho_scale=16.0)
     sc.render.filepath = str(tmp_path / "spot.exr")
     bpy.ops.render.render(write_still=True)
     img = bpy.data.images.load(str(tmp_path / "spot.exr"))

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from meshshade.blender.convert import (BlenderLight, colour_groups, convert_lights, light_direction,
-                                       mm_per_blender_unit, point_intensity, spot_falloff, sun_irradiance,
+                                       mm_per_blender_unit, point_intensity, sun_irradiance,
                                        world_faces, world_vertices_mm)
 from meshshade.errors import LightError, UnitsError
 from meshshade.light import DirectionalLight, PointLight
@@ -62,7 +62,6 @@ def test_strengths():
     assert sun_irradiance(1000.0) == pytest.approx(1e-3)            # 1000 W/m^2 = 1e-3 W/mm^2
     assert point_intensity(4.0 * math.pi) == pytest.approx(1.0)     # 4 pi W over 4 pi sr
     assert point_intensity(100.0) == pytest.approx(7.957747154594767)   # 100 / (4 pi)
-    assert spot_falloff(np.array([1.0]), math.radians(60), 0.0)[0] == 1.0
 
 
 def test_convert_lights_sun_point_spot_and_what_is_left_out():
