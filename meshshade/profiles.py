@@ -16,9 +16,16 @@ saddle     (1/R, -1/R)         R_d(s)                                 (none)    
 point      (--k1, --k2)        R_d(s)                                 (none)                     k1/k2 kernel
 =========  ==================  =====================================  =========================  ===========
 
-``beam`` is the half-space near-field model (:mod:`meshshade.kernels.near_field`: exact single scattering plus the
-beam's fitted diffusion sources, docs/physics.md §13) at the same distance as the dipole's (the chord on the sphere
-and cylinder, s elsewhere): near the light it is the accurate one; it does not know curvature yet.
+``near_field`` says what enters the medium (docs/physics.md §13): ``"point"`` is every model's own point source at
+depth z_r; ``"beam"`` replaces it by the near-field model (exact single scattering plus the beam's fitted diffusion
+sources, :mod:`meshshade.kernels.near_field`), composed with each model's geometry:
+
+=========  ========================================================================================================
+dipole     the half-space near field at the dipole's distance (the chord on the sphere and cylinder, s elsewhere)
+exact      each of the beam's sources with the exact sphere's or cylinder's Green's function (eq. (78)); single
+           scattering at the chord
+curved     the half-space near field at s times the k1/k2 kernel's curvature factor R_curved(s) / R_d(s) (eq. (79))
+=========  ========================================================================================================
 
 ``mc`` is Monte Carlo on the exact plane, sphere or cylinder (:func:`meshshade.montecarlo.shapes.shape_mc_profile`:
 exact exit distances, rings of half-width max(0.1 s, 0.05 / min sigma_t'), a pencil beam at normal incidence,
@@ -36,14 +43,15 @@ from meshshade.errors import ParameterError
 from meshshade.kernels.curvature import curvature_profile
 from meshshade.kernels.cylinder import cylinder_exact_profile
 from meshshade.kernels.dipole import dipole_profile
-from meshshade.kernels.near_field import near_field_profile
+from meshshade.kernels.near_field import near_field_cylinder_profile, near_field_profile, near_field_sphere_profile
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import CHANNELS, Material
 from meshshade.montecarlo.shapes import shape_mc_profile
 from meshshade.transport.baking import RTOL_RANGE
+from meshshade.transport.near_field import check_near_field
 
 SHAPES = ("plane", "sphere", "cylinder", "saddle", "point")
-MODELS = ("dipole", "exact", "curved", "beam", "mc")
+MODELS = ("dipole", "exact", "curved", "mc")
 
 
 def _real(value) -> float:
@@ -123,6 +131,9 @@ def _check_models(models) -> list[str]:
     if not models:
         raise ParameterError(f"models: give at least one of {', '.join(MODELS)}")
     for m in models:
+        if m == "beam":
+            raise ParameterError("the near-field model is a switch, not a model: --near-field beam "
+                                 "(near_field='beam') with --models dipole, exact or curved")
         if m not in MODELS:
             raise ParameterError(f"unknown model {m!r}; choose among {', '.join(MODELS)}")
     dup = sorted({m for m in models if models.count(m) > 1})
@@ -163,7 +174,7 @@ def _mc(material, s, shape, azimuth_deg, photons, seed):
 
 def reflectance_profile(material: Material, distances_mm, *, model: str = "dipole", shape: Shape | None = None,
                         azimuth_deg: float = 0.0, rtol: float = 1e-10, photons: int = MC_PHOTONS,
-                        seed: int = 0) -> np.ndarray:
+                        seed: int = 0, near_field: str = "point") -> np.ndarray:
     """Diffuse reflectance per unit power entering the medium [mm^-2], shape (3, n): channels r, g, b.
 
     Parameters
@@ -175,6 +186,8 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     azimuth_deg : angle of the exit direction from the first principal direction [degrees], finite
     rtol : relative tolerance of the exact series, in [1e-15, 0.1] (``RTOL_RANGE``)
     photons, seed : Monte Carlo photons per channel and seed (``model="mc"``)
+    near_field : "point" | "beam" — the models' point source at z_r or the near-field model (module docstring);
+        Monte Carlo is exact either way
 
     Every argument is checked first (MeshshadeError, one line naming it, its value and the allowed range).
     """
@@ -187,6 +200,7 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     (model,) = _check_models([model])
     phi = np.deg2rad(_check_azimuth(azimuth_deg))
     rtol = _check_rtol(rtol)
+    near_field = check_near_field(near_field)
     if model == "mc":
         return _mc(material, s, shape, azimuth_deg, photons, seed).reflectance
     out = np.empty((3, s.size))
@@ -199,10 +213,10 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
         done[key] = c
         st = float(material.sigma_t_prime[c])
         par = {"albedo_prime": float(material.albedo_prime[c]), "eta": material.eta}
-        if model == "beam":
-            out[c] = near_field_profile(_flat_distance(s * st, shape, phi, st), g=material.g, **par) * st * st
-            continue
-        out[c] = _profile_opt(s * st, model, shape, phi, st, par, rtol) * st * st
+        if near_field == "beam":
+            out[c] = _beam_profile_opt(s * st, model, shape, phi, st, par, material.g, rtol) * st * st
+        else:
+            out[c] = _profile_opt(s * st, model, shape, phi, st, par, rtol) * st * st
     return out
 
 
@@ -217,6 +231,27 @@ def _flat_distance(r, shape, phi, st):
         around, along = r * np.cos(phi), r * np.sin(phi)
         return np.hypot(2.0 * R0 * np.sin(0.5 * around / R0), along)
     return r
+
+
+def _beam_profile_opt(r, model, shape, phi, st, par, g, rtol):
+    """The near-field model composed with ``model`` on ``shape`` (module docstring), optical units."""
+    if shape.kind == "plane" or model == "dipole":
+        return near_field_profile(_flat_distance(r, shape, phi, st), g=g, **par)
+    if model == "curved":
+        flat = dipole_profile(r, **par)
+        curved = _profile_opt(r, "curved", shape, phi, st, par, rtol)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            factor = np.where(flat > 0, curved / np.where(flat > 0, flat, 1.0), 1.0)
+        return near_field_profile(r, g=g, **par) * factor
+    R0 = shape.radius_mm * st
+    if shape.kind == "sphere":
+        _profile_opt(r, "dipole", shape, phi, st, par, rtol)   # the same checks as the point source's
+        return near_field_sphere_profile(np.minimum(r / R0, np.pi), R0_opt=R0, g=g, rtol=rtol, **par)
+    if shape.kind == "cylinder":
+        around, along = r * np.cos(phi), r * np.sin(phi)
+        theta = np.abs(np.mod(around / R0 + np.pi, 2 * np.pi) - np.pi)
+        return near_field_cylinder_profile(theta, np.abs(along), R0_opt=R0, g=g, rtol=max(rtol, 1e-13), **par)
+    raise ParameterError(f"no exact solution for shape {shape.kind!r}; use --models dipole,curved")
 
 
 def _profile_opt(r, model, shape, phi, st, par, rtol):
@@ -245,13 +280,13 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
 
 
 def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_deg=(0.0,), rtol=1e-10,
-                 photons: int = MC_PHOTONS, seed: int = 0):
+                 photons: int = MC_PHOTONS, seed: int = 0, near_field: str = "point"):
     """All (model, radius, azimuth, channel) curves as rows of dicts, for the CSV, table and plot; Monte Carlo
     rows (``mc``, ``photons`` per channel, ``seed``) also hold ``stderr_per_mm2``.
 
     ``models``: a non-empty list of distinct names among ``MODELS``; ``shapes``: a non-empty list of
-    :class:`Shape`; ``azimuths_deg``: a non-empty list of finite angles; ``distances_mm`` and ``rtol`` as
-    :func:`reflectance_profile`. All checked before any curve is computed (MeshshadeError, one line).
+    :class:`Shape`; ``azimuths_deg``: a non-empty list of finite angles; ``distances_mm``, ``rtol`` and
+    ``near_field`` as :func:`reflectance_profile`. All checked before any curve is computed (MeshshadeError, one line).
     """
     s_all = _check_distances(distances_mm)
     models = _check_models(models)
@@ -262,6 +297,7 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
     if not azimuths_deg:
         raise ParameterError("azimuths: give at least one angle in degrees")
     rtol = _check_rtol(rtol)
+    near_field = check_near_field(near_field)
     if not isinstance(material, Material):
         raise ParameterError(f"material must be a Material, got {type(material).__name__}")
     rows = []
@@ -280,7 +316,8 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
                     res = _mc(material, s, shape, az, photons, seed)
                     R, err = res.reflectance, res.stderr
                 else:
-                    R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol)
+                    R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol,
+                                            near_field=near_field)
                 for c, ch in enumerate(CHANNELS):
                     rows.append({"model": model, "channel": ch, "radius_mm": shape.radius_mm,
                                  "azimuth_deg": az, "distance_mm": s, "reflectance_per_mm2": R[c],

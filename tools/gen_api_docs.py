@@ -24,7 +24,7 @@ PAGES = {
                                         "exact", "neighbourhoods", "arc"]),
     "raycast": ("meshshade.raycast", ["scene", "backends", "embree", "numpy_twin", "embree_direct"]),
     "light": ("meshshade.light", ["sources", "spec", "samples", "shadows"]),
-    "transport": ("meshshade.transport", ["baking", "models", "pair_kernel", "gather", "zones", "auto", "clusters",
+    "transport": ("meshshade.transport", ["baking", "models", "pair_kernel", "near_field", "gather", "zones", "auto", "clusters",
                                           "farfield", "farfield_kernels"]),
     "output": ("meshshade.output", ["bake_file", "render", "tonemap", "compare", "report"]),
     "montecarlo": ("meshshade.montecarlo", ["simulation", "engine", "emitter", "sampling", "direct_walk", "kernels", "shapes",

@@ -13,7 +13,9 @@ others at ``bake``'s defaults; rows ``knob="default"`` are the baseline):
   the ``render_radiance`` call (per-pixel includes building the :class:`~meshshade.output.render.PixelGather`); error:
   exitance at the pixel centres' surface points of the same orthographic camera against the exact reference;
 * ``photons``: the Monte Carlo photon count (model ``mc``; against an exact reference, or against the
-  reference MC run with another seed).
+  reference MC run with another seed);
+* ``near_field``: the other near field of ``bake`` (docs/physics.md §13; "beam" when the baseline is "point"), on
+  the scenes with a Monte Carlo reference only (the exact references are diffusion's own point source).
 """
 from __future__ import annotations
 
@@ -23,8 +25,9 @@ from dataclasses import dataclass, field
 from meshshade.bench.scenes import SCENES, Scene
 from meshshade.errors import ParameterError
 from meshshade.transport import MODELS, bake
+from meshshade.transport.near_field import check_near_field
 
-KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons")
+KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons", "near_field")
 #: models for which bake's rtol (series tolerance) changes nothing
 NO_SERIES = ("dipole", "curved")
 
@@ -38,7 +41,7 @@ def bake_defaults() -> dict:
 @dataclass(frozen=True)
 class Run:
     """One measurement: ``scene`` with ``model`` at ``level``; ``knob``/``value`` name what differs from the
-    defaults. ``settings``: bake keywords (rtol, cutoff_tol, geodesic), or ``render`` / ``photons``."""
+    defaults. ``settings``: bake keywords (rtol, cutoff_tol, geodesic, near_field), or ``render`` / ``photons``."""
 
     scene: Scene
     model: str
@@ -103,14 +106,18 @@ FULL = BenchConfig(
 )
 
 
-def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchConfig | None = None) -> list:
+def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchConfig | None = None,
+               near_field: str = "point") -> list:
     """The runs of a bench mode (``config`` overrides ``quick``); ``scenes`` (names of :data:`SCENES`, or
-    :class:`Scene` objects) and ``models`` restrict it.
+    :class:`Scene` objects) and ``models`` restrict it; ``near_field`` is the bakes' baseline near field (the
+    ``near_field`` knob measures the other one).
 
     Models default to :data:`meshshade.transport.MODELS`, so a model added there is benchmarked without a
     change here.
     """
     cfg = config or (QUICK if quick else FULL)
+    near_field = check_near_field(near_field)
+    other = "beam" if near_field == "point" else "point"
     models = tuple(MODELS) if models is None else tuple(models)
     bad = [m for m in models if m not in MODELS]
     if bad:
@@ -126,9 +133,11 @@ def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchCo
     for sc in (n if isinstance(n, Scene) else SCENES[n] for n in picked):
         n = sc.name
         L = cfg.levels.get(n, sc.level)
-        base = {"rtol": d["rtol"], "cutoff_tol": d["cutoff_tol"], "geodesic": sc.geodesic}
+        base = {"rtol": d["rtol"], "cutoff_tol": d["cutoff_tol"], "geodesic": sc.geodesic, "near_field": near_field}
         for m in models:
             runs.append(Run(sc, m, "default", "", L, dict(base)))
+            if sc.reference == "mc":
+                runs.append(Run(sc, m, "near_field", other, L, {**base, "near_field": other}))
             if n in cfg.rtol_scenes and m not in NO_SERIES:
                 runs += [Run(sc, m, "rtol", f"{v:g}", L, {**base, "rtol": v}) for v in cfg.rtol]
             if n in cfg.cutoff_scenes:

@@ -251,15 +251,16 @@ def face_patches(mesh, patch_mm: float) -> np.ndarray:
     return inv.reshape(-1)
 
 
-def mc_reference(mesh, light, mc, *, patch_mm: float) -> Reference:
-    """Patch reference from an MCResult ``mc`` (channel 0)."""
+def mc_reference(mesh, light, mc, *, patch_mm: float, channel: int = 0) -> Reference:
+    """Patch reference from an MCResult ``mc`` (``channel``, default 0)."""
+    c = int(channel)
     pid = face_patches(mesh, patch_mm)
     fan = entry_fan(mesh, light)
     use = np.ones(mesh.n_faces, bool) if fan is None else ~np.any(fan[mesh.faces], axis=1)
     n_p = int(pid.max()) + 1
     w = np.where(use, 1.0, 0.0)
-    power = np.bincount(pid, weights=w * mc.face_power[:, 0], minlength=n_p)
-    var = np.bincount(pid, weights=w * mc.face_power_stderr[:, 0] ** 2, minlength=n_p)
+    power = np.bincount(pid, weights=w * mc.face_power[:, c], minlength=n_p)
+    var = np.bincount(pid, weights=w * mc.face_power_stderr[:, c] ** 2, minlength=n_p)
     area = np.bincount(pid, weights=w * mesh.face_areas, minlength=n_p)
     stderr = np.sqrt(var)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -267,8 +268,8 @@ def mc_reference(mesh, light, mc, *, patch_mm: float) -> Reference:
         rel = np.where(power > 0, stderr / power, np.inf)
     peak = float(density.max())
     pmask = (density >= MC_FLOOR * peak) & (rel <= MC_MAX_REL_STDERR) & (area > 0)
-    return Reference("mc", np.asarray(mc.radiance[:, 0], float), np.zeros(mesh.n_vertices, bool), peak,
-                     energy=float(mc.face_power[:, 0].sum()), entry_fan=fan,
+    return Reference("mc", np.asarray(mc.radiance[:, c], float), np.zeros(mesh.n_vertices, bool), peak,
+                     energy=float(mc.face_power[:, c].sum()), entry_fan=fan,
                      patch_id=np.where(use, pid, -1), patch_power=power, patch_stderr=stderr, patch_mask=pmask,
                      stderr_median=float(np.median(rel[pmask])) if np.any(pmask) else None)
 

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_transport_arg, add_light_arg, add_material_args,
-                                   add_mesh_args, add_model_arg, lights_from_args, mesh_and_material, number)
+from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args, add_mesh_args,
+                                   add_model_arg, add_near_field_arg, add_transport_arg, lights_from_args,
+                                   mesh_and_material, number)
 from meshshade.io import check_output_path
 from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, write_bake
 from meshshade.transport import bake, describe_result
@@ -26,6 +27,7 @@ def add_bake_args(p: argparse.ArgumentParser) -> None:
     add_geodesic_arg(p)
     add_far_field_arg(p)
     add_transport_arg(p)
+    add_near_field_arg(p)
     p.add_argument("--out", required=True, metavar="OUT.ply|.glb|.gltf|.usd|.usda|.usdc",
                    help="the baked mesh, format from the extension: PLY with radiance_r/g/b (W/mm^2) and tone-mapped "
                         "red/green/blue; glTF/GLB with COLOR_0 and _RADIANCE; USD with displayColor and "
@@ -44,7 +46,7 @@ def run_bake(args) -> int:
     mesh, material = mesh_and_material(args)
     result = bake(mesh, material, lights, model=args.model, cutoff_tol=args.cutoff_tol,
                   curvature_radius_mm=args.curvature_radius, progress=not args.quiet, geodesic=args.geodesic,
-                  far_field=args.far_field, transport=args.transport)
+                  far_field=args.far_field, transport=args.transport, near_field=args.near_field)
     write_bake(result, mesh, args.out, npz=args.npz, lights=lights)
     if not args.quiet:
         print(describe_result(result))

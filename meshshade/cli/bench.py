@@ -24,6 +24,9 @@ def add_bench_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=integer(0), default=0, help="seed of every Monte Carlo run (default 0)")
     p.add_argument("--scenes", metavar="LIST", help="comma list of scene names (default: the mode's set)")
     p.add_argument("--models", metavar="LIST", help="comma list of models (default: every model of the bake)")
+    p.add_argument("--near-field", default="point", choices=["point", "beam"],
+                   help="the bakes' near field (default point); scenes with a Monte Carlo reference also get rows "
+                        "with the other one (knob near_field)")
     p.add_argument("--mc-photons", type=integer(16), default=None, metavar="N",
                    help="photons of each Monte Carlo reference (default 1000000 quick, 4000000 full)")
     add_cluster_args(p)   # the references are split on Dask; every timed run stays in this process
@@ -39,7 +42,8 @@ def run_bench(args) -> int:
     if args.seed < 0:
         raise MeshshadeError(f"--seed must be >= 0, got {args.seed}")
     check_cluster_options(args.scheduler, args.workers)
-    plan = bench_plan(quick=args.quick, scenes=parse_names(args.scenes), models=parse_names(args.models))
+    plan = bench_plan(quick=args.quick, scenes=parse_names(args.scenes), models=parse_names(args.models),
+                      near_field=args.near_field)
     out = output_dir(args.out)
     with contextlib.ExitStack() as stack:
         client = (stack.enter_context(open_client(args.scheduler, args.workers, quiet=args.quiet))

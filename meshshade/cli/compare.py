@@ -20,13 +20,19 @@ def add_compare_args(p: argparse.ArgumentParser) -> None:
     add_image_args(p)
     p.add_argument("--models", default="curved,dipole",
                    help=f"two models A,B among {', '.join((*MODELS, 'mc'))} (default curved,dipole)")
+    p.add_argument("--near-field", default="point", metavar="NF[,NF]",
+                   help="what enters the medium, for both models or per model A,B: point (each model's point source "
+                        "at z_r; default) or beam (single scattering plus the fitted beam sources, docs/physics.md "
+                        "§13); e.g. --models curved,curved --near-field point,beam")
     p.add_argument("--floor", type=number, default=1e-3, help="relative radiance floor for the ratios")
     p.add_argument("--photons", type=integer(16), default=100_000, help="photons when one model is mc (default 1e5)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
 
 
 def run_compare(args) -> int:
-    models = check_models(tuple(m.strip() for m in args.models.split(",") if m.strip()))
+    near = tuple(x.strip() for x in args.near_field.split(",") if x.strip())
+    models = check_models(tuple(m.strip() for m in args.models.split(",") if m.strip()),
+                          near_field=near[0] if len(near) == 1 else near)
     check_floor(args.floor)
     check_image_size(args.width, args.height, args.spp)
     check_tonemap_options(args.tonemap, args.bias)
@@ -36,8 +42,8 @@ def run_compare(args) -> int:
                          height=args.height, spp=args.spp, per_pixel=args.per_pixel, cutoff_tol=args.cutoff_tol,
                          floor=args.floor, mc_photons=args.photons, geodesic=args.geodesic,
                          far_field=args.far_field, transport=args.transport,
-                         progress=False if args.quiet else "compare")
-    for p in save_comparison(cmp, out, models=models, metadata=scene.metadata, operator=args.tonemap,
+                         progress=False if args.quiet else "compare", near_field=near[0] if len(near) == 1 else near)
+    for p in save_comparison(cmp, out, models=cmp["labels"], metadata=scene.metadata, operator=args.tonemap,
                              bias=args.bias, background=scene.background):
         if not args.quiet:
             print(f"wrote {p}")

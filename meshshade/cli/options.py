@@ -141,6 +141,13 @@ def add_model_arg(p: argparse.ArgumentParser) -> None:
                         "geodesic method the scene calls for and reports its choices")
 
 
+def add_near_field_arg(p: argparse.ArgumentParser, default: str = "point") -> None:
+    p.add_argument("--near-field", default=default, choices=["point", "beam"],
+                   help=f"what enters the medium (default {default}): point, each model's point source at depth z_r; "
+                        "beam, exact single scattering plus diffusion sources along the beam fitted to exact "
+                        "transport, composed with the model's geometry (docs/physics.md §13)")
+
+
 def add_geodesic_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--geodesic", default="exact", choices=["exact", "arc"],
                    help="geodesic distances: exact polyhedral (default) or arc (curvature-corrected chords: "

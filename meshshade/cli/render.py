@@ -12,7 +12,7 @@ import os
 import warnings
 from pathlib import Path
 
-from meshshade.cli.options import (add_image_args, add_model_arg, background_from_args, image_scene_from_args,
+from meshshade.cli.options import (add_image_args, add_model_arg, add_near_field_arg, background_from_args, image_scene_from_args,
                                    material_given)
 from meshshade.errors import MaterialError, MeshshadeError, MeshValidationError, OutputError
 from meshshade.io import check_output_path, read_baked_ply, write_exr, write_png
@@ -33,6 +33,7 @@ BAKED_EPILOG = ("A PLY written by 'meshshade bake' is rendered as it is (its rad
 def add_render_args(p: argparse.ArgumentParser) -> None:
     add_image_args(p)
     add_model_arg(p)
+    add_near_field_arg(p)
     p.add_argument("--out", required=True, metavar="OUT[.exr|.png]", help="writes OUT.exr (linear) and OUT.png")
     p.epilog = BAKED_EPILOG
 
@@ -67,7 +68,8 @@ def run_render(args) -> int:
     scene = image_scene_from_args(args)
     mesh, material = scene.mesh, scene.material
     res = bake(mesh, material, scene.lights, model=args.model, cutoff_tol=args.cutoff_tol, geodesic=args.geodesic,
-               far_field=args.far_field, transport=args.transport, progress=False if args.quiet else "render")
+               far_field=args.far_field, transport=args.transport, progress=False if args.quiet else "render",
+               near_field=args.near_field)
     gather = PixelGather(mesh, res) if args.per_pixel else None
     rgb, alpha = render_radiance(mesh, res.radiance, scene.camera, args.width, args.height, args.spp,
                                  eta=material.eta, exitance_at=gather)

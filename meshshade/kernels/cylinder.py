@@ -66,7 +66,7 @@ from scipy import special
 from meshshade.errors import MaterialError, MeshshadeError, ParameterError
 from meshshade.kernels.optics import check_material, diffusion_params, g_func
 
-__all__ = ["cylinder_exact_profile", "cylinder_exact_profile_geodesic"]
+__all__ = ["cylinder_exact_profile", "cylinder_exact_profile_geodesic", "cylinder_point_source_exitance"]
 
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(20)
 _MAX_TERMS = 2_000_000
@@ -410,3 +410,55 @@ def _cylinder_fluence(r, theta, z, *, R0_opt, albedo_prime, eta, rtol=1e-10):
     reg, _ = _regular_part(th_src, zz, r_src=abs(r_src), r_e=r, R=R, mu=mu, flux=False, eps=eps)
     D = 1.0 / 3.0
     return ((free - reg) / (4.0 * np.pi * D)).reshape(shape)
+
+
+def cylinder_point_source_exitance(theta, z, *, R0_opt, depth_opt, mu, D, z_b, c_phi, c_E, rtol=1e-8):
+    """Exitance ``C_phi Psi + C_E (-D dPsi/dr)`` on the physical cylinder r = R0 of a unit isotropic point source
+    at depth ``t`` under the entry point (docs/physics.md eq. (77)), Psi = 0 on r = R0 + z_b.
+
+    The cylinder's exact Green's function (module docstring) for any source depth and dipole variant (``mu``,
+    ``D``, ``z_b``, ``c_phi``, ``c_E`` as in :class:`meshshade.kernels.beam_diffusion.DipoleVariant`; Jensen's
+    :func:`cylinder_exact_profile` is ``alpha'`` times this with ``c_phi = 0``, ``c_E = 1``, ``t = z_r``). A source
+    past the axis (R0 < t < 2 R0) sits at radius t - R0 on the far side; one at t >= 2 R0 is outside and gives 0.
+    theta (angle around the axis), z (axial offset, optical units) broadcast; returns float64 of their shape.
+    """
+    R0 = _check_scalar("R0_opt", R0_opt, 0.0)
+    t = _check_scalar("depth_opt", depth_opt, 0.0)
+    mu = _check_scalar("mu", mu)
+    D = _check_scalar("D", D, 0.0)
+    z_b = _check_scalar("z_b", z_b)
+    if mu < 0 or z_b < 0:
+        raise ParameterError(f"mu and z_b must be >= 0, got {mu}, {z_b}")
+    eps = _truncation_eps(rtol)
+    th, zz = np.broadcast_arrays(np.asarray(theta, dtype=np.float64), np.asarray(z, dtype=np.float64))
+    shape = th.shape
+    th = th.ravel()
+    zz = np.abs(zz.ravel())
+    if not (np.all(np.isfinite(th)) and np.all(np.isfinite(zz))):
+        raise ParameterError("theta and z must be finite")
+    if t >= 2.0 * R0:
+        return np.zeros(shape)
+    R = R0 + z_b
+    r_src = R0 - t
+    if r_src >= 0.0:
+        sin2 = np.sin(0.5 * th) ** 2
+        d = np.sqrt(t * t + 4.0 * R0 * r_src * sin2 + zz**2)
+        geo = t + 2.0 * r_src * sin2
+        th_src = th
+    else:
+        cos2 = np.cos(0.5 * th) ** 2
+        d = np.sqrt((2.0 * R0 - t) ** 2 + 4.0 * R0 * (-r_src) * cos2 + zz**2)
+        geo = (2.0 * R0 - t) + 2.0 * (-r_src) * cos2
+        th_src = th - np.pi
+    out = np.zeros(th.shape)
+    if c_E:
+        with np.errstate(under="ignore"):
+            free = g_func(d, mu) * geo
+        reg, _ = _regular_part(th_src, zz, r_src=abs(r_src), r_e=R0, R=R, mu=mu, flux=True, eps=eps)
+        out += float(c_E) / (4.0 * np.pi) * (free + reg)
+    if c_phi:
+        with np.errstate(under="ignore"):
+            free = np.exp(-mu * d) / d
+        reg, _ = _regular_part(th_src, zz, r_src=abs(r_src), r_e=R0, R=R, mu=mu, flux=False, eps=eps)
+        out += float(c_phi) / (4.0 * np.pi * D) * (free - reg)
+    return np.maximum(out, 0.0).reshape(shape)

@@ -24,12 +24,16 @@ import math
 import numpy as np
 
 from meshshade.kernels import near_field_table as table
-from meshshade.kernels.beam_diffusion import point_source_reflectance, point_source_ring, point_source_total
+from meshshade.kernels.beam_diffusion import (dipole_variant, point_source_reflectance, point_source_ring,
+                                              point_source_total)
+from meshshade.kernels.cylinder import cylinder_point_source_exitance
 from meshshade.kernels.optics import check_material
+from meshshade.kernels.sphere import sphere_point_source_exitance
 from meshshade.kernels.single_scattering import (real_coefficients, single_scattering_profile,
                                                  single_scattering_ring, single_scattering_total)
 
-__all__ = ["near_field_sources", "near_field_profile", "near_field_ring", "near_field_total", "FIT_DOMAIN"]
+__all__ = ["near_field_sources", "near_field_profile", "near_field_ring", "near_field_total",
+           "near_field_sphere_profile", "near_field_cylinder_profile", "FIT_DOMAIN"]
 
 #: (alpha', eta, g) ranges of the fitted grid
 FIT_DOMAIN = {"albedo_prime": (1.0 - 10.0 ** float(table.X_NODES[-1]), 1.0 - 10.0 ** float(table.X_NODES[0])),
@@ -64,25 +68,70 @@ def near_field_sources(albedo_prime: float, eta: float, g: float = 0.0) -> tuple
     return table.DEPTHS.copy(), w, bool(cx or ce or cg)
 
 
-def near_field_profile(r_opt, *, albedo_prime, eta, g=0.0):
-    """R_near(r) per unit entering power, optical units (times sigma_t'^2 for mm^-2); inf at r = 0."""
+def near_field_profile(r_opt, *, albedo_prime, eta, g=0.0, cos_t=1.0):
+    """R_near(r) per unit entering power, optical units (times sigma_t'^2 for mm^-2); inf at r = 0.
+
+    ``cos_t`` < 1 (oblique incidence, docs/physics.md eq. (81)): the light travels inside at acos(cos_t) from the
+    normal; the beam's sources keep their distances t_k along it, so they lie at depths cos_t t_k, and single
+    scattering follows the same depth density. Azimuthally averaged about the entry point (the sources' lateral
+    offset t_k sin_t is left out)."""
     depths, w, _ = near_field_sources(albedo_prime, eta, g)
     r = np.asarray(r_opt, dtype=np.float64)
-    ms = sum(wk * point_source_reflectance(r, t, albedo_prime=albedo_prime, eta=eta)
+    ms = sum(wk * point_source_reflectance(r, cos_t * t, albedo_prime=albedo_prime, eta=eta)
              for t, wk in zip(depths, w) if wk > 0)
-    return single_scattering_profile(r, albedo_prime=albedo_prime, eta=eta, g=g) + ms
+    return single_scattering_profile(r, albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) + ms
 
 
-def near_field_ring(lo, hi, *, albedo_prime, eta, g=0.0):
-    """Average of R_near over the ring lo <= r < hi (optical units, arrays)."""
+def near_field_ring(lo, hi, *, albedo_prime, eta, g=0.0, cos_t=1.0):
+    """Average of R_near over the ring lo <= r < hi (optical units, arrays; ``cos_t`` as :func:`near_field_profile`)."""
     depths, w, _ = near_field_sources(albedo_prime, eta, g)
-    ms = sum(wk * point_source_ring(lo, hi, t, albedo_prime=albedo_prime, eta=eta)
+    ms = sum(wk * point_source_ring(lo, hi, cos_t * t, albedo_prime=albedo_prime, eta=eta)
              for t, wk in zip(depths, w) if wk > 0)
-    return single_scattering_ring(lo, hi, albedo_prime=albedo_prime, eta=eta, g=g) + ms
+    return single_scattering_ring(lo, hi, albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) + ms
 
 
-def near_field_total(*, albedo_prime, eta, g=0.0) -> float:
-    """int R_near 2 pi r dr (per unit entering power)."""
+def near_field_total(*, albedo_prime, eta, g=0.0, cos_t=1.0) -> float:
+    """int R_near 2 pi r dr (per unit entering power; ``cos_t`` as :func:`near_field_profile`)."""
     depths, w, _ = near_field_sources(albedo_prime, eta, g)
-    ms = float(sum(wk * point_source_total(t, albedo_prime=albedo_prime, eta=eta) for t, wk in zip(depths, w)))
-    return single_scattering_total(albedo_prime=albedo_prime, eta=eta, g=g) + ms
+    ms = float(sum(wk * point_source_total(cos_t * t, albedo_prime=albedo_prime, eta=eta)
+                   for t, wk in zip(depths, w)))
+    return single_scattering_total(albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) + ms
+
+
+def _variant_kw(albedo_prime, eta):
+    v = dipole_variant(albedo_prime, eta, "better")
+    return {"mu": v.mu, "D": v.D, "z_b": v.z_b, "c_phi": v.c_phi, "c_E": v.c_E}
+
+
+def near_field_sphere_profile(theta, *, R0_opt, albedo_prime, eta, g=0.0, rtol=1e-10):
+    """The near-field model on a sphere of radius R0 (docs/physics.md eq. (78)), optical units:
+
+        R_near,sph(theta) = R^(1)(chord) + sum_k w_k R_sph,t_k(theta),
+
+    the fitted beam's sources (:func:`near_field_sources`) each with the sphere's exact Green's function
+    (:func:`meshshade.kernels.sphere.sphere_point_source_exitance`; a source beyond the far side of the ball,
+    t_k >= 2 R0, has left it and is dropped), and the half-space's single scattering at the chord
+    2 R0 sin(theta/2). theta in [0, pi]; inf at theta = 0 (the single scattering's r^-1 peak)."""
+    R0 = float(R0_opt)
+    depths, w, _ = near_field_sources(albedo_prime, eta, g)
+    kw = _variant_kw(albedo_prime, eta)
+    th = np.asarray(theta, dtype=np.float64)
+    ms = sum(wk * sphere_point_source_exitance(th, R0_opt=R0, depth_opt=t, rtol=rtol, **kw)
+             for t, wk in zip(depths, w) if wk > 0)
+    chord = 2.0 * R0 * np.sin(0.5 * th)
+    return single_scattering_profile(chord, albedo_prime=albedo_prime, eta=eta, g=g) + ms
+
+
+def near_field_cylinder_profile(theta, z, *, R0_opt, albedo_prime, eta, g=0.0, rtol=1e-8):
+    """The near-field model on an infinite cylinder of radius R0 (docs/physics.md eq. (78)), optical units: the
+    fitted beam's sources each with the cylinder's exact Green's function
+    (:func:`meshshade.kernels.cylinder.cylinder_point_source_exitance`), plus the half-space's single scattering
+    at the chord. theta (around the axis) and z (along it) broadcast."""
+    R0 = float(R0_opt)
+    depths, w, _ = near_field_sources(albedo_prime, eta, g)
+    kw = _variant_kw(albedo_prime, eta)
+    th, zz = np.broadcast_arrays(np.asarray(theta, dtype=np.float64), np.asarray(z, dtype=np.float64))
+    ms = sum(wk * cylinder_point_source_exitance(th, zz, R0_opt=R0, depth_opt=t, rtol=rtol, **kw)
+             for t, wk in zip(depths, w) if wk > 0)
+    chord = np.hypot(2.0 * R0 * np.sin(0.5 * th), zz)
+    return single_scattering_profile(chord, albedo_prime=albedo_prime, eta=eta, g=g) + ms

@@ -66,40 +66,57 @@ def _angular_factor(a, sigma_s, g, eta):
     return sigma_s * hg_phase(-c, g) * (1.0 - fresnel_reflectance(c, eta, 1.0)) * c
 
 
-def single_scattering_profile(r_opt, *, albedo_prime, eta, g=0.0):
-    """R1(r) per unit entering power, optical units (multiply by sigma_t'^2 for mm^-2); inf at r = 0."""
+def _check_cos_t(cos_t) -> float:
+    c = float(cos_t)
+    if not 0.0 < c <= 1.0:
+        raise ValueError(f"cos_t (cosine of the refracted direction) must lie in (0, 1], got {cos_t!r}")
+    return c
+
+
+def single_scattering_profile(r_opt, *, albedo_prime, eta, g=0.0, cos_t=1.0):
+    """R1(r) per unit entering power, optical units (multiply by sigma_t'^2 for mm^-2); inf at r = 0.
+
+    ``cos_t`` < 1: the light travels inside at angle acos(cos_t) from the normal, so it first scatters at depth
+    z with density (sigma_s / cos_t) exp(-sigma_t z / cos_t) (docs/physics.md eq. (81)); the profile is that of
+    this depth density about the entry point, azimuthally averaged with the normal-incidence phase factor
+    (exact for g = 0)."""
     check_material(albedo_prime, eta)
+    ct = _check_cos_t(cos_t)
     sigma_s, sigma_t = real_coefficients(float(albedo_prime), float(g))
     r = np.asarray(r_opt, dtype=np.float64)
     a, w = _angles(float(eta))
-    f = _angular_factor(a, sigma_s, g, float(eta)) * w
-    ratio = (1.0 + np.cos(a)) / np.sin(a)
+    f = _angular_factor(a, sigma_s, g, float(eta)) * w / ct
+    ratio = (1.0 + np.cos(a) / ct) / np.sin(a)
     with np.errstate(divide="ignore"):
         inv = np.where(r > 0, 1.0 / np.where(r > 0, r, 1.0), np.inf)
     e = np.exp(-sigma_t * r[..., None] * ratio)
     return np.where(r > 0, inv * (e @ f), np.inf)[()]
 
 
-def single_scattering_ring(lo, hi, *, albedo_prime, eta, g=0.0):
+def single_scattering_ring(lo, hi, *, albedo_prime, eta, g=0.0, cos_t=1.0):
     """Average of R1 over the ring lo <= r < hi (optical units, arrays): int 2 pi r R1 dr / (pi (hi^2 - lo^2)).
 
     In (rho, a): 2 pi r R1 dr dz-weight becomes 2 pi sigma_s sin a cos a p (1 - F) exp(-k rho) drho da with
-    k = sigma_t (1 + cos a), and rho runs over [lo / sin a, hi / sin a]."""
+    k = sigma_t (1 + cos a / cos_t), and rho runs over [lo / sin a, hi / sin a]; ``cos_t`` as
+    :func:`single_scattering_profile`."""
     check_material(albedo_prime, eta)
+    ct = _check_cos_t(cos_t)
     sigma_s, sigma_t = real_coefficients(float(albedo_prime), float(g))
     lo, hi = np.broadcast_arrays(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
     a, w = _angles(float(eta))
-    f = 2.0 * math.pi * _angular_factor(a, sigma_s, g, float(eta)) * np.sin(a) * w
-    k = sigma_t * (1.0 + np.cos(a))
+    f = 2.0 * math.pi * _angular_factor(a, sigma_s, g, float(eta)) * np.sin(a) * w / ct
+    k = sigma_t * (1.0 + np.cos(a) / ct)
     s = np.sin(a)
     inner = (np.exp(-k * lo[..., None] / s) - np.exp(-k * hi[..., None] / s)) / k
     return (inner @ f) / (math.pi * (hi * hi - lo * lo))
 
 
-def single_scattering_total(*, albedo_prime, eta, g=0.0):
-    """Total singly scattered reflectance int R1 2 pi r dr (per unit entering power)."""
+def single_scattering_total(*, albedo_prime, eta, g=0.0, cos_t=1.0):
+    """Total singly scattered reflectance int R1 2 pi r dr (per unit entering power; ``cos_t`` as
+    :func:`single_scattering_profile`)."""
     check_material(albedo_prime, eta)
+    ct = _check_cos_t(cos_t)
     sigma_s, sigma_t = real_coefficients(float(albedo_prime), float(g))
     a, w = _angles(float(eta))
-    f = 2.0 * math.pi * _angular_factor(a, sigma_s, g, float(eta)) * np.sin(a) * w
-    return float(f @ (1.0 / (sigma_t * (1.0 + np.cos(a)))))
+    f = 2.0 * math.pi * _angular_factor(a, sigma_s, g, float(eta)) * np.sin(a) * w / ct
+    return float(f @ (1.0 / (sigma_t * (1.0 + np.cos(a) / ct))))

@@ -439,3 +439,45 @@ def _sphere_fluence(r_opt, theta, *, R0_opt, albedo_prime, eta, rtol=1e-14):
     series, _ = _series(yy, R0=R0, r_src=r_src, r_e=r, gape=R - r, delta=delta, z_b=z_b, mu=mu, flux=False,
                         scale0=math.exp(-mu * gap) / gap, rtol=rtol)
     return (3.0 / (4.0 * np.pi) * (free - series)).reshape(shape)
+
+
+def sphere_point_source_exitance(theta, *, R0_opt, depth_opt, mu, D, z_b, c_phi, c_E, rtol=1e-10):
+    """Exitance ``C_phi Psi + C_E (-D dPsi/dr)`` on the physical sphere r = R0 of a unit isotropic point source
+    at depth ``t`` on the axis under the entry point (docs/physics.md eq. (77)), Psi = 0 on r = R0 + z_b.
+
+    The sphere's exact Green's function (docs/physics.md eqs. (22)-(23)) for any source depth and any dipole
+    variant: ``mu``, ``D``, ``z_b``, ``c_phi``, ``c_E`` as in :class:`meshshade.kernels.beam_diffusion.DipoleVariant`
+    (Jensen's reflectance is ``alpha'`` times this with ``c_phi = 0``, ``c_E = 1``, ``t = z_r``). The flux is
+    :func:`sphere_series_profile`'s series, the fluence the same sum with the fluence coefficients. A source
+    deeper than the centre (R0 < t < 2 R0) is the mirror case seen from the antipode; one at t >= 2 R0 lies
+    outside the ball and gives 0. As R0 -> inf this tends to the half-space's
+    :func:`meshshade.kernels.beam_diffusion.point_source_reflectance`.
+
+    theta : polar angle(s) in [0, pi] from the entry point; R0_opt, depth_opt > 0 (optical units);
+    rtol : truncation tolerance of each series relative to its theta = 0 scale. Returns float64, shape of theta.
+    """
+    R0 = _check_scalar("R0_opt", R0_opt, lo=0.0, lo_open=True)
+    t = _check_scalar("depth_opt", depth_opt, lo=0.0, lo_open=True)
+    mu = _check_scalar("mu", mu, lo=0.0)
+    D = _check_scalar("D", D, lo=0.0, lo_open=True)
+    z_b = _check_scalar("z_b", z_b, lo=0.0)
+    th = np.asarray(theta, dtype=np.float64)
+    if t >= 2.0 * R0:
+        _angles(th)   # validates theta
+        return np.zeros(th.shape)
+    if t > R0:   # past the centre: the same problem seen from the antipode
+        t, th = 2.0 * R0 - t, np.pi - th
+    shape, s2, yy = _angles(th)
+    out = np.zeros(th.size)
+    if c_E:
+        E, _ = _flux_profile(th, R0, t, z_b, mu, rtol)
+        out += float(c_E) / (4.0 * np.pi) * E.ravel()
+    if c_phi:
+        r_src = R0 - t
+        d = np.sqrt(t * t + 4.0 * R0 * r_src * s2)
+        with np.errstate(under="ignore"):
+            free = np.exp(-mu * d) / d
+        series, _ = _series(yy, R0=R0, r_src=r_src, r_e=R0, gape=z_b, delta=t, z_b=z_b, mu=mu, flux=False,
+                            scale0=math.exp(-mu * t) / t, rtol=rtol)
+        out += float(c_phi) / (4.0 * np.pi * D) * (free - series)
+    return np.maximum(out, 0.0).reshape(shape)

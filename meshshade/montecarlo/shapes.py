@@ -67,14 +67,16 @@ def _to_boundary(kind, R, x, y, z, dx, dy, dz):
 
 
 @njit(parallel=True, **_OPTS)
-def walk_shape(kind, R, sigma_t, albedo, g, eta, base, start, n, thr, boost, max_events, ex, ey, ez, ew, order):
+def walk_shape(kind, R, sigma_t, albedo, g, eta, base, start, n, thr, boost, max_events, ex, ey, ez, ew, order,
+               sin_t=0.0):
     """Photons ``start .. start + n - 1``: their exit point (ex, ey, ez), weight ``ew`` (0: absorbed, roulette or
-    lost) and scattering ``order`` (-1: lost after ``max_events`` free paths), per photon slot ``0 .. n - 1``."""
+    lost) and scattering ``order`` (-1: lost after ``max_events`` free paths), per photon slot ``0 .. n - 1``.
+    On the plane the photons start along the refracted direction (sin_t, 0, -cos_t)."""
     for j in prange(n):
         key = photon_key(base, start + j)
         c = np.uint64(0)
         if kind == 0:
-            x, y, z, dx, dy, dz = 0.0, 0.0, 0.0, 0.0, 0.0, -1.0
+            x, y, z, dx, dy, dz = 0.0, 0.0, 0.0, sin_t, 0.0, -math.sqrt(1.0 - sin_t * sin_t)
         elif kind == 1:
             x, y, z, dx, dy, dz = 0.0, 0.0, R, 0.0, 0.0, -1.0
         else:
@@ -204,10 +206,11 @@ def _check(shape_kind, radius_mm, s, lo, hi, azimuth, photons, n_batches, sector
 def shape_mc_profile(material: Material, distances_mm, *, shape: str = "plane", radius_mm: float | None = None,
                      photons: int = 1_000_000, seed: int = 0, azimuth_deg: float = 0.0, halfwidth_mm=None,
                      n_batches: int = DEFAULT_BATCHES, sector_deg: float = SECTOR_DEG,
-                     progress=None) -> ShapeProfile:
+                     progress=None, incidence_deg: float = 0.0) -> ShapeProfile:
     """Ring-averaged reflectance profile by Monte Carlo on an exact ``shape`` ("plane", "sphere", "cylinder"):
     ``photons`` per channel (channels with equal coefficients share one run), a unit pencil beam entering at
-    normal incidence (``reflectance`` is per unit *entering* power), rings [max(s - h, 0), s + h] with
+    normal incidence (``reflectance`` is per unit *entering* power; on the plane at ``incidence_deg`` from the
+    normal in [0, 90), refracted by Snell's law, rings still centred on the entry point), rings [max(s - h, 0), s + h] with
     h = ``halfwidth_mm`` (default :func:`ring_halfwidth`); on the cylinder only exits within ``sector_deg`` of
     ``azimuth_deg`` (folded into [0, 90] deg by symmetry) count, and a ring whose sector reaches half the girth
     around the cylinder (where the unrolled surface would overlap itself) is NaN; on the sphere the last ring may
@@ -224,6 +227,14 @@ def shape_mc_profile(material: Material, distances_mm, *, shape: str = "plane", 
         raise ParameterError(f"ring half-widths must be finite and > 0 mm, got {halfwidth_mm!r}")
     lo, hi = np.maximum(s - h, 0.0), s + h
     kind = str(shape).lower()
+    try:
+        inc = float(incidence_deg)
+    except (TypeError, ValueError):
+        inc = math.nan
+    if not 0.0 <= inc < 90.0 or (inc > 0.0 and kind != "plane"):
+        raise ParameterError(f"incidence must be in [0, 90) degrees, and oblique only on the plane; got "
+                             f"{incidence_deg!r} on a {kind}")
+    sin_t = math.sin(math.radians(inc)) / float(material.eta)
     az = math.radians(float(azimuth_deg))
     az_f = abs(math.atan2(abs(math.sin(az)), abs(math.cos(az))))     # folded into [0, pi/2]
     _check(kind, radius_mm, s, lo, hi, az_f, photons, n_batches, sector_deg)
@@ -261,7 +272,7 @@ def shape_mc_profile(material: Material, distances_mm, *, shape: str = "plane", 
             ex, ey, ez, ew = (np.empty(n) for _ in range(4))
             order = np.empty(n, dtype=np.int64)
             walk_shape(code, R, sigma_t, sigma_s / sigma_t, g, float(material.eta), base, start, n,
-                       ROULETTE_THRESHOLD, ROULETTE_BOOST, MAX_EVENTS, ex, ey, ez, ew, order)
+                       ROULETTE_THRESHOLD, ROULETTE_BOOST, MAX_EVENTS, ex, ey, ez, ew, order, sin_t)
             lost += int(np.count_nonzero(order < 0))
             batch = (np.arange(start, start + n, dtype=np.int64) * n_batches) // photons
             out_ok = ew > 0.0

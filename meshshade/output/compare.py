@@ -24,6 +24,7 @@ from meshshade.output.tonemap import luminance
 from meshshade.raycast import make_scene
 from meshshade.transport.baking import bake, check_bake_options
 from meshshade.transport.models import MODELS
+from meshshade.transport.near_field import NEAR_FIELDS, check_near_field
 
 #: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
 DEFAULT_FLOOR = 1e-3
@@ -44,8 +45,23 @@ def check_floor(floor) -> float:
     return x
 
 
-def check_models(models) -> tuple:
-    """Exactly two different model names among ``COMPARE_MODELS``; MeshshadeError otherwise."""
+def near_field_pair(near_field) -> tuple:
+    """``near_field`` ("point", "beam", or one per model A, B) as a checked pair; MeshshadeError otherwise."""
+    pair = (near_field, near_field) if isinstance(near_field, str) else tuple(near_field)
+    if len(pair) != 2:
+        raise ParameterError(f"near field: give one value or two (A,B) among {', '.join(NEAR_FIELDS)}, got "
+                             f"{near_field!r}")
+    return tuple(check_near_field(x) for x in pair)
+
+
+def compare_labels(models, near_field="point") -> tuple:
+    """The names of the two sides: the model, with ``+beam`` where its near field is the beam."""
+    return tuple(m + ("+beam" if nf == "beam" and m != "mc" else "") for m, nf in zip(models, near_field_pair(near_field)))
+
+
+def check_models(models, near_field="point") -> tuple:
+    """Exactly two model names among ``COMPARE_MODELS``, different unless their near fields differ
+    (``near_field``: one value or one per model); MeshshadeError otherwise."""
     if isinstance(models, str) or not all(isinstance(m, str) for m in models):
         raise ParameterError(f"models must be two model names A,B, got {models!r}")
     models = tuple(models)
@@ -55,8 +71,8 @@ def check_models(models) -> tuple:
     for m in models:
         if m not in COMPARE_MODELS:
             raise ParameterError(f"unknown model {m!r}; choose two among {', '.join(COMPARE_MODELS)}")
-    if models[0] == models[1]:
-        raise ParameterError(f"compare needs two different models, got {models[0]!r} twice")
+    if len(set(compare_labels(models, near_field))) < 2:
+        raise ParameterError(f"compare needs two different models (or near fields), got {models[0]!r} twice")
     return models
 
 
@@ -137,7 +153,7 @@ def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
 def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camera=None, width=256, height=256,
                    spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
                    seed: int = 0, geodesic: str = "exact", far_field: str | None = None, transport: str = "auto",
-                   progress: bool | str = False) -> dict:
+                   progress: bool | str = False, near_field="point") -> dict:
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
     ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
@@ -151,8 +167,12 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     :func:`~meshshade.output.render.check_image_size`; with ``mc``, ``mc_photons`` and ``seed`` as
     :func:`~meshshade.montecarlo.simulation.check_mc_options`; ``camera`` a Camera or None; the lights.
     ``progress`` (False, True or a task name, default "compare") is passed to each bake and Monte Carlo run.
+    ``near_field``: "point" or "beam" for both models, or one per model (:func:`~meshshade.transport.baking.bake`);
+    ``labels`` in the result name the sides (``curved+beam``).
     """
-    models = check_models(models)
+    near = near_field_pair(near_field)
+    models = check_models(models, near)
+    labels = compare_labels(models, near)
     floor = check_floor(floor)
     if not isinstance(mesh, Mesh):
         raise ParameterError(f"run_comparison needs a meshshade Mesh (mm), got {type(mesh).__name__}")
@@ -172,13 +192,13 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     scene = make_scene(mesh.vertices, mesh.faces)
     task = (progress if isinstance(progress, str) else "compare") if progress else False
     bakes, images = [], []
-    for m in models:
+    for m, nf in zip(models, near):
         if m == "mc":  # Monte Carlo reference: per-vertex exitance (per-pixel gathering does not apply)
             mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed, progress=task)
             res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
         else:
             res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field,
-                       transport=transport, progress=task)
+                       transport=transport, progress=task, near_field=nf)
             ex = render.PixelGather(mesh, res) if per_pixel else None
         images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
                                              exitance_at=ex, scene=scene))
@@ -186,13 +206,13 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     (ra, aa), (rb, _) = images
     cov = aa > 0
     stats = compare_stats(bakes[0].radiance, bakes[1].radiance, pixel_a=ra, pixel_b=rb, pixel_mask=cov,
-                          vertex_areas=mesh.vertex_areas, names=tuple(models), floor=floor)
+                          vertex_areas=mesh.vertex_areas, names=labels, floor=floor)
     stats["camera"] = camera.describe()
-    stats["timings_s"] = {m: b.timings for m, b in zip(models, bakes)}
-    for m, b in zip(models, bakes):  # what --model auto chose (counts per decision)
+    stats["timings_s"] = {m: b.timings for m, b in zip(labels, bakes)}
+    for m, b in zip(labels, bakes):  # what --model auto chose (counts per decision)
         if getattr(b, "plan", None) is not None:
             stats[f"{m}_decisions"] = b.plan.counts()
-    return {"camera": camera, "bakes": bakes, "images": images, "split": (split_image(ra, rb), aa),
+    return {"camera": camera, "labels": labels, "bakes": bakes, "images": images, "split": (split_image(ra, rb), aa),
             "rel": relative_difference(ra, rb, floor=floor, mask=cov), "stats": stats}
 
 

@@ -36,6 +36,7 @@ from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.output.tonemap import srgb_encode, tonemap_linear
 from meshshade.raycast import make_scene
 from meshshade.transport.gather import gather
+from meshshade.transport.near_field import near_field_factors
 from meshshade.transport.pair_kernel import PairKernel, source_frames, source_patch_radius
 
 
@@ -224,6 +225,7 @@ class _Windowed:
     def __init__(self, kernel, near_mm):
         self.kernel, self.near = kernel, near_mm
         self.channels, self.material = kernel.channels, kernel.material
+        self.near_factors, self.source_scale = kernel.near_factors, kernel.source_scale
 
     def evaluate(self, c, src, s, chord, phi):
         t = np.clip((chord - 0.5 * self.near) / (0.5 * self.near), 0.0, 1.0)
@@ -252,7 +254,11 @@ class PixelGather:
         curv = SimpleNamespace(k1=result.k1, k2=result.k2, d1=result.d1)
         self.samples = result.samples
         self.frames = source_frames(result.samples, curv, mesh.faces)
-        self.kernel = PairKernel(result.model, result.material, self.frames, plan=getattr(result, "plan", None))
+        beam = getattr(result, "stats", {}).get("near_field") == "beam"   # the bake's near field, at each pixel
+        self.kernel = PairKernel(result.model, result.material, self.frames, plan=getattr(result, "plan", None),
+                                 near=near_field_factors(result.material) if beam else None)
+        if beam:
+            self.kernel.source_scale = self.kernel.near_factors.incidence_scale(result.samples.cos_incidence)
         if near_mm is None:  # few sources (beams): a wide near field is cheap and takes the peak's whole shoulder
             near_mm = (16.0 if len(result.samples) <= 4096 else 8.0) * mesh.mean_edge_length
         self.near_mm = float(near_mm)

@@ -40,6 +40,7 @@ from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, S
                                               vertex_power)
 from meshshade.transport.gather import PairStream, Stopwatch, chunk_size, cutoff_radii, gather
 from meshshade.transport.models import MODELS
+from meshshade.transport.near_field import check_near_field, near_field_factors
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, source_frames, source_patch_radius
 from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, clusters_pay, neighbourhood_solver
 
@@ -107,7 +108,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool | str = False,
          rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
          far_field: str | None = None, far_tol: float = 0.1, far_rel_tol: float = 1e-2,
-         far_geodesic: str = "cluster", transport="auto") -> BakeResult:
+         far_geodesic: str = "cluster", transport="auto", near_field: str = "point") -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
 
     Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
@@ -139,6 +140,12 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     says which and why), or a :class:`~meshshade.transport.hierarchical.SurfaceTransport` built for this
     mesh, material and model (reused across lights and frames). Beam samples always use the direct sum.
 
+    ``near_field``: what enters the medium. "point" (default): each kernel's point source at depth z_r. "beam":
+    exact single scattering plus diffusion sources along the beam fitted to exact transport (docs/physics.md
+    §13), carried by every model as the factor of eq. (79): pairs are multiplied by the ratio of the near-field
+    model to the planar dipole (patch-averaged near the source; for beams over the receiver's patch), and the far
+    field by the ratio of their tails (transport/near_field.py, eq. (80)).
+
     ``progress``: False (default), True or the task named in the progress lines ("bake"; ``render`` and
     ``compare`` pass their own name): the gather's sources done, as a bar on a terminal and as periodic lines
     on stderr otherwise (:class:`meshshade.progress.Progress`). Whatever it is, a Ctrl-C (KeyboardInterrupt)
@@ -153,6 +160,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     far_field = check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol,
                                    far_tol=far_tol, far_rel_tol=far_rel_tol, far_geodesic=far_geodesic,
                                    backend=backend, auto_options=auto_options, transport=transport)
+    near_field = check_near_field(near_field)
     lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
     clock = Stopwatch()
     # inside memo.reuse() (a batch worker) the mesh's curvature and scene are kept for the next job on this mesh
@@ -168,12 +176,16 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
     direct_options = far_field_given or far_geodesic != "cluster"
     core, why, built = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
-                                   direct_options=direct_options,
+                                   direct_options=direct_options, near_field=near_field,
                                    cutoff_tol=cutoff_tol, auto_options=auto_options, rtol=rtol, progress=progress)
     verified = None
     if core is not None:
         pv = vertex_power(samples, mesh.n_vertices)
-        M, hstats = core.exitance(pv, progress=progress)
+        pv_c = pv
+        if near_field == "beam":   # per channel: each sample's power times its incidence scale
+            pv_c = vertex_power(samples, mesh.n_vertices,
+                                near_field_factors(material).incidence_scale(samples.cos_incidence))
+        M, hstats = core.exitance(pv_c, progress=progress)
         if transport == "auto":  # the far field's distances on this light's configuration, or the direct sum
             t_v = time.perf_counter()
             verified = verify_far_field(core, M, pv)
@@ -186,7 +198,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     if core is None:
         M, beam_distance, stats, plan, kstats = _direct(mesh, material, lights, samples, curv, cut, model, clock,
                                                         far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol,
-                                                        auto_options, progress)
+                                                        auto_options, progress, near_field)
         stats["transport"] = "direct" + (f" ({why})" if why else "")
     else:
         if built:  # built by this bake (not passed in or reused): its stages count here
@@ -200,12 +212,15 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
             sub = subset_samples(samples, point)
             Mb, beam_distance, bstats, bplan, kstats = _direct(mesh, material, lights, sub, curv, cut, model, clock,
                                                                "off", far_tol, far_rel_tol, far_geodesic, geodesic,
-                                                               rtol, auto_options, progress)
+                                                               rtol, auto_options, progress, near_field)
             M = M + Mb
             stats.update({f"beam_{k}": v for k, v in bstats.items() if k in ("pairs_found", "pairs_evaluated")})
             if plan is not None and bplan is not None:
                 plan = merge_plans(plan, bplan, point)
     stats.update(kstats)
+    stats["near_field"] = near_field
+    if near_field == "beam" and near_field_factors(material).clamped:
+        stats["near_field_clamped"] = True   # a channel outside the fitted domain: its nearest node is used
     stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
     stats["entering_power"] = float(samples.power.sum())
     check_exitance(M, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
@@ -214,7 +229,7 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
 
 
 def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field, far_tol, far_rel_tol, far_geodesic,
-            geodesic, rtol, auto_options, progress):
+            geodesic, rtol, auto_options, progress, near_field="point"):
     """The direct sum of :func:`bake` over ``samples``: (M, beam distance, stats, AutoPlan or None, kernel stats)."""
     frames = source_frames(samples, curv, mesh.faces)
     far_field, near = _near_radius(mesh, material, samples, cut, far_field, far_tol)
@@ -227,7 +242,10 @@ def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field,
     zone = assign_zones(len(samples), samples.vertex >= 0, far_field, geodesic, plan, far_geodesic)
     clustered, src_cut, chord_cut = _gather_radii(zone, cut, near)
     groups = _zone_groups(zone)
-    kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan)
+    factors = near_field_factors(material) if near_field == "beam" else None
+    kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors)
+    if factors is not None:
+        kernel.source_scale = factors.incidence_scale(samples.cos_incidence)
     methods = {m for z, _ in groups for m in ZONES[z].solver_methods}
     solvers = {m: neighbourhood_solver(m, mesh) for m in methods}
     clock.lap("neighbourhoods")
@@ -242,7 +260,10 @@ def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field,
         M, gstats = _gather_near(kernel, stream, groups, chord_cut, progress)
         stats.update(gstats)
         if np.any(clustered):
-            M_far, fstats = _far_field(samples, clustered, mesh, material, near, cut, far_field, far_rel_tol)
+            M_far, fstats = _far_field(samples, clustered, mesh, material, near, cut, far_field, far_rel_tol,
+                                       None if factors is None else kernel.source_scale)
+            if factors is not None:   # the far field carries the near-field model's energy beyond r_near
+                M_far = M_far * np.array([factors.far_scale(c, float(near[c])) for c in range(3)])[None, :]
             M += M_far
             stats.update(fstats)
             clock.lap("far field")
@@ -276,9 +297,9 @@ def _surface_transport(transport, mesh, material, model, samples, curv, *, direc
     ``built``: whether this call built it (not passed in, nor reused from :mod:`meshshade.memo`)."""
     if isinstance(transport, SurfaceTransport):
         if (transport.mesh is not mesh or transport.material.describe() != material.describe()
-                or transport.model != model):
-            raise ParameterError("the SurfaceTransport passed as transport was built for another mesh, material or "
-                                 "model")
+                or transport.model != model or transport.near_field != kw.get("near_field", "point")):
+            raise ParameterError("the SurfaceTransport passed as transport was built for another mesh, material, "
+                                 "model or near field")
         return transport, None, False
     if transport == "direct":
         return None, None, False
@@ -429,16 +450,35 @@ def _gather_near(kernel, stream: PairStream, groups, chord_cut, progress) -> tup
                           enabled=bool(progress))
     with stream.bar:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
         M, stats = gather(kernel, mesh.n_vertices, samples.power, stream.src_cut, stream.pairs(groups),
-                          source_radius=source_patch_radius(samples, mesh.vertex_areas), chord_cutoff_mm=chord_cut)
+                          source_radius=source_patch_radius(samples, mesh.vertex_areas), chord_cutoff_mm=chord_cut,
+                          receiver_radius=np.sqrt(mesh.vertex_areas / np.pi))
     return M, {**stats, "pairs_found": stream.pairs_found, "geodesic_pairs_computed": stream.geodesic_pairs}
 
 
-def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, far_rel_tol: float):
-    """The far field of the clustered sources (pairs with chord beyond r_near): M (n, 3) W/mm^2 and stats."""
+def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, far_rel_tol: float, scale=None):
+    """The far field of the clustered sources (pairs with chord beyond r_near): M (n, 3) W/mm^2 and stats.
+    ``scale`` (k, 3) or None: per-sample, per-channel power factors (the near field's incidence scale); channels
+    whose factors differ are summed in separate passes."""
     fn = far_field_exitance if far_field == "clustered" else far_field_exitance_direct
-    with kernel_interrupts():  # numba in this thread: a Ctrl-C is a KeyboardInterrupt, not a SystemError
-        M, fstats = fn((samples.positions[clustered], samples.power[clustered]), mesh.vertices, material, near,
-                       cut, rel_tol=far_rel_tol)
+    pos = samples.positions[clustered]
+    columns = [None] if scale is None else [0, 1, 2]
+    M = np.zeros((mesh.n_vertices, 3))
+    done: list = []
+    for c in columns:
+        power = samples.power[clustered] * (1.0 if c is None else scale[clustered, c])
+        if c is not None:
+            j = next((k for k in done if np.array_equal(scale[clustered, k], scale[clustered, c])), None)
+            if j is not None:
+                M[:, c] = M[:, j]
+                continue
+            done.append(c)
+        with kernel_interrupts():  # numba in this thread: a Ctrl-C is a KeyboardInterrupt, not a SystemError
+            Mc, fstats = fn((pos, power), mesh.vertices, material, near, cut, rel_tol=far_rel_tol)
+        if c is None:
+            M = Mc
+        else:
+            same = [k for k in range(3) if np.array_equal(scale[clustered, k], scale[clustered, c])]
+            M[:, same] = Mc[:, same]
     return M, {"far_field": far_field, "near_mm": near.tolist(), "far_field_rel_tol": far_rel_tol,
                "far_pairs_exact": fstats["pairs_exact"], "far_clusters_accepted": fstats.get("clusters_accepted", 0)}
 

@@ -34,7 +34,7 @@ def cutoff_radii(material: Material, tol: float) -> np.ndarray:
 
 
 def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, source_radius=None,
-           chord_cutoff_mm=None) -> tuple[np.ndarray, dict]:
+           chord_cutoff_mm=None, receiver_radius=None) -> tuple[np.ndarray, dict]:
     """Accumulate M[v, c] = sum_i power_i R_c(pair) over the pair chunks yielded by ``pairs_iter``.
 
     ``pairs_iter`` yields ``(src, vertex, s, chord, phi)`` arrays (src indexes ``power`` (k,) W and the kernel's
@@ -42,7 +42,10 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
     reflectance is negligible); ``cutoff_mm`` is (3,), or (k, 3) per source and channel. ``chord_cutoff_mm``
     (k, 3) or None: pairs must also have chord <= it (the near zone of sources whose far field is summed by
     clusters). ``source_radius`` (k,) mm: patch radius of each source (0 for a pencil beam), see
-    :func:`~meshshade.transport.pair_kernel.patch_average_factor`. Returns M (n_vertices, 3) W/mm^2 and counts.
+    :func:`~meshshade.transport.pair_kernel.patch_average_factor`. With the near field of ``kernel.near_factors``
+    (transport/near_field.py) every pair is also multiplied by its near-field factor, and a point source (a beam)
+    is averaged over the receiver's patch, of radius ``receiver_radius`` (n_vertices,) mm: a vertex's exitance
+    stands for its patch, and the near field peaks within it. Returns M (n_vertices, 3) W/mm^2 and counts.
     """
     M = np.zeros((n_vertices, 3))
     cutoff_mm = np.asarray(cutoff_mm, dtype=np.float64)
@@ -55,13 +58,20 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
             if not np.any(keep):
                 continue
             R = kernel.evaluate(c, src[keep], s[keep], chord[keep], phi[keep])
+            a = None
             if source_radius is not None:
                 a = source_radius[src[keep]]
+                if kernel.near_factors is not None and receiver_radius is not None:
+                    a = np.where(a > 0, a, receiver_radius[vtx[keep]])
                 near = np.flatnonzero(s[keep] < PATCH_AVERAGE_RADII * a)
                 if near.size:
                     ch = kernel.material.channel(c)
                     R[near] *= patch_average_factor(s[keep][near], a[near], albedo_prime=ch["albedo_prime"],
                                                     eta=ch["eta"], sigma_t_prime=ch["sigma_t_prime"])
+            if kernel.near_factors is not None:
+                R *= kernel.near_factors.pair_factor(c, s[keep], 0.0 if a is None else a)
+                if kernel.source_scale is not None:
+                    R *= kernel.source_scale[src[keep], c]
             acc = np.bincount(vtx[keep], weights=power[src[keep]] * R, minlength=n_vertices)
             n_pairs[c] += int(keep.sum())
             for cc in same:

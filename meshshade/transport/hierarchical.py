@@ -46,6 +46,7 @@ from meshshade.transport.gather import cutoff_radii
 from meshshade.transport.hierarchy_kernels import (KIND_CURVED, KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_SPHERE,
                                                    cluster_geometry, far_traverse)
 from meshshade.transport.models import MODELS
+from meshshade.transport.near_field import check_near_field, near_field_factors
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, patch_average_factor, source_frames
 from meshshade.transport.zones import NEAR_MARGIN, neighbourhood_solver
 
@@ -233,13 +234,18 @@ class SurfaceTransport:
     params: tuple
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    #: "point" or "beam" (transport/near_field.py), and the far field's per-channel energy scale T_near/T_d at the
+    #: median near radius (ones for "point")
+    near_field: str = "point"
+    far_scale: np.ndarray = field(default_factory=lambda: np.ones(3))
 
     # ------------------------------------------------------------------------------------------------ build
     @classmethod
     def build(cls, mesh, material: Material, model: str = "auto", *, geodesic: str = "exact",
               cutoff_tol: float = 1e-4, curvature=None, curvature_radius_mm: float | None = None,
               auto_options: dict | None = None, rtol: float = 1e-10, theta: float = THETA,
-              near_patch_radii: float | None = None, progress: bool | str = False) -> "SurfaceTransport":
+              near_patch_radii: float | None = None, progress: bool | str = False,
+              near_field: str = "point") -> "SurfaceTransport":
         """The geometric work for ``mesh`` (a Mesh in mm), ``material`` and ``model`` (one of MODELS).
 
         ``geodesic`` ("exact" or "arc"): the near field's geodesics (with ``auto``, exact where the plan asks
@@ -247,8 +253,10 @@ class SurfaceTransport:
         ``theta`` in (0, 1): the clusters' opening criterion. ``near_patch_radii`` (>= 4, or None): the near
         radius in patch radii; None lets :func:`far_distance_check` choose it from NEAR_PATCH_RADII on this mesh,
         and raises :class:`FarFieldUnsupported` when none of them makes the far field's distances accurate
-        enough (bake's ``transport="auto"`` then uses the direct sum).
+        enough (bake's ``transport="auto"`` then uses the direct sum). ``near_field``: "point" or "beam"
+        (transport/near_field.py: the near matrices carry the near-field factors, the far field its energy scale).
         """
+        near_field = check_near_field(near_field)
         if model not in MODELS:
             raise ParameterError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
         if geodesic not in ("exact", "arc"):
@@ -295,7 +303,11 @@ class SurfaceTransport:
             kind[plan.kernel == CURVED] = KIND_CURVED
             kind[plan.kernel == EXACT_SPHERE] = KIND_SPHERE
         timings["plan"] = time.perf_counter() - t0
-        kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan)
+        factors = near_field_factors(material) if near_field == "beam" else None
+        kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors)
+        far_scale = np.ones(3)
+        if factors is not None:
+            far_scale = np.array([factors.far_scale(c, float(np.median(near_mm))) for c in range(3)])
         t0 = time.perf_counter()
         if model == "auto":
             exact = plan.exact_geodesic & (geodesic == "exact")
@@ -323,7 +335,7 @@ class SurfaceTransport:
             stats["exact_sphere_fallback_dipole"] = int((H <= 0).sum())
         return cls(mesh, material, model, curv, frames, plan, kind, cut, near_mm, patch, kernel.channels, near,
                    float(theta), trees, shape, sph_row, logr, sph_tab, sph_r0, _channel_params(material, cut),
-                   timings, stats)
+                   timings, stats, near_field, far_scale)
 
     # ------------------------------------------------------------------------------------------------ use
     def sample_plan(self, samples):
@@ -335,10 +347,29 @@ class SurfaceTransport:
 
     def exitance(self, vertex_power, *, progress: bool | str = False) -> tuple[np.ndarray, dict]:
         """Exitance M (n, 3) [W/mm^2] of the vertex sources with powers ``vertex_power`` (n,) W (0 where unlit),
+        or (n, 3) per channel (the near field's incidence scale makes them differ: one pass per distinct column),
         and stats (timings, cluster and pair counts)."""
         mesh = self.mesh
         n = mesh.n_vertices
         pv = np.asarray(vertex_power, dtype=np.float64)
+        if pv.ndim == 2 and pv.shape == (n, 3):
+            M = np.zeros((n, 3))
+            stats: dict = {"far_pairs": 0, "far_clusters": 0, "timings": {}}
+            done: list = []
+            for c in range(3):
+                j = next((k for k in done if np.array_equal(pv[:, k], pv[:, c])), None)
+                if j is not None:
+                    M[:, c] = M[:, j]
+                    continue
+                done.append(c)
+                Mc, sc = self.exitance(pv[:, c], progress=progress)
+                same = [k for k in range(3) if np.array_equal(pv[:, k], pv[:, c])]
+                M[:, same] = Mc[:, same]
+                stats["far_pairs"] += sc["far_pairs"]
+                stats["far_clusters"] += sc["far_clusters"]
+                for k, v in sc["timings"].items():
+                    stats["timings"][k] = stats["timings"].get(k, 0.0) + v
+            return M, stats
         if pv.shape != (n,) or not np.all(np.isfinite(pv)) or np.any(pv < 0):
             raise ParameterError(f"vertex_power must be a finite (n,) = ({n},) array >= 0 [W]")
         timings: dict = {}
@@ -386,7 +417,7 @@ class SurfaceTransport:
                     blk = order[a:a + RECEIVER_BLOCK]
                     with kernel_interrupts():
                         Mf, cnt = far_traverse(recv, rnrm, blk, *args)
-                    M[blk] += Mf[blk]
+                    M[blk] += Mf[blk] * self.far_scale[None, :]
                     counts += cnt[blk].sum(axis=0)
                     bar.update(blk.size)
         timings["far field"] = time.perf_counter() - t0
@@ -508,6 +539,8 @@ def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch,
                         ch = kernel.material.channel(c)
                         R[close] *= patch_average_factor(s[close], a_p[close], albedo_prime=ch["albedo_prime"],
                                                          eta=ch["eta"], sigma_t_prime=ch["sigma_t_prime"])
+                    if kernel.near_factors is not None:
+                        R *= kernel.near_factors.pair_factor(c, s, a_p)
                     parts[c].append(R)
                 rows_all.append(vtx)
                 cols_all.append(s_idx)
@@ -556,8 +589,12 @@ def verify_far_field(core: "SurfaceTransport", M, vertex_power, *, n_receivers: 
     return {"mean": float(worst.mean()), "max": float(worst.max()), "receivers": int(idx.size)}
 
 
-def vertex_power(samples, n_vertices: int) -> np.ndarray:
-    """(n,) W: the power of the vertex samples of ``samples`` (EntrySamples) summed per vertex (several lights)."""
+def vertex_power(samples, n_vertices: int, scale=None) -> np.ndarray:
+    """(n,) W: the power of the vertex samples of ``samples`` (EntrySamples) summed per vertex (several lights);
+    with ``scale`` (k, 3) per sample and channel, (n, 3): the powers times it."""
     at_v = samples.vertex >= 0
-    return np.bincount(samples.vertex[at_v], weights=samples.power[at_v], minlength=n_vertices)
+    if scale is None:
+        return np.bincount(samples.vertex[at_v], weights=samples.power[at_v], minlength=n_vertices)
+    return np.stack([np.bincount(samples.vertex[at_v], weights=samples.power[at_v] * scale[at_v, c],
+                                 minlength=n_vertices) for c in range(3)], axis=1)
 

@@ -80,9 +80,14 @@ class PairKernel:
     """
 
     def __init__(self, model: str, material: Material, frames: SourceFrames, *, rtol: float = 1e-10,
-                 sphere_radius_rtol: float = 1e-3, plan=None):
+                 sphere_radius_rtol: float = 1e-3, plan=None, near=None):
         if model not in MODELS:
             raise ParameterError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+        #: the near-field factors (transport.near_field.NearFieldFactors) the gather multiplies pairs by, or None
+        #: for the kernels' own point source at z_r; with them, ``source_scale`` (k, 3): each source's incidence
+        #: scale per channel (NearFieldFactors.incidence_scale), or None
+        self.near_factors = near
+        self.source_scale = None
         if model == "auto" and plan is None:
             raise ValueError("model 'auto' needs the per-sample plan (meshshade.transport.auto.plan_sources)")
         self.model, self.material, self.frames, self.plan = model, material, frames, plan
@@ -252,14 +257,17 @@ def _disc_nodes():
 _DISC_T, _DISC_W = _disc_nodes()
 
 
-def _disc_average(s, a, *, albedo_prime, eta):
+def _disc_average(s, a, *, albedo_prime, eta, profile=None, tail=None):
     """Average of the dipole R_d over the disc of radius ``a`` centred at distance ``s`` from the receiver (optical
     units, (k,) arrays, a > 0; within 1e-7 of a brute-force 2-D quadrature for a up to 30); see
-    :func:`patch_average_factor`. Returns (k,) in units of R_d/sigma_t'^2."""
+    :func:`patch_average_factor`. Returns (k,) in units of R_d/sigma_t'^2. ``profile(r)`` and its tail
+    ``tail(r) = int_r^inf profile 2 pi r dr`` replace the dipole's when given (any radial kernel)."""
     kw = {"albedo_prime": albedo_prime, "eta": eta}
+    if profile is None:
+        profile = lambda r: dipole_profile(r, **kw)   # noqa: E731
+        tail = lambda r: dipole_tail_reflectance(r, **kw)   # noqa: E731
     inside = s < a
-    full = np.where(inside, dipole_tail_reflectance(0.0, **kw) - dipole_tail_reflectance(np.where(inside, a - s, 0.0),
-                                                                                          **kw), 0.0)
+    full = np.where(inside, tail(0.0) - tail(np.where(inside, a - s, 0.0)), 0.0)
     out = np.empty(s.shape)
     for b in range(0, s.size, 65536):   # blocks of pairs: (block, 60) temporaries
         sc, ac, t = s[b:b + 65536, None], a[b:b + 65536, None], _DISC_T[None, :]
@@ -267,7 +275,8 @@ def _disc_average(s, a, *, albedo_prime, eta):
         r = np.sqrt(r2)
         with np.errstate(invalid="ignore", divide="ignore"):
             arc = np.arccos(np.clip((r2 + sc * sc - ac * ac) / (2.0 * r * sc), -1.0, 1.0))
-        integrand = np.where(sc > 0, 2.0 * sc * ac * np.sin(t) * arc, 0.0) * dipole_profile(r, **kw)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            integrand = np.where(sc > 0, 2.0 * sc * ac * np.sin(t) * arc * profile(r), 0.0)
         out[b:b + 65536] = integrand @ _DISC_W
     return (full + out) / (np.pi * a * a)
 

@@ -81,8 +81,12 @@ def test_bench_plan_iterates_over_transport_models():
 
 def test_bench_tiny_rows_finite_with_required_columns(tiny_result):
     rows = tiny_result.rows
-    # sphere: 2 defaults + the rtol rows (exact-sphere only: the dipole sums no series); torus: 2 defaults + 1 mc row
-    assert len(rows) == 2 + len(TINY.rtol) + 2 + 1
+    # sphere: 2 defaults + the rtol rows (exact-sphere only: the dipole sums no series); torus (Monte Carlo
+    # reference): 2 defaults + their 2 near_field=beam rows + 1 mc row
+    assert len(rows) == 2 + len(TINY.rtol) + 2 + 2 + 1
+    beam = [r for r in rows if r["knob"] == "near_field"]
+    assert {(r["scene"], r["value"]) for r in beam} == {("tiny_torus_beam", "beam")}
+    assert "dipole (near_field=beam)" in table_markdown(rows, tiny_result.metadata)
     for r in rows:
         for c in REQUIRED:
             assert c in r

@@ -141,3 +141,29 @@ def test_point_source_ring_and_total_closed_forms(a, eta, t):
         assert point_source_ring(lo, hi, t, albedo_prime=a, eta=eta) == pytest.approx(want, rel=1e-9)
     total = sum(quad(f, lo, hi, epsrel=1e-12, limit=400)[0] for lo, hi in ((0, t), (t, 10 * t + 1), (10 * t + 1, 2e3)))
     assert point_source_total(t, albedo_prime=a, eta=eta) == pytest.approx(total, rel=1e-8)
+
+
+@pytest.mark.parametrize("a, eta, g, cos_t", [(0.99, 1.3, 0.0, 0.7), (0.9, 1.0, 0.8, 0.3), (0.6, 1.5, 0.5, 0.85)])
+def test_oblique_single_scattering_against_mpmath(a, eta, g, cos_t):
+    """eq. (81): first scattering at depth z with density (sigma_s/cos_t) exp(-sigma_t z/cos_t), the rest as at
+    normal incidence; the depth integral in mpmath, the ring and total from the profile by quadrature."""
+    sigma_s = a / (1 - g)
+    sigma_t = sigma_s + 1 - a
+    for r in (0.01, 0.3, 2.0):
+        def integrand(z):
+            l = mp.sqrt(r * r + z * z)
+            c = -z / l
+            p = (1 - g * g) / (4 * mp.pi * (1 + g * g - 2 * g * c) ** 1.5)
+            return (mp.exp(-sigma_t * (z / cos_t + l)) * p * (1 - mp_fresnel_inside(z / l, mp.mpf(eta)))
+                    * z / l ** 3)
+        mu_c = math.sqrt(1 - 1 / eta ** 2)
+        z_c = r * mu_c / math.sqrt(1 - mu_c * mu_c)
+        ref = sigma_s / cos_t * mp.quad(integrand, sorted({0, z_c, r, 10 * r + 1}) + [mp.inf])
+        got = single_scattering_profile(r, albedo_prime=a, eta=eta, g=g, cos_t=cos_t)
+        assert got == pytest.approx(float(ref), rel=1e-7), r
+    prof = lambda r: 2 * math.pi * r * single_scattering_profile(r, albedo_prime=a, eta=eta, g=g, cos_t=cos_t)  # noqa: E731
+    tot = quad(prof, 0, 50, limit=400, points=(0.1, 1, 5))[0]
+    assert single_scattering_total(albedo_prime=a, eta=eta, g=g, cos_t=cos_t) == pytest.approx(tot, rel=1e-7)
+    ring = quad(prof, 0.2, 0.7, limit=200)[0] / (math.pi * (0.7 ** 2 - 0.2 ** 2))
+    assert float(single_scattering_ring(0.2, 0.7, albedo_prime=a, eta=eta, g=g, cos_t=cos_t)) == pytest.approx(
+        ring, rel=1e-7)
