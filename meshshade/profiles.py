@@ -285,8 +285,9 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
     rows (``mc``, ``photons`` per channel, ``seed``) also hold ``stderr_per_mm2``.
 
     ``models``: a non-empty list of distinct names among ``MODELS``; ``shapes``: a non-empty list of
-    :class:`Shape`; ``azimuths_deg``: a non-empty list of finite angles; ``distances_mm``, ``rtol`` and
-    ``near_field`` as :func:`reflectance_profile`. All checked before any curve is computed (MeshshadeError, one line).
+    :class:`Shape`; ``azimuths_deg``: a non-empty list of finite angles; ``distances_mm`` and ``rtol`` as
+    :func:`reflectance_profile`; ``near_field``: "point", "beam" or a list of both (each model's curve for each;
+    curves with the near field are named ``model+beam``; Monte Carlo once). All checked before any curve is computed (MeshshadeError, one line).
     """
     s_all = _check_distances(distances_mm)
     models = _check_models(models)
@@ -297,7 +298,10 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
     if not azimuths_deg:
         raise ParameterError("azimuths: give at least one angle in degrees")
     rtol = _check_rtol(rtol)
-    near_field = check_near_field(near_field)
+    near_fields = [near_field] if isinstance(near_field, str) else list(near_field)
+    near_fields = list(dict.fromkeys(check_near_field(x) for x in near_fields))
+    if not near_fields:
+        raise ParameterError("near field: give point, beam or both")
     if not isinstance(material, Material):
         raise ParameterError(f"material must be a Material, got {type(material).__name__}")
     rows = []
@@ -311,15 +315,17 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
                 raise ParameterError(f"no requested distance lies on the sphere of radius {shape.radius_mm:g} mm")
         for az in azimuths_deg:
             for model in models:
-                err = None
-                if model == "mc":
-                    res = _mc(material, s, shape, az, photons, seed)
-                    R, err = res.reflectance, res.stderr
-                else:
-                    R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol,
-                                            near_field=near_field)
-                for c, ch in enumerate(CHANNELS):
-                    rows.append({"model": model, "channel": ch, "radius_mm": shape.radius_mm,
-                                 "azimuth_deg": az, "distance_mm": s, "reflectance_per_mm2": R[c],
-                                 "stderr_per_mm2": None if err is None else err[c]})
+                for nf in (near_fields if model != "mc" else near_fields[:1]):
+                    err = None
+                    if model == "mc":
+                        res = _mc(material, s, shape, az, photons, seed)
+                        R, err = res.reflectance, res.stderr
+                    else:
+                        R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol,
+                                                near_field=nf)
+                    label = model + ("+beam" if nf == "beam" and model != "mc" and len(near_fields) > 1 else "")
+                    for c, ch in enumerate(CHANNELS):
+                        rows.append({"model": label, "channel": ch, "radius_mm": shape.radius_mm,
+                                     "azimuth_deg": az, "distance_mm": s, "reflectance_per_mm2": R[c],
+                                     "stderr_per_mm2": None if err is None else err[c]})
     return rows

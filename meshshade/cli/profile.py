@@ -6,8 +6,7 @@ import argparse
 
 import numpy as np
 
-from meshshade.cli.options import (add_material_args, add_near_field_arg, integer, material_from_args, number,
-                                   parse_floats)
+from meshshade.cli.options import add_material_args, integer, material_from_args, number, parse_floats
 from meshshade.io import check_output_path, write_figure, write_text
 from meshshade.output.report import format_profile_table, profile_csv_text, profile_figure
 from meshshade.profiles import MC_PHOTONS, Shape, profile_distances, profile_rows
@@ -27,7 +26,10 @@ def add_profile_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--models", default="dipole,exact",
                    help="comma list among dipole,exact,curved,mc (default dipole,exact); mc: Monte Carlo on the "
                         "exact plane, sphere or cylinder, with error bars")
-    add_near_field_arg(p)
+    p.add_argument("--near-field", default="point", metavar="NF[,NF]",
+                   help="what enters the medium: point (each model's point source at z_r; default), beam (single "
+                        "scattering plus the fitted beam sources, composed with the model's geometry, docs/physics.md "
+                        "§13), or point,beam for both curves (named model+beam)")
     p.add_argument("--distances", metavar="LIST", help="geodesic distances [mm], e.g. 0.1,0.5,1")
     p.add_argument("--max-distance", type=number, default=None, metavar="MM",
                    help="with --samples: evenly spaced distances 0..MM (default 20 mm)")
@@ -58,7 +60,8 @@ def run_profile(args) -> int:
         radii = parse_floats(args.radius, "--radius") if args.radius is not None else [None]
         shapes = [Shape.make(args.shape, r) for r in radii]
     rows = profile_rows(material, distances, models=models, shapes=shapes, azimuths_deg=azimuths,
-                        rtol=args.rtol, photons=args.photons, seed=args.seed, near_field=args.near_field)
+                        rtol=args.rtol, photons=args.photons, seed=args.seed,
+                        near_field=[x.strip() for x in args.near_field.split(",") if x.strip()])
     extra = (["radius_mm"] if len(shapes) > 1 else []) + (
         ["azimuth_deg"] if len(azimuths) > 1 or shapes[0].kind in ("cylinder", "saddle", "point") else [])
     if args.csv:

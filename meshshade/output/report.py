@@ -93,13 +93,18 @@ def profile_figure(rows, *, material, shapes):
     grey = _grey(rows)
     chans = ["r"] if grey else ["r", "g", "b"]
     fig, axes = plt.subplots(1, len(chans), figsize=(5.2 * len(chans), 4.2), squeeze=False)
-    styles = {"dipole": "--", "exact": "-", "curved": "-.", "beam": (0, (5, 1, 1, 1)), "mc": ":"}
+    styles = {"dipole": "--", "exact": "-", "curved": "-.", "mc": ":"}
     radii = sorted({r["radius_mm"] for r in rows if r["radius_mm"] is not None})
     cmap = plt.get_cmap("viridis")
+    labels = list(dict.fromkeys(r["model"] for r in rows))
+    palette = plt.get_cmap("tab10")   # one radius: a colour per curve (point and +beam near fields apart)
     for ax, ch in zip(axes[0], chans):
         for r in (x for x in rows if x["channel"] == ch):
             R = np.where(r["reflectance_per_mm2"] > 0, r["reflectance_per_mm2"], np.nan)
-            colour = cmap(radii.index(r["radius_mm"]) / max(1, len(radii) - 1) * 0.85) if radii else "k"
+            if len(radii) > 1:
+                colour = cmap(radii.index(r["radius_mm"]) / max(1, len(radii) - 1) * 0.85)
+            else:
+                colour = palette(labels.index(r["model"]) % 10)
             label = r["model"] + (f", R0 = {r['radius_mm']:g} mm" if r["radius_mm"] is not None else "")
             if len({x["azimuth_deg"] for x in rows}) > 1:
                 label += f", phi = {r['azimuth_deg']:g} deg"
@@ -108,7 +113,8 @@ def profile_figure(rows, *, material, shapes):
                             label=label + " (±2σ)", capsize=2, lw=1.0)
                 ax.set_yscale("log")
                 continue
-            ax.semilogy(r["distance_mm"], R, linestyle=styles.get(r["model"], "-"), color=colour, label=label, lw=1.4)
+            ax.semilogy(r["distance_mm"], R, linestyle=styles.get(r["model"].split("+")[0], "-"), color=colour,
+                        label=label, lw=2.0 if r["model"].endswith("+beam") else 1.4)
         ax.set_xlabel("geodesic distance from entry point [mm]")
         ax.set_ylabel("diffuse reflectance R [1/mm$^2$]")
         ax.set_title(("" if grey else f"channel {ch}: ") + ", ".join(sorted({s.kind for s in shapes})))

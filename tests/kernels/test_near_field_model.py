@@ -94,6 +94,15 @@ def test_profile_near_field_beam_is_the_near_field_in_mm(tmp_path):
                  "0.1,1", "--plot", str(tmp_path / "p.png"), "--quiet"]) == 0
     assert (tmp_path / "p.png").stat().st_size > 0
     assert main(["profile", "--material", "skin1", "--models", "beam"]) == 2
+    # both near fields in one call: curves named model and model+beam, Monte Carlo once
+    from meshshade.profiles import profile_rows
+    rows = profile_rows(m, s, models=["exact", "mc"], shapes=[Shape.make("sphere", 10.0)], photons=20_000,
+                        near_field=["point", "beam"])
+    assert sorted({r["model"] for r in rows}) == ["exact", "exact+beam", "mc"] and len(rows) == 9
+    assert main(["profile", "--material", "skin1", "--shape", "sphere", "--radius", "10", "--models", "exact,curved",
+                 "--near-field", "point,beam", "--distances", "0.1,1", "--csv", str(tmp_path / "p.csv"),
+                 "--quiet"]) == 0
+    assert "curved+beam" in (tmp_path / "p.csv").read_text()
 
 
 @pytest.mark.parametrize("material", [Material(1.0, 0.01, 1.3, 0.0), Material(1.0, 0.1, 1.3, 0.0),
