@@ -117,7 +117,7 @@ def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchCo
     """
     cfg = config or (QUICK if quick else FULL)
     near_field = check_near_field(near_field)
-    other = "beam" if near_field == "point" else "point"
+    other_near = "beam" if near_field == "point" else "point"
     models = tuple(MODELS) if models is None else tuple(models)
     bad = [m for m in models if m not in MODELS]
     if bad:
@@ -137,7 +137,7 @@ def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchCo
         for m in models:
             runs.append(Run(sc, m, "default", "", L, dict(base)))
             if sc.reference == "mc":
-                runs.append(Run(sc, m, "near_field", other, L, {**base, "near_field": other}))
+                runs.append(Run(sc, m, "near_field", other_near, L, {**base, "near_field": other_near}))
             if n in cfg.rtol_scenes and m not in NO_SERIES:
                 runs += [Run(sc, m, "rtol", f"{v:g}", L, {**base, "rtol": v}) for v in cfg.rtol]
             if n in cfg.cutoff_scenes:

@@ -77,6 +77,13 @@ def test_bench_plan_iterates_over_transport_models():
     plan = bench.bench_plan(quick=True, scenes=["sphere_r20_beam"])
     assert {r.model for r in plan if r.knob == "default"} == set(MODELS)
     assert {r.knob for r in plan} <= set(bench.KNOBS)
+    # the near-field knob: every model of every Monte Carlo scene once, the other near field, in its settings
+    full = bench.bench_plan()
+    nf = [r for r in full if r.knob == "near_field"]
+    mc_scenes = {r.scene.name for r in full if r.scene.reference == "mc"}
+    assert {(r.scene.name, r.model) for r in nf} == {(n, m) for n in mc_scenes for m in MODELS}
+    assert all(r.value == "beam" and r.settings["near_field"] == "beam" for r in nf)
+    assert all(r.settings["near_field"] == "point" for r in full if r.knob not in ("near_field", "photons"))
 
 
 def test_bench_tiny_rows_finite_with_required_columns(tiny_result):
