@@ -260,6 +260,20 @@ def _regular_part(theta, z, *, r_src, r_e, R, mu, flux, eps):
     return (2.0 / np.pi) * out, (2.0 / np.pi) * total_abs
 
 
+def _source_geometry(th, zz, R0, depth):
+    """(d, geo, theta from the source) for a source at ``depth`` below the entry point: the distance d to the
+    surface points (theta, z), and ``geo`` = R0 - r' cos(theta) (the free-space flux's geometric factor), both
+    without cancellation (docs/physics.md §5.2); a source past the axis (depth > R0) sits at radius depth - R0 and
+    angle pi, and angles are measured from there."""
+    r_src = R0 - depth
+    if r_src >= 0.0:
+        sin2 = np.sin(0.5 * th) ** 2
+        return (np.sqrt(depth * depth + 4.0 * R0 * r_src * sin2 + zz**2), depth + 2.0 * r_src * sin2, th)
+    cos2 = np.cos(0.5 * th) ** 2
+    far = 2.0 * R0 - depth
+    return np.sqrt(far * far + 4.0 * R0 * (-r_src) * cos2 + zz**2), far + 2.0 * (-r_src) * cos2, th - np.pi
+
+
 def _truncation_eps(rtol):
     """Series/q-range truncation level, relative to the absolute scale of the series (~R(0))."""
     rtol = _check_scalar("rtol", rtol, 0.0)
@@ -337,18 +351,7 @@ def cylinder_exact_profile(theta, z, *, R0_opt, albedo_prime, eta, rtol=1e-8, fu
         raise ParameterError("theta and z must be finite")
     R = R0 + z_b
     r_src = R0 - z_r
-    if r_src >= 0.0:
-        # d^2 = R0^2 + r'^2 - 2 R0 r' cos(theta) + z^2 and R0 - r' cos(theta), without cancellation (docs/physics.md §5.2)
-        sin2 = np.sin(0.5 * th) ** 2
-        d = np.sqrt(z_r**2 + 4.0 * R0 * r_src * sin2 + zz**2)
-        geo = z_r + 2.0 * r_src * sin2
-        th_src = th
-    else:
-        # source past the axis: radius |r'| at angle pi; distances measured from there
-        cos2 = np.cos(0.5 * th) ** 2
-        d = np.sqrt((2.0 * R0 - z_r) ** 2 + 4.0 * R0 * (-r_src) * cos2 + zz**2)
-        geo = (2.0 * R0 - z_r) + 2.0 * (-r_src) * cos2
-        th_src = th - np.pi
+    d, geo, th_src = _source_geometry(th, zz, R0, z_r)
     with np.errstate(under="ignore"):
         free = g_func(d, mu) * geo
     reg, scale = _regular_part(th_src, zz, r_src=abs(r_src), r_e=R0, R=R, mu=mu, flux=True, eps=eps)
@@ -440,16 +443,7 @@ def cylinder_point_source_exitance(theta, z, *, R0_opt, depth_opt, mu, D, z_b, c
         return np.zeros(shape)
     R = R0 + z_b
     r_src = R0 - t
-    if r_src >= 0.0:
-        sin2 = np.sin(0.5 * th) ** 2
-        d = np.sqrt(t * t + 4.0 * R0 * r_src * sin2 + zz**2)
-        geo = t + 2.0 * r_src * sin2
-        th_src = th
-    else:
-        cos2 = np.cos(0.5 * th) ** 2
-        d = np.sqrt((2.0 * R0 - t) ** 2 + 4.0 * R0 * (-r_src) * cos2 + zz**2)
-        geo = (2.0 * R0 - t) + 2.0 * (-r_src) * cos2
-        th_src = th - np.pi
+    d, geo, th_src = _source_geometry(th, zz, R0, t)
     out = np.zeros(th.shape)
     if c_E:
         with np.errstate(under="ignore"):

@@ -39,6 +39,22 @@ def mp_fresnel_inside(mu, eta):
     return (rs * rs + rp * rp) / 2
 
 
+def mp_single_scattering(r, a, eta, g, cos_t=1.0):
+    """R1(r) by mpmath quadrature of the depth integral (physics.md eqs. (71), (81)): first scattering at depth z
+    with density (sigma_s/cos_t) exp(-sigma_t z/cos_t), then straight out through the Fresnel boundary."""
+    sigma_s = a / (1 - g)
+    sigma_t = sigma_s + 1 - a
+
+    def integrand(z):
+        l = mp.sqrt(r * r + z * z)
+        c = -z / l
+        p = (1 - g * g) / (4 * mp.pi * (1 + g * g - 2 * g * c) ** 1.5)
+        return mp.exp(-sigma_t * (z / cos_t + l)) * p * (1 - mp_fresnel_inside(z / l, mp.mpf(eta))) * z / l ** 3
+    mu_c = math.sqrt(1 - 1 / eta ** 2)   # total internal reflection below: a kink at z_c, split there
+    z_c = r * mu_c / math.sqrt(1 - mu_c * mu_c)
+    return sigma_s / cos_t * mp.quad(integrand, sorted({0, z_c, r, 10 * r + 1}) + [mp.inf])
+
+
 @pytest.mark.parametrize("eta", [1.1, 1.3, 1.33, 1.5, 2.0])
 def test_fresnel_moments_against_mpmath(eta):
     e = mp.mpf(eta)
@@ -80,17 +96,8 @@ def test_ring_averages_are_averages_of_the_profiles(a, eta, g):
 
 @pytest.mark.parametrize("a, eta, g", [(0.99, 1.3, 0.0), (0.9, 1.0, 0.8), (0.6, 1.5, 0.5)])
 def test_single_scattering_profile_against_mpmath(a, eta, g):
-    sigma_s = a / (1 - g)
-    sigma_t = sigma_s + 1 - a
     for r in (0.01, 0.3, 2.0):
-        def integrand(z):
-            l = mp.sqrt(r * r + z * z)
-            c = -z / l
-            p = (1 - g * g) / (4 * mp.pi * (1 + g * g - 2 * g * c) ** 1.5)
-            return mp.exp(-sigma_t * (z + l)) * p * (1 - mp_fresnel_inside(z / l, mp.mpf(eta))) * z / l ** 3
-        mu_c = math.sqrt(1 - 1 / eta ** 2)   # total internal reflection below: a kink at z_c, split there
-        z_c = r * mu_c / math.sqrt(1 - mu_c * mu_c)
-        ref = sigma_s * mp.quad(integrand, sorted({0, z_c, r, 10 * r + 1}) + [mp.inf])
+        ref = mp_single_scattering(r, a, eta, g)
         got = single_scattering_profile(r, albedo_prime=a, eta=eta, g=g)
         assert got == pytest.approx(float(ref), rel=1e-7), r
     tot = quad(lambda r: 2 * math.pi * r * single_scattering_profile(r, albedo_prime=a, eta=eta, g=g), 0, 50,
@@ -147,18 +154,8 @@ def test_point_source_ring_and_total_closed_forms(a, eta, t):
 def test_oblique_single_scattering_against_mpmath(a, eta, g, cos_t):
     """eq. (81): first scattering at depth z with density (sigma_s/cos_t) exp(-sigma_t z/cos_t), the rest as at
     normal incidence; the depth integral in mpmath, the ring and total from the profile by quadrature."""
-    sigma_s = a / (1 - g)
-    sigma_t = sigma_s + 1 - a
     for r in (0.01, 0.3, 2.0):
-        def integrand(z):
-            l = mp.sqrt(r * r + z * z)
-            c = -z / l
-            p = (1 - g * g) / (4 * mp.pi * (1 + g * g - 2 * g * c) ** 1.5)
-            return (mp.exp(-sigma_t * (z / cos_t + l)) * p * (1 - mp_fresnel_inside(z / l, mp.mpf(eta)))
-                    * z / l ** 3)
-        mu_c = math.sqrt(1 - 1 / eta ** 2)
-        z_c = r * mu_c / math.sqrt(1 - mu_c * mu_c)
-        ref = sigma_s / cos_t * mp.quad(integrand, sorted({0, z_c, r, 10 * r + 1}) + [mp.inf])
+        ref = mp_single_scattering(r, a, eta, g, cos_t)
         got = single_scattering_profile(r, albedo_prime=a, eta=eta, g=g, cos_t=cos_t)
         assert got == pytest.approx(float(ref), rel=1e-7), r
     prof = lambda r: 2 * math.pi * r * single_scattering_profile(r, albedo_prime=a, eta=eta, g=g, cos_t=cos_t)  # noqa: E731
