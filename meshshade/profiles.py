@@ -13,8 +13,15 @@ plane      (0, 0)              R_d(s)                                 R_d(s) (ex
 sphere     (1/R, 1/R)          R_d(chord), chord = 2R sin(s/2R)       docs/physics.md eq. (23)   k1/k2 kernel
 cylinder   (1/R, 0)            R_d(chord of the helix)                exact infinite cylinder    k1/k2 kernel
 saddle     (1/R, -1/R)         R_d(s)                                 (none)                     k1/k2 kernel
+cavity     (-1/R, -1/R)        R_d(s)                                 (none)                     k1/k2 kernel
+bore       (0, -1/R)           R_d(s)                                 (none)                     k1/k2 kernel
 point      (--k1, --k2)        R_d(s)                                 (none)                     k1/k2 kernel
 =========  ==================  =====================================  =========================  ===========
+
+``fitted`` is the curvature model fitted to Monte Carlo (:mod:`meshshade.kernels.fitted_curvature`, docs/physics.md
+§14) on every shape: R_d(s) times its curvature factor, or with ``near_field="beam"`` the near-field base R_near(s)
+times it (eq. (82)). A cavity is the medium outside a ball, a bore the medium outside a cylinder (its first
+principal direction, k1 = 0, runs along the axis).
 
 ``near_field`` says what enters the medium (docs/physics.md §13): ``"point"`` is every model's own point source at
 depth z_r; ``"beam"`` replaces it by the near-field model (exact single scattering plus the beam's fitted diffusion
@@ -27,7 +34,7 @@ exact      each of the beam's sources with the exact sphere's or cylinder's Gree
 curved     the half-space near field at s times the k1/k2 kernel's curvature factor R_curved(s) / R_d(s) (eq. (79))
 =========  ========================================================================================================
 
-``mc`` is Monte Carlo on the exact plane, sphere or cylinder (:func:`meshshade.montecarlo.shapes.shape_mc_profile`:
+``mc`` is Monte Carlo on the exact plane, sphere, cylinder, cavity or bore (:func:`meshshade.montecarlo.shapes.shape_mc_profile`:
 exact exit distances, rings of half-width max(0.1 s, 0.05 / min sigma_t'), a pencil beam at normal incidence,
 ``photons`` per channel, reproducible for a ``seed``); its rows carry the standard error.
 """
@@ -43,6 +50,7 @@ from meshshade.errors import ParameterError
 from meshshade.kernels.curvature import curvature_profile
 from meshshade.kernels.cylinder import cylinder_exact_profile
 from meshshade.kernels.dipole import dipole_profile
+from meshshade.kernels.fitted_curvature import fitted_curvature_factor, helix_chord_curvature
 from meshshade.kernels.near_field import near_field_cylinder_profile, near_field_profile, near_field_sphere_profile
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import CHANNELS, Material
@@ -50,8 +58,10 @@ from meshshade.montecarlo.shapes import shape_mc_profile
 from meshshade.transport.baking import RTOL_RANGE
 from meshshade.transport.near_field import check_near_field
 
-SHAPES = ("plane", "sphere", "cylinder", "saddle", "point")
-MODELS = ("dipole", "exact", "curved", "mc")
+SHAPES = ("plane", "sphere", "cylinder", "saddle", "cavity", "bore", "point")
+MODELS = ("dipole", "exact", "curved", "fitted", "mc")
+#: the shapes with an exact Monte Carlo (meshshade.montecarlo.shapes)
+MC_SHAPES = ("plane", "sphere", "cylinder", "cavity", "bore")
 
 
 def _real(value) -> float:
@@ -90,7 +100,8 @@ class Shape:
         R = _real(radius_mm)
         if not 0.0 < R < math.inf:
             raise ParameterError(f"radius must be finite and > 0 mm, got {radius_mm!r}")
-        k = {"sphere": (1 / R, 1 / R), "cylinder": (1 / R, 0.0), "saddle": (1 / R, -1 / R)}[kind]
+        k = {"sphere": (1 / R, 1 / R), "cylinder": (1 / R, 0.0), "saddle": (1 / R, -1 / R), "cavity": (-1 / R, -1 / R),
+             "bore": (0.0, -1 / R)}[kind]
         return cls(kind, R, *k)
 
 
@@ -166,9 +177,13 @@ MC_PHOTONS = 1_000_000
 
 
 def _mc(material, s, shape, azimuth_deg, photons, seed):
-    if shape.kind not in ("plane", "sphere", "cylinder"):
-        raise ParameterError(f"Monte Carlo profiles are exact on a plane, sphere or cylinder, not a {shape.kind}")
-    return shape_mc_profile(material, s, shape=shape.kind, radius_mm=shape.radius_mm, azimuth_deg=azimuth_deg,
+    if shape.kind not in MC_SHAPES:
+        raise ParameterError(f"Monte Carlo profiles are exact on a {', '.join(MC_SHAPES[:-1])} or {MC_SHAPES[-1]}, "
+                             f"not a {shape.kind}")
+    # the Monte Carlo's azimuth runs from the direction around the axis; a bore's first principal direction
+    # (k1 = 0) runs along it
+    az = 90.0 - float(azimuth_deg) if shape.kind == "bore" else azimuth_deg
+    return shape_mc_profile(material, s, shape=shape.kind, radius_mm=shape.radius_mm, azimuth_deg=az,
                             photons=photons, seed=seed)
 
 
@@ -181,7 +196,7 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     ----------
     material : Material
     distances_mm : (n,) float, finite and >= 0 — geodesic distance from the entry point [mm] (at least one)
-    model : "dipole" | "exact" | "curved" | "mc" (see the module table)
+    model : "dipole" | "exact" | "curved" | "fitted" | "mc" (see the module table)
     shape : Shape (default: plane)
     azimuth_deg : angle of the exit direction from the first principal direction [degrees], finite
     rtol : relative tolerance of the exact series, in [1e-15, 0.1] (``RTOL_RANGE``)
@@ -233,10 +248,24 @@ def _flat_distance(r, shape, phi, st):
     return r
 
 
+def _fitted_factor(r, shape, phi, st, par):
+    """The fitted model's curvature factor on ``shape``, with the curvature along the exit direction measured
+    between the entry and exit points as in the bake (docs/physics.md eq. (85)): the helix's on a cylinder or bore,
+    the entry point's normal curvature elsewhere (where the two agree, or no second point exists)."""
+    along = None
+    if shape.kind in ("cylinder", "bore"):
+        around = phi if shape.kind == "cylinder" else np.pi / 2 - phi   # a bore's k1 = 0 runs along its axis
+        sign = 1.0 if shape.kind == "cylinder" else -1.0
+        along = sign * helix_chord_curvature(r, around, shape.radius_mm * st)
+    return fitted_curvature_factor(r, phi, shape.k1 / st, shape.k2 / st, k_along_opt=along, **par)
+
+
 def _beam_profile_opt(r, model, shape, phi, st, par, g, rtol):
     """The near-field model composed with ``model`` on ``shape`` (module docstring), optical units."""
     if shape.kind == "plane" or model == "dipole":
         return near_field_profile(_flat_distance(r, shape, phi, st), g=g, **par)
+    if model == "fitted":
+        return near_field_profile(r, g=g, **par) * _fitted_factor(r, shape, phi, st, par)
     if model == "curved":
         flat = dipole_profile(r, **par)
         curved = _profile_opt(r, "curved", shape, phi, st, par, rtol)
@@ -255,8 +284,10 @@ def _beam_profile_opt(r, model, shape, phi, st, par, g, rtol):
 
 
 def _profile_opt(r, model, shape, phi, st, par, rtol):
-    if shape.kind == "plane" or (model == "dipole" and shape.kind in ("saddle", "point")):
+    if shape.kind == "plane" or (model == "dipole" and shape.kind in ("saddle", "cavity", "bore", "point")):
         return dipole_profile(r, **par)
+    if model == "fitted":
+        return dipole_profile(r, **par) * _fitted_factor(r, shape, phi, st, par)
     if model == "curved":
         return curvature_profile(r, phi, k1_opt=shape.k1 / st, k2_opt=shape.k2 / st, **par)
     R0 = shape.radius_mm * st
@@ -307,7 +338,7 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
     rows = []
     for shape in shapes:
         s = s_all
-        if shape.kind == "sphere" and np.any(s_all > np.pi * shape.radius_mm):
+        if shape.kind in ("sphere", "cavity") and np.any(s_all > np.pi * shape.radius_mm):
             s = s_all[s_all <= np.pi * shape.radius_mm]  # no point on a sphere is further than half its girth
             warnings.warn(f"sphere of radius {shape.radius_mm:g} mm: distances beyond {np.pi * shape.radius_mm:.4g} mm "
                           "(half the circumference) are left out of its curves", stacklevel=2)

@@ -7,7 +7,12 @@ Carlo run with another seed (``--short-photons``, the issue's yardstick). Prints
 run) with the mean and max patch error and the wall time.
 
     python tools/near_field_bakes.py [--scenes sphere_r20_sun,spot_50mm_directional] [--photons 20000000]
-        [--short-photons 2000000] [--material skin1] [--models curved,auto]
+        [--short-photons 2000000] [--material skin1] [--models curved,auto] [--near-fields point,beam]
+
+``--material bench`` is the bench's skin-like medium (meshshade.bench.scenes.MATERIAL); ``--short-photons 0``
+skips the short run. The fitted curvature model's real-mesh figures (docs/validation.md) come from
+``--scenes head_200mm_beam,head_200mm_directional,spot_50mm_beam,spot_50mm_directional,torus_beam,torus_directional
+--material bench --photons 4000000 --short-photons 0 --models dipole,curved,fitted,auto``.
 """
 from __future__ import annotations
 
@@ -18,7 +23,7 @@ import time
 import warnings
 
 from meshshade.bench.references import mc_reference, vertex_errors
-from meshshade.bench.scenes import SCENES, Scene
+from meshshade.bench.scenes import MATERIAL, SCENES, Scene
 from meshshade.materials import Material
 from meshshade.montecarlo.simulation import simulate
 from meshshade.transport import bake
@@ -35,8 +40,10 @@ def main(argv=None) -> int:
     ap.add_argument("--material", default="skin1")
     ap.add_argument("--models", default="curved,auto")
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--near-fields", default="point,beam")
     args = ap.parse_args(argv)
-    mat = Material.preset(args.material)
+    mat = MATERIAL if args.material == "bench" else Material.preset(args.material)
+    channels = (0,) if mat.is_grey else (0, 1, 2)
     scenes = {**SCENES, **EXTRA}
     for name in args.scenes.split(","):
         sc = scenes[name]
@@ -49,16 +56,17 @@ def main(argv=None) -> int:
             long = simulate(mesh, mat, [light], photons=args.photons, seed=args.seed, keep_beam_exits=False,
                             beam_distances=False)
             t_long = time.perf_counter() - t
-            t = time.perf_counter()
-            short = simulate(mesh, mat, [light], photons=args.short_photons, seed=args.seed + 1000,
-                             keep_beam_exits=False, beam_distances=False)
-            runs[f"mc {args.short_photons:.0e}"] = (short.radiance, time.perf_counter() - t)
+            if args.short_photons:
+                t = time.perf_counter()
+                short = simulate(mesh, mat, [light], photons=args.short_photons, seed=args.seed + 1000,
+                                 keep_beam_exits=False, beam_distances=False)
+                runs[f"mc {args.short_photons:.0e}"] = (short.radiance, time.perf_counter() - t)
             for model in args.models.split(","):
-                for nf in ("point", "beam"):
+                for nf in args.near_fields.split(","):
                     t = time.perf_counter()
                     res = bake(mesh, mat, [light], model=model, geodesic=sc.geodesic, near_field=nf)
                     runs[f"{model} {nf}"] = (res.radiance, time.perf_counter() - t)
-        for ch in range(3):
+        for ch in channels:
             ref = mc_reference(mesh, light, long, patch_mm=sc.patch_mm, channel=ch)
             for run, (M, secs) in runs.items():
                 err = vertex_errors(mesh, M[:, ch], ref)

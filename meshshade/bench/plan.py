@@ -29,7 +29,7 @@ from meshshade.transport.near_field import check_near_field
 
 KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons", "near_field")
 #: models for which bake's rtol (series tolerance) changes nothing
-NO_SERIES = ("dipole", "curved")
+NO_SERIES = ("dipole", "curved", "fitted")
 
 
 def bake_defaults() -> dict:

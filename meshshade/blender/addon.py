@@ -42,11 +42,12 @@ LOG_NAME = "meshshade-blender.log"
 #: seconds between two looks at a running bake
 POLL_SECONDS = 0.2
 
-_MODEL_ITEMS = [("auto", "auto", "meshshade chooses per entry sample: planar dipole, curvature kernel or exact sphere "
-                 "where each is needed (recommended)")] + [
+_MODEL_ITEMS = [("auto", "auto", "meshshade chooses per entry sample: planar dipole, curvature kernel, exact sphere or "
+                 "fitted model where each is needed (recommended)")] + [
     (m, m, {"dipole": "planar dipole (Jensen et al. 2001): flat half-space everywhere",
             "curved": "first-order correction in the principal curvatures k1, k2",
-            "exact-sphere": "exact diffusion solution of the sphere of the local mean curvature"}.get(m, m))
+            "exact-sphere": "exact diffusion solution of the sphere of the local mean curvature",
+            "fitted": "curvature model fitted to Monte Carlo beyond first order"}.get(m, m))
     for m in MODELS if m != "auto"]
 _PRESET_ITEMS = [("CUSTOM", "Custom coefficients", "sigma_s' and sigma_a in 1/mm")] + [
     (name, name, f"{source}: sigma_s' {', '.join(f'{x:g}' for x in s)} /mm, sigma_a "

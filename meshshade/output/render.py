@@ -227,9 +227,9 @@ class _Windowed:
         self.channels, self.material = kernel.channels, kernel.material
         self.near_factors, self.source_scale = kernel.near_factors, kernel.source_scale
 
-    def evaluate(self, c, src, s, chord, phi):
+    def evaluate(self, c, src, s, chord, phi, vtx=None):
         t = np.clip((chord - 0.5 * self.near) / (0.5 * self.near), 0.0, 1.0)
-        return self.kernel.evaluate(c, src, s, chord, phi) * (1.0 - t * t * (3.0 - 2.0 * t))
+        return self.kernel.evaluate(c, src, s, chord, phi, vtx) * (1.0 - t * t * (3.0 - 2.0 * t))
 
 
 class PixelGather:

@@ -16,6 +16,8 @@ the issue's ``|k| C(rho_cut)``). Then
   fitted to one umbilic point of a bumpy surface would fill its whole neighbourhood with light), *and* too
   curved for first order (``kmax (W + 1/sigma_t') > validity_tol``, the kernel's own validity measure,
   kernels/curvature.py): the exact sphere series with the local radius 2/(k1 + k2);
+* ``fitted`` — too curved for first order but not a sphere: the curvature model fitted to Monte Carlo beyond
+  first order (kernels/fitted_curvature.py);
 * ``curved`` — everything else: the first-order k1/k2 kernel.
 
 **Geodesic distance.** Exact polyhedral geodesics cost ~2 us per pair; the "arc" method (curvature-corrected
@@ -44,7 +46,8 @@ from meshshade.materials import Material
 from meshshade.transport.models import KERNEL_NAMES
 
 #: plan codes of the kernels (indices into KERNEL_NAMES)
-DIPOLE, CURVED, EXACT_SPHERE = (KERNEL_NAMES.index(name) for name in ("dipole", "curved", "exact-sphere"))
+DIPOLE, CURVED, EXACT_SPHERE, FITTED = (KERNEL_NAMES.index(name) for name in ("dipole", "curved", "exact-sphere",
+                                                                              "fitted"))
 
 #: defaults (see module docstring; the validity tolerance is the curvature kernel's own, VALIDITY_TOL)
 CURVATURE_TOL = 1e-2
@@ -54,7 +57,7 @@ UMBILIC_TOL = 0.1
 
 @dataclass(frozen=True)
 class AutoPlan:
-    """Per entry sample: ``kernel`` (k,) int8 in {DIPOLE, CURVED, EXACT_SPHERE}; ``exact_geodesic`` (k,) bool
+    """Per entry sample: ``kernel`` (k,) int8 in {DIPOLE, CURVED, EXACT_SPHERE, FITTED}; ``exact_geodesic`` (k,) bool
     (exact geodesics in the near zone); ``far_dipole`` (k,) bool (the surface is flat on the scale of the
     cutoff around the sample, so its far field may be summed by clusters with the planar dipole of the chord)."""
 
@@ -72,7 +75,8 @@ class AutoPlan:
     def describe(self) -> str:
         c = self.counts()
         return (f"auto: kernel dipole {c['auto_kernel_dipole']}, curved {c['auto_kernel_curved']}, "
-                f"exact-sphere {c['auto_kernel_exact-sphere']} entry samples; geodesics exact "
+                f"exact-sphere {c['auto_kernel_exact-sphere']}, fitted {c['auto_kernel_fitted']} entry samples; "
+                f"geodesics exact "
                 f"{c['auto_geodesic_exact']}, arc {c['auto_geodesic_arc']}")
 
 
@@ -142,6 +146,7 @@ def plan_sources(k1, k2, k_near, k_far, material: Material, near_mm, cutoff_mm, 
     kernel = np.full(k1.shape, CURVED, dtype=np.int8)
     kernel[flat] = DIPOLE
     kernel[~flat & out_of_range & umbilic] = EXACT_SPHERE
+    kernel[~flat & out_of_range & ~umbilic] = FITTED
     near = np.broadcast_to(np.asarray(near_mm, dtype=np.float64), k1.shape)
     exact_geo = np.asarray(k_near, dtype=np.float64) * near > geodesic_tol
     far_dipole = np.asarray(k_far, dtype=np.float64) * W.max() <= curvature_tol

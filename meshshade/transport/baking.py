@@ -244,6 +244,7 @@ def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field,
     groups = _zone_groups(zone)
     factors = near_field_factors(material) if near_field == "beam" else None
     kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors)
+    kernel.pair_points = (samples.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
     if factors is not None:
         kernel.source_scale = factors.incidence_scale(samples.cos_incidence)
     methods = {m for z, _ in groups for m in ZONES[z].solver_methods}

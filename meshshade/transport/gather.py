@@ -57,7 +57,7 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
                 keep &= chord <= chord_cutoff_mm[src, c]
             if not np.any(keep):
                 continue
-            R = kernel.evaluate(c, src[keep], s[keep], chord[keep], phi[keep])
+            R = kernel.evaluate(c, src[keep], s[keep], chord[keep], phi[keep], vtx[keep])
             a = None
             if source_radius is not None:
                 a = source_radius[src[keep]]

@@ -33,18 +33,21 @@ from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError, ParameterError
 from meshshade.geometry.curvature import principal_curvatures
+from meshshade.kernels import fitted_curvature_table
 from meshshade.kernels.curvature import CurvatureTable
+from meshshade.kernels.fitted_curvature import effective_coefficients, matched_table
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.optics import diffusion_params
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
 from meshshade.progress import Progress, kernel_interrupts
-from meshshade.transport.auto import CURVED, AutoPlan, DIPOLE, EXACT_SPHERE, neighbourhood_curvature, plan_sources
+from meshshade.transport.auto import (CURVED, DIPOLE, EXACT_SPHERE, FITTED, AutoPlan, neighbourhood_curvature,
+                                      plan_sources)
 from meshshade.transport.farfield import _receiver_order
 from meshshade.transport.farfield_kernels import kd_permutation, node_ranges, tree_depth
 from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.hierarchy_kernels import (KIND_CURVED, KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_SPHERE,
-                                                   cluster_geometry, far_traverse)
+from meshshade.transport.hierarchy_kernels import (KIND_CURVED, KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_FITTED,
+                                                   KIND_SPHERE, cluster_geometry, far_traverse)
 from meshshade.transport.models import MODELS
 from meshshade.transport.near_field import check_near_field, near_field_factors
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, patch_average_factor, source_frames
@@ -298,13 +301,17 @@ class SurfaceTransport:
             kind[:] = KIND_DIPOLE_CHORD
         elif model == "exact-sphere":
             kind[:] = np.where(H > 0, KIND_SPHERE, KIND_DIPOLE_CHORD)
+        elif model == "fitted":
+            kind[:] = KIND_FITTED
         elif model == "auto":
             kind[plan.kernel == DIPOLE] = KIND_DIPOLE_SURFACE
             kind[plan.kernel == CURVED] = KIND_CURVED
             kind[plan.kernel == EXACT_SPHERE] = KIND_SPHERE
+            kind[plan.kernel == FITTED] = KIND_FITTED
         timings["plan"] = time.perf_counter() - t0
         factors = near_field_factors(material) if near_field == "beam" else None
         kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors)
+        kernel.pair_points = (src.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
         far_scale = np.ones(3)
         if factors is not None:
             far_scale = np.array([factors.far_scale(c, float(np.median(near_mm))) for c in range(3)])
@@ -384,7 +391,7 @@ class SurfaceTransport:
         rep = np.arange(3)
         for c, same in self.channels:
             rep[same] = c
-        st, al, mu, zr, zb, zv, a0, coef, n_int = self.params
+        st, al, mu, zr, zb, zv, a0, coef, n_int, fit, fit_coef, fit_zb = self.params
         recv = mesh.vertices
         rnrm = mesh.vertex_normals
         order = _receiver_order(recv)
@@ -412,7 +419,7 @@ class SurfaceTransport:
                         np.ascontiguousarray(self.shape[r]), power, np.ascontiguousarray(self.near_mm[r]),
                         np.ascontiguousarray(self.sphere_row[r]), tree.lo, tree.hi, tree.first_leaf, P, sig, nsig, ssig, nmean,
                         cone, Smean, rad, rn, srow, self.cutoff_mm, self.theta, CONE_MIN, rep, st, al, mu, zr, zb,
-                        zv, a0, coef, n_int, self.sphere_table, self.sphere_r0)
+                        zv, a0, coef, n_int, fit, fit_coef, fit_zb, self.sphere_table, self.sphere_r0)
                 for a in range(0, n, RECEIVER_BLOCK):
                     blk = order[a:a + RECEIVER_BLOCK]
                     with kernel_interrupts():
@@ -426,7 +433,7 @@ class SurfaceTransport:
 
 
 _KIND_NAMES = {KIND_DIPOLE_CHORD: "dipole_chord", KIND_DIPOLE_SURFACE: "dipole_surface", KIND_CURVED: "curved",
-               KIND_SPHERE: "exact_sphere"}
+               KIND_SPHERE: "exact_sphere", KIND_FITTED: "fitted"}
 
 
 def _channel_params(material: Material, cut):
@@ -442,7 +449,16 @@ def _channel_params(material: Material, cut):
     for c, t in enumerate(tables):
         coef[c, :t.coef.shape[0]] = t.coef
     a0 = np.array([t.a0 for t in tables])
-    return st, b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_b), b3(p.z_v), a0, coef, n_int
+    # the fitted model: per channel its effective coefficients and the tables of the matched boundary (eta = 1),
+    # padded to the material's table lengths (same nodes: the same distances)
+    matched = [matched_table(t) for t in tables]
+    fit_coef = np.zeros_like(coef)
+    for c, t in enumerate(matched):
+        fit_coef[c, :t.coef.shape[0]] = t.coef
+    fit = np.stack([effective_coefficients(fitted_curvature_table.COEF, float(np.ravel(p.A)[0]) - 1.0)] * 3)
+    fit_zb = np.array([t.z_b for t in matched])
+    return (st, b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_b), b3(p.z_v), a0, coef, n_int, fit, fit_coef,
+            fit_zb)
 
 
 def _shape_operators(frames) -> np.ndarray:
@@ -530,7 +546,7 @@ def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch,
                 for c, _ in kernel.channels:
                     R = np.empty(s.size)
                     if np.any(~on):
-                        R[~on] = kernel.evaluate(c, s_idx[~on], s[~on], chord[~on], phi[~on])
+                        R[~on] = kernel.evaluate(c, s_idx[~on], s[~on], chord[~on], phi[~on], vtx[~on])
                     if np.any(on):
                         R[on] = _sphere_lookup(sph_tab, sph_r0, row[on], c, s[on])
                     a_p = patch[s_idx]

@@ -12,7 +12,9 @@ of a curved cluster) is dropped: (k a^2/2)^2 against a^2.
 
 Kernels (``kind``): 0 dipole of the chord, 1 dipole of the surface distance, 2 the first-order curved kernel
 (soft policy, docs/physics.md eqs. (49)-(53)) with the source's shape operator, 3 the exact sphere of the source's
-local radius (tabulated per radius bin, log-linear in theta). The surface distance of a far pair is the arc of
+local radius (tabulated per radius bin, log-linear in theta), 4 the fitted curvature model on the dipole
+(docs/physics.md eq. (82); per channel its 15 effective coefficients ``fit`` (3, 15), and the curvature tables of the
+matched boundary ``fit_coef`` (same layout as ``coef``) with their extrapolation distances ``fit_zb``). The surface distance of a far pair is the arc of
 docs/physics.md eq. (59) from the chord and the two normals.
 """
 from __future__ import annotations
@@ -26,9 +28,10 @@ from meshshade.kernels.curvature.coefficients import _ratios_direct
 from meshshade.kernels.curvature.policies import _DELTA_MAX, _INV_SAT
 from meshshade.kernels.curvature.table import _PER_UNIT, _table_eval
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
+from meshshade.kernels.fitted_curvature import pair_exponent
 
 STACK_SIZE = 256
-KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_CURVED, KIND_SPHERE = 0, 1, 2, 3
+KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_CURVED, KIND_SPHERE, KIND_FITTED = 0, 1, 2, 3, 4
 
 
 # ---------------------------------------------------------------------------------------------------- geometry
@@ -72,16 +75,55 @@ def pair_geometry(x0, x1, x2, nx0, nx1, nx2, y0, y1, y2, ny0, ny1, ny2, S, srow)
     return c, s, kn, tr - nsn - kn
 
 
+@njit(cache=True, inline="always")
+def along_curvature(kind, kn, x0, x1, x2, nx0, nx1, nx2, y0, y1, y2, ny0, ny1, ny2):
+    """The normal curvature along a pair that the kernel uses: for the fitted model (kind 4) the normal-section
+    curvature between the two points, ``(n_x - n_y).(x - y)/|x - y|^2`` (docs/physics.md eq. (85)); the source's
+    own ``kn`` for every other kernel (and for a pair of coincident points)."""
+    if kind != KIND_FITTED:
+        return kn
+    v0, v1, v2 = x0 - y0, x1 - y1, x2 - y2
+    c2 = v0 * v0 + v1 * v1 + v2 * v2
+    if c2 <= 0.0:
+        return kn
+    return ((nx0 - ny0) * v0 + (nx1 - ny1) * v1 + (nx2 - ny2) * v2) / c2
+
+
+@njit(cache=True, inline="always")
+def twist2(S, srow, kn, knp):
+    """Squared twist tau^2 of the shape operator S[srow] in the frame of a pair: from tr(S^2) = kn^2 + knp^2 + 2 tau^2
+    (S tangent, so its normal eigenvalue is 0; clamped at 0 against rounding)."""
+    sxx, syy, szz, sxy, sxz, syz = S[srow, 0], S[srow, 1], S[srow, 2], S[srow, 3], S[srow, 4], S[srow, 5]
+    tr2 = sxx * sxx + syy * syy + szz * szz + 2.0 * (sxy * sxy + sxz * sxz + syz * syz)
+    return max(0.5 * (tr2 - kn * kn - knp * knp), 0.0)
+
+
 # ---------------------------------------------------------------------------------------------------- kernels
 @njit(cache=True, inline="always")
-def kernel_value(kind, c, chord, s, kn, knp, sph_row, st, al, mu, zr, zb, zv, a0, coef, n_int, sph_tab, sph_r0):
+def kernel_value(kind, c, chord, s, kn, knp, t2, sph_row, st, al, mu, zr, zb, zv, a0, coef, n_int, fit, fit_coef,
+                 fit_zb, sph_tab, sph_r0):
     """R [1/mm^2] of channel ``c`` for one pair: kind (module docstring), chord and surface distance s (mm), the
-    source's normal curvatures towards the receiver and across (1/mm), its sphere-table row (kind 3)."""
+    source's normal curvatures towards the receiver and across (1/mm) and its squared twist t2 (1/mm^2, kind 4),
+    its sphere-table row (kind 3)."""
     sc = st[c]
     if kind == KIND_DIPOLE_CHORD:
         return dipole_diffuse_reflectance(chord * sc, al[c], mu[c], zr[c], zv[c]) * sc * sc
     if kind == KIND_DIPOLE_SURFACE:
         return dipole_diffuse_reflectance(s * sc, al[c], mu[c], zr[c], zv[c]) * sc * sc
+    if kind == KIND_FITTED:
+        rho = s * sc
+        if rho * mu[c] >= 1500.0:
+            return 0.0
+        k1o, k2o = kn / sc, knp / sc
+        u = math.sqrt(rho) * _PER_UNIT
+        if u < n_int[c]:
+            ra, rb = _table_eval(u, coef[c])
+            ra1, rb1 = _table_eval(u, fit_coef[c])
+        else:
+            ra, rb = _ratios_direct(rho, mu[c], zr[c], zb[c])
+            ra1, rb1 = _ratios_direct(rho, mu[c], zr[c], fit_zb[c])
+        E = pair_exponent(rho, k1o, k2o, t2 / (sc * sc), ra, rb, ra1, rb1, fit[c])
+        return dipole_diffuse_reflectance(rho, al[c], mu[c], zr[c], zv[c], E) * sc * sc
     if kind == KIND_CURVED:
         rho = s * sc
         k1o, k2o = kn / sc, knp / sc
@@ -262,7 +304,7 @@ def cluster_geometry(pos, nrm, shape, power, patch, near, sph, logr, lo, hi):
 @njit(cache=True, parallel=True)
 def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo, hi, first_leaf, P, sig, nsig, ssig, nmean,
                  cone, Smean, rad, rn, srow, cutoff, theta, cone_min, rep, st, al, mu, zr, zb, zv, a0, coef, n_int,
-                 sph_tab, sph_r0):
+                 fit, fit_coef, fit_zb, sph_tab, sph_r0):
     """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in ``order``.
 
     A node is skipped when its sources are all beyond the cutoff (chord), used whole (sigma points, mean normal,
@@ -324,8 +366,11 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                                                    nsig[node, q, 2], ssig[node], q)
                     for c in range(3):
                         if (use >> c) & 1:
-                            acc[c] += w * kernel_value(kind, c, ch, s, kn, knp, srow[node], st, al, mu, zr, zb,
-                                                       zv, a0, coef, n_int, sph_tab, sph_r0)
+                            acc[c] += w * kernel_value(kind, c, ch, s, along_curvature(
+                                kind, kn, x0, x1, x2, nx0, nx1, nx2, sig[node, q, 0], sig[node, q, 1], sig[node, q, 2],
+                                nsig[node, q, 0], nsig[node, q, 1], nsig[node, q, 2]), knp, twist2(ssig[node], q, kn, knp),
+                                                       srow[node], st, al, mu, zr, zb,
+                                                       zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
                 n_clu += 1
             if open_mask == 0:
                 continue
@@ -339,8 +384,11 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                         continue
                     for c in range(3):
                         if (open_mask >> c) & 1 and s <= cutoff[c]:
-                            acc[c] += power[j] * kernel_value(kind, c, ch, s, kn, knp, sph[j], st, al, mu, zr, zb,
-                                                              zv, a0, coef, n_int, sph_tab, sph_r0)
+                            acc[c] += power[j] * kernel_value(kind, c, ch, s, along_curvature(
+                                kind, kn, x0, x1, x2, nx0, nx1, nx2, pos[j, 0], pos[j, 1], pos[j, 2], nrm[j, 0],
+                                nrm[j, 1], nrm[j, 2]), knp, twist2(shape, j, kn, knp),
+                                                              sph[j], st, al, mu, zr, zb,
+                                                              zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
                     n_leaf += 1
                 continue
             stack[top], smask[top] = 2 * node + 1, open_mask

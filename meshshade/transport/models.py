@@ -3,12 +3,13 @@
 * ``dipole``: Jensen's planar dipole of the chord distance;
 * ``curved``: the first-order k1/k2 kernel (kernels/curvature.py);
 * ``exact-sphere``: the exact sphere series with the local radius 2/(k1 + k2);
+* ``fitted``: the curvature model fitted to Monte Carlo beyond first order (kernels/fitted_curvature.py);
 * ``auto``: per entry sample the cheapest of the three that the scene calls for (transport/auto.py).
 """
 from __future__ import annotations
 
 #: the kernels ``auto`` chooses between per entry sample, in the order of its plan codes (``AutoPlan.kernel``,
-#: the NPZ's ``auto_kernel``: 0 dipole, 1 curved, 2 exact-sphere)
-KERNEL_NAMES = ("dipole", "curved", "exact-sphere")
+#: the NPZ's ``auto_kernel``: 0 dipole, 1 curved, 2 exact-sphere, 3 fitted)
+KERNEL_NAMES = ("dipole", "curved", "exact-sphere", "fitted")
 #: every model :func:`meshshade.transport.baking.bake` accepts
 MODELS = KERNEL_NAMES + ("auto",)

@@ -16,6 +16,7 @@ import numpy as np
 from meshshade.errors import ParameterError
 from meshshade.kernels.curvature import CurvatureTable
 from meshshade.kernels.dipole import dipole_profile, dipole_tail_reflectance
+from meshshade.kernels.fitted_curvature import chord_curvature, fitted_dipole_pairs, matched_table, normal_curvatures
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
 from meshshade.transport.models import KERNEL_NAMES, MODELS
@@ -102,6 +103,12 @@ class PairKernel:
                 self.channels.append((c, [c]))
         self.stats: dict = {}
         self._tables: dict = {}  # curved: one CurvatureTable per channel
+        self._matched: dict = {}  # fitted: the channel's table with a matched boundary (eta = 1)
+        #: (source positions (k, 3) mm, receiver positions (n, 3) mm, receiver unit normals (n, 3), receiver
+        #: principal curvatures k1, k2 (n,) 1/mm and first principal directions (n, 3)), or None: with them the
+        #: fitted model measures each pair's curvatures between its two points (:meth:`_pair_curvatures`) when
+        #: :meth:`evaluate` is given the receivers
+        self.pair_points = None
         if model in ("exact-sphere", "auto"):
             H = 0.5 * (frames.k1 + frames.k2)
             convex = H > 0
@@ -116,27 +123,38 @@ class PairKernel:
         self.rtol = rtol
         self.sphere_radius_rtol = sphere_radius_rtol
 
-    def evaluate(self, c: int, src, s, chord, phi) -> np.ndarray:
+    def evaluate(self, c: int, src, s, chord, phi, vtx=None) -> np.ndarray:
         """R [mm^-2] of channel ``c`` for pairs with source indices ``src`` (into the frames), geodesic distance
-        ``s`` [mm], chord [mm] and azimuth ``phi`` [rad]; all (p,), returns (p,) float64."""
+        ``s`` [mm], chord [mm] and azimuth ``phi`` [rad]; all (p,), returns (p,) float64. ``vtx`` (p,): the
+        receivers' indices into ``pair_points``, or None."""
         if self.model != "auto":
-            return self._evaluate(self.model, c, src, s, chord, phi)
+            return self._evaluate(self.model, c, src, s, chord, phi, vtx)
         out = np.empty(s.shape)
         kind = self.plan.kernel[src]
         for i, name in enumerate(KERNEL_NAMES):
             m = kind == i
             if np.any(m):  # "dipole" in auto: the planar dipole of the geodesic distance (curved at k = 0)
                 out[m] = self._evaluate("dipole-geodesic" if name == "dipole" else name, c, src[m], s[m],
-                                        chord[m], phi[m])
+                                        chord[m], phi[m], None if vtx is None else vtx[m])
         return out
 
-    def _evaluate(self, model, c, src, s, chord, phi):
+    def _evaluate(self, model, c, src, s, chord, phi, vtx=None):
         ch = self.material.channel(c)
         st, par = ch["sigma_t_prime"], {"albedo_prime": ch["albedo_prime"], "eta": ch["eta"]}
         if model == "dipole":
             return dipole_profile(chord * st, **par) * st * st
         if model == "dipole-geodesic":
             return dipole_profile(s * st, **par) * st * st
+        if model == "fitted":
+            table = self._curvature_table(c, st, par, float(s.max()) if s.size else 0.0)
+            matched = self._matched.get(c)
+            if matched is None or matched.rho_max_opt != table.rho_max_opt:
+                matched = self._matched[c] = matched_table(table)
+            f = self.frames
+            ka, kc, t2 = normal_curvatures(phi, f.k1[src], f.k2[src])
+            if vtx is not None and self.pair_points is not None:
+                ka, kc, t2 = self._pair_curvatures(src, vtx, ka, kc, t2)
+            return fitted_dipole_pairs(table, s * st, ka / st, kc / st, t2 / (st * st), matched=matched) * st * st
         if model == "curved":
             table = self._curvature_table(c, st, par, float(s.max()) if s.size else 0.0)
             f = self.frames
@@ -146,6 +164,26 @@ class PairKernel:
                 self.stats.get("curved_pairs_out_of_first_order_range", 0) + int((~valid).sum()))
             return R * st * st
         return self._exact_sphere(c, st, par, src, s, chord)
+
+    def _pair_curvatures(self, src, vtx, ka, kc, t2):
+        """The fitted model's curvatures of pairs whose receivers are known (docs/physics.md eq. (85)): along the pair
+        the normal-section curvature between its two points; across it and the squared twist, the mean of the
+        source's and the receiver's (the receiver's normal curvature across the pair's direction in its tangent
+        plane). A surface that bends differently away from the entry point is then seen as it is, not as the
+        entry point's osculating quadric extrapolated (on spheres, cylinders around their axis and cavities the
+        two agree)."""
+        xs, xr, nr, rk1, rk2, rd1 = self.pair_points
+        ka = chord_curvature(xs[src], self.frames.normals[src], xr[vtx], nr[vtx], ka)
+        v = xr[vtx] - xs[src]
+        n = nr[vtx]
+        tv = v - np.einsum("ij,ij->i", v, n)[:, None] * n
+        across = np.cross(n, tv)
+        norm = np.linalg.norm(across, axis=1)
+        ok = norm > 0.0
+        c2 = np.where(ok, np.einsum("ij,ij->i", rd1[vtx], across) / np.where(ok, norm, 1.0), 0.0) ** 2
+        kc = np.where(ok, 0.5 * (kc + rk1[vtx] * c2 + rk2[vtx] * (1.0 - c2)), kc)
+        t2 = np.where(ok, 0.5 * (t2 + (rk1[vtx] - rk2[vtx]) ** 2 * c2 * (1.0 - c2)), t2)
+        return ka, kc, t2
 
     def _curvature_table(self, c, st, par, s_max):
         """One Chebyshev table of the curvature coefficients per channel, grown when a longer distance shows up."""

@@ -178,4 +178,4 @@ def test_profile_command_takes_mc_on_plane_sphere_and_cylinder(tmp_path, capsys)
     assert main(["profile", "--material", "marble", "--models", "mc", "--shape", "saddle", "--radius", "5",
                  "--distances", "1"]) == 2
     err = capsys.readouterr().err
-    assert "exact on a plane, sphere or cylinder" in err and err.count("\n") == 1
+    assert "exact on a plane, sphere, cylinder, cavity or bore" in err and err.count("\n") == 1

@@ -69,19 +69,21 @@ def test_plan_flat_surface_uses_dipole_and_arc():
     assert plan.counts()["auto_kernel_dipole"] == 5 and plan.counts()["auto_geodesic_arc"] == 5
 
 
-def test_plan_small_sphere_uses_exact_sphere_and_saddle_uses_curved():
+def test_plan_small_sphere_uses_exact_sphere_and_saddle_uses_fitted():
+    """Out of first-order range: the exact sphere where the neighbourhood is that sphere, the fitted model
+    elsewhere (a saddle, a cylinder, an umbilic point on a bumpy surface)."""
     R0 = 10.0
     k1 = np.array([1 / R0, 0.05, 0.03])
     k2 = np.array([1 / R0, -0.05, 0.0])
     cut = transport.cutoff_radii(SKIN, 1e-4)
     kn = np.maximum(np.abs(k1), np.abs(k2))
     plan = auto.plan_sources(k1, k2, kn, kn, SKIN, cut.max(), cut)
-    assert plan.kernel.tolist() == [auto.EXACT_SPHERE, auto.CURVED, auto.CURVED]
+    assert plan.kernel.tolist() == [auto.EXACT_SPHERE, auto.FITTED, auto.FITTED]
     assert plan.exact_geodesic.all() and not plan.far_dipole.any()
-    # the same umbilic point on a bumpy surface (larger or smaller curvatures within the cutoff): curved
+    # the same umbilic point on a bumpy surface (larger or smaller curvatures within the cutoff): fitted
     bumpy = auto.plan_sources(k1[:1], k2[:1], kn[:1], 1.5 * kn[:1], SKIN, cut.max(), cut)
     dent = auto.plan_sources(k1[:1], k2[:1], kn[:1], kn[:1], SKIN, cut.max(), cut, kmin_far=[0.0])
-    assert bumpy.kernel[0] == auto.CURVED and dent.kernel[0] == auto.CURVED
+    assert bumpy.kernel[0] == auto.FITTED and dent.kernel[0] == auto.FITTED
 
 
 def test_plan_threshold_is_the_documented_bound():
@@ -179,7 +181,7 @@ def test_cli_auto_reports_decisions(tmp_path, capsys):
     assert main(["bake", str(src), "--material", "skin1", "--light", "beam:0,0,40:0,0,-1", "--model", "auto",
                  "--out", str(out), "--npz", str(npz)]) == 0
     text = capsys.readouterr().out
-    assert "auto: kernel dipole 0, curved 0, exact-sphere 1 entry samples" in text
+    assert "auto: kernel dipole 0, curved 0, exact-sphere 1, fitted 0 entry samples" in text
     header = out.read_bytes().split(b"end_header")[0].decode("ascii")
     assert "comment meshshade auto: kernel dipole 0, curved 0, exact-sphere 1" in header
     assert trimesh.load(out, process=False).vertices.shape == V.shape
@@ -279,17 +281,22 @@ def test_cli_far_field_flag(tmp_path):
 
 def test_auto_on_a_large_marble_box_uses_dipole_arc_and_far_field():
     """Face interiors of a 300 mm box are flat on marble's 48 mm cutoff: dipole kernel, arc geodesics and the
-    clustered far field there; the curved kernel and exact geodesics near edges and corners. Auto must stay
-    close to `curved` (measured: mean 0.12 %, p99 4 %, the largest differences beside the edges, where the edge's
-    fitted curvature is spread over a few vertices) while computing fewer geodesic pairs."""
+    clustered far field there; the fitted model (out of first-order range) and exact geodesics near edges and
+    corners. Auto must stay close to `fitted` everywhere (the fitted model is the dipole at k = 0, exactly) while
+    computing fewer geodesic pairs."""
     mesh = Mesh.from_arrays(*box((300.0, 300.0, 300.0), 30))
     light = [DirectionalLight((0.2, 0.1, -1.0), 1.0)]
-    ref = transport.bake(mesh, MARBLE, light, model="curved", transport="direct")
+    ref = transport.bake(mesh, MARBLE, light, model="fitted", transport="direct")
     got = transport.bake(mesh, MARBLE, light, model="auto", transport="direct")
     s = got.stats
-    assert s["auto_kernel_dipole"] > 0 and s["auto_kernel_curved"] > 0
+    assert s["auto_kernel_dipole"] > 0 and s["auto_kernel_curved"] + s["auto_kernel_fitted"] > 0
     assert s.get("zone_arc_near", 0) + s.get("zone_exact_near", 0) > 0 and s["far_field"] == "clustered"
     assert s["geodesic_pairs_computed"] < ref.stats["geodesic_pairs_computed"]
-    lit = ref.radiance[:, 0] > 1e-3 * ref.radiance[:, 0].max()
+    # where every pair within the cutoff stays on one face the two are the same kernel (the fitted model's pairs
+    # across an edge see the edge's bend, eq. (85), which auto's dipole sources do not)
+    v = mesh.vertices
+    inner = np.sort(150.0 - np.abs(v), axis=1)[:, 1] > transport.cutoff_radii(MARBLE, 1e-4).max()
+    lit = (ref.radiance[:, 0] > 1e-3 * ref.radiance[:, 0].max()) & inner
+    assert lit.sum() > 200
     rel = np.abs(got.radiance - ref.radiance)[lit, 0] / ref.radiance[lit, 0]
-    assert rel.mean() < 5e-3 and np.quantile(rel, 0.99) < 0.08, (rel.mean(), np.quantile(rel, 0.99))
+    assert rel.mean() < 5e-3 and np.quantile(rel, 0.99) < 0.02, (rel.mean(), np.quantile(rel, 0.99))

@@ -1,0 +1,332 @@
+"""The fitted curvature model (docs/physics.md §14, eqs. (82)-(84)), in optical units (lengths x sigma_t',
+curvatures / sigma_t').
+
+The first-order k1/k2 kernel (§7) is a diffusion result for a point source: it holds where the curvature radius is
+large against both the transport length and the distance travelled, ``nu <= 0.25`` (eq. (55)). Beyond, and near
+the entry point at any curvature, Monte Carlo on curved shapes departs from it. This model keeps what is known
+exactly and fits only the rest to Monte Carlo:
+
+    R_fit(r, phi) = R_near(r) exp(S(delta(r, phi) + Q(r, phi))),                                  (82)
+
+* ``R_near`` is the near-field base of the half-space (:mod:`meshshade.kernels.near_field`): at k1 = k2 = 0 the
+  model *is* the base, exactly (every term of Q vanishes there);
+* ``delta = k_n(phi) a(r) + k_n(phi + pi/2) b(r)`` is the first-order kernel's relative correction (eq. (51)), so
+  ``R_fit = R_near (1 + delta) + O(k^2)`` wherever diffusion holds (r beyond a few transport lengths, where the
+  near-source terms below have decayed);
+* ``Q = sum_j theta_j f_j`` is linear in fitted coefficients over the features of :func:`fitted_features`
+  (eq. (83)): four near-source terms of first order in k that decay within a few transport lengths (transport,
+  not diffusion: Monte Carlo's response to curvature near the source is two to three times the diffusion
+  kernel's there); nine terms of second order and beyond (delta^2-like, delta times k where a curvature radius near
+  the transport length makes diffusion itself fail, and the twist tau of the shape operator in the direction of
+  travel, which first order cannot see); two terms that move delta towards its value for a matched boundary
+  (eta = 1) where |delta| is large (Monte Carlo's curvature response hardly depends on eta, the diffusion
+  kernel's grows with the extrapolation distance; the switch U^2/(1 + U^2) is of second order); and the thirteen
+  base terms again times A - 1 (A the boundary mismatch of eq. (9), 0 for eta = 1), so that every coefficient may
+  depend on the boundary. Per material the last group folds into the first: 15 effective coefficients;
+* ``S`` is the identity for |E| <= E_LIN and saturates smoothly (C^2) towards +-E_SAT beyond it (eq. (84)), so the
+  model is positive, bounded by ``R_near e^{+-E_SAT}`` and smooth for every input.
+
+The coefficients are fitted by ``tools/fit_curvature_model.py`` to the exact-shape Monte Carlo training set
+(``tools/curvature_training_set.py``) and stored with their provenance and held-out errors in
+:mod:`meshshade.kernels.fitted_curvature_table`.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from meshshade.kernels import fitted_curvature_table as table
+from meshshade.kernels.curvature import CurvatureTable, curvature_ratios
+from meshshade.kernels.curvature.coefficients import _ratios_direct
+from meshshade.kernels.curvature.table import _MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _cos, _dipole_exp_block, _table_eval
+from meshshade.kernels.near_field import near_field_profile
+from meshshade.kernels.optics import diffusion_params
+
+__all__ = ["FEATURES", "E_LIN", "E_SAT", "N_BASE", "fitted_features", "fitted_saturation", "fitted_exponent",
+           "effective_coefficients", "fitted_curvature_factor", "fitted_curvature_profile", "fitted_dipole_profile",
+           "fitted_dipole_pairs", "chord_curvature", "helix_chord_curvature", "matched_table", "normal_curvatures", "pair_exponent"]
+
+#: decay lengths (transport lengths) of the near-source terms: 3/10, 3/3 and 3, so that one exponential gives all
+#: three (e2 = e3^3, e1 = e3^10) in the compiled loop
+NEAR_LENGTHS = (0.3, 1.0, 3.0)
+_BASE = ("H e1", "H e2", "H e3", "(ka - kc) e2", "u^2", "u v", "v^2", "u ka", "u kc", "H^2 e2", "w^2", "tau^2 e2",
+         "w^2 H a")
+#: number of base features (those that appear again times A - 1)
+N_BASE = len(_BASE)
+#: names of the features f_j of eq. (83), in the order of the coefficients
+FEATURES = _BASE + ("(d1 - d) U^2/(1 + U^2)", "(d1 - d) U^3/(1 + U^2)") + tuple(f"(A - 1) {f}" for f in _BASE)
+#: the saturation S of eq. (84): identity up to E_LIN, then towards +-E_SAT
+E_LIN = 4.0
+E_SAT = 6.0
+
+
+def normal_curvatures(phi, k1, k2):
+    """(k_along, k_across, tau^2): the normal curvatures along the direction phi from the first principal direction
+    and across it (Euler's formula, k_n(phi) and k_n(phi + pi/2)), and the square of the twist
+    tau = (k1 - k2) sin(phi) cos(phi), the off-diagonal of the shape operator in the (along, across) frame."""
+    phi = np.asarray(phi, dtype=np.float64)
+    c2 = np.cos(phi) ** 2
+    k1, k2 = np.asarray(k1, dtype=np.float64), np.asarray(k2, dtype=np.float64)
+    tau = 0.5 * (k1 - k2) * np.sin(2.0 * phi)
+    return k1 * c2 + k2 * (1.0 - c2), k1 * (1.0 - c2) + k2 * c2, tau * tau
+
+
+def fitted_features(r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt, A_minus_1):
+    """The features f_j of eq. (83), (..., len(FEATURES)) float64 (arrays broadcast).
+
+    a, b are the first-order ratios of the material, a1, b1 those of the same albedo with eta = 1, A - 1 the
+    material's boundary mismatch minus one. With H = (ka + kc)/2, e_j = exp(-r / l_j) (l_j in NEAR_LENGTHS),
+    u = ka a, v = kc a, w^2 = tau^2 a^2 (the ratio a scales every direction: it is the kernel's own length),
+    delta = ka a + kc b, delta_1 = ka a1 + kc b1 and U = H a:
+
+    ``H e1, H e2, H e3, (ka - kc) e2`` (first order, near the source); ``u^2, u v, v^2, u ka, u kc, H^2 e2, w^2,
+    tau^2 e2, w^2 H a`` (second order and beyond; the twist enters squared, as symmetry requires);
+    ``(delta_1 - delta) U^2/(1 + U^2)`` and ``(delta_1 - delta) U^3/(1 + U^2)`` (third order at small k); and the
+    first thirteen again times A - 1. Every feature is 0 at k = 0."""
+    r, ka, kc, t2, a, b, a1, b1, Am1 = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (
+        r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt, A_minus_1)))
+    H = 0.5 * (ka + kc)
+    e1, e2, e3 = (np.exp(-r / length) for length in NEAR_LENGTHS)
+    u, v, w2 = ka * a, kc * a, t2 * a * a
+    base = [H * e1, H * e2, H * e3, (ka - kc) * e2, u * u, u * v, v * v, u * ka, u * kc, H * H * e2, w2, t2 * e2,
+            w2 * H * a]
+    U = H * a
+    sw = U * U / (1.0 + U * U)
+    dd = (ka * a1 + kc * b1) - (ka * a + kc * b)
+    return np.stack(base + [dd * sw, dd * sw * U] + [Am1 * f for f in base], axis=-1)
+
+
+def effective_coefficients(coef, A_minus_1) -> np.ndarray:
+    """The 15 per-material coefficients of the compiled kernel: the base thirteen plus (A - 1) times their
+    boundary terms, then the two matched-boundary terms."""
+    th = np.asarray(coef, dtype=np.float64)
+    _check_coef(th)
+    return np.ascontiguousarray(np.concatenate([th[:N_BASE] + float(A_minus_1) * th[N_BASE + 2:],
+                                                th[N_BASE:N_BASE + 2]]))
+
+
+def fitted_saturation(E):
+    """S(E) of eq. (84): E for |E| <= E_LIN, else sign(E) (E_LIN + w tanh((|E| - E_LIN)/w)), w = E_SAT - E_LIN
+    (value, slope and curvature continuous at E_LIN; |S| < E_SAT, = E_SAT once tanh rounds to 1)."""
+    E = np.asarray(E, dtype=np.float64)
+    w = E_SAT - E_LIN
+    m = np.abs(E)
+    return np.where(m <= E_LIN, E, np.sign(E) * (E_LIN + w * np.tanh((m - E_LIN) / w)))
+
+
+def fitted_exponent(r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt, A_minus_1, coef=None):
+    """``S(delta + Q)`` of eq. (82) from the first-order ratios (optical units; arrays broadcast; arguments as
+    :func:`fitted_features`); ``coef`` the theta_j (default: the shipped fit)."""
+    theta = np.asarray(table.COEF if coef is None else coef, dtype=np.float64)
+    _check_coef(theta)
+    ka, kc, a, b = (np.asarray(x, dtype=np.float64) for x in (k_along, k_across, a_opt, b_opt))
+    delta = ka * a + kc * b
+    X = fitted_features(r_opt, ka, kc, tau2, a, b, a1_opt, b1_opt, A_minus_1)
+    return fitted_saturation(delta + X @ theta)
+
+
+def _boundary(albedo_prime, eta) -> float:
+    return float(diffusion_params(albedo_prime, eta).A) - 1.0
+
+
+def fitted_curvature_factor(r_opt, phi, k1_opt, k2_opt, *, albedo_prime, eta, coef=None, k_along_opt=None):
+    """``R_fit / R_near = exp(S(delta + Q))`` at distance r, azimuth phi from the first principal direction and
+    principal curvatures k1, k2 (optical units; arrays broadcast; scalar material). 1 exactly at k1 = k2 = 0.
+    ``k_along_opt``: the curvature along the pair measured between its points (eq. (85)) instead of the entry
+    point's k_n(phi)."""
+    r = np.asarray(r_opt, dtype=np.float64)
+    a, b = curvature_ratios(r, albedo_prime=albedo_prime, eta=eta)
+    a1, b1 = curvature_ratios(r, albedo_prime=albedo_prime, eta=1.0)
+    ka, kc, t2 = normal_curvatures(phi, k1_opt, k2_opt)
+    if k_along_opt is not None:
+        ka = np.broadcast_to(np.asarray(k_along_opt, dtype=np.float64), np.broadcast(ka, k_along_opt).shape)
+    return np.exp(fitted_exponent(r, ka, kc, t2, a, b, a1, b1, _boundary(albedo_prime, eta), coef))
+
+
+def fitted_curvature_profile(r_opt, phi, k1_opt, k2_opt, *, albedo_prime, eta, g=0.0):
+    """R_fit(r, phi) of eq. (82) per unit entering power, optical units (times sigma_t'^2 for mm^-2)."""
+    base = near_field_profile(r_opt, albedo_prime=albedo_prime, eta=eta, g=g)
+    return base * fitted_curvature_factor(r_opt, phi, k1_opt, k2_opt, albedo_prime=albedo_prime, eta=eta)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _ratios_at(r, coef, n_int, mu, z_r, z_b):
+    u_t = math.sqrt(r) * _PER_UNIT
+    if u_t < n_int:
+        return _table_eval(u_t, coef)
+    if r * mu >= _MU_RHO_ZERO:
+        return 0.0, 0.0
+    return _ratios_direct(r, mu, z_r, z_b)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
+def pair_exponent(r, ka, kc, t2, ra, rb, ra1, rb1, th):
+    """S(delta + Q) of eq. (82) for one pair (compiled; the loop below and the hierarchical far field): distance r,
+    normal curvatures along and across ka, kc, squared twist t2, first-order ratios ra, rb of the material and
+    ra1, rb1 of its matched boundary, all optical units; ``th`` the 15 effective coefficients
+    (:func:`effective_coefficients`). One exponential (e3; e2 = e3^3, e1 = e2^3 e3). NaN in, NaN out."""
+    H = 0.5 * (ka + kc)
+    e3 = math.exp(-r / 3.0)
+    e2 = e3 * e3 * e3
+    e1 = e2 * e2 * e2 * e3
+    u = ka * ra
+    v = kc * ra
+    w2 = t2 * ra * ra
+    delta = ka * ra + kc * rb
+    U = H * ra
+    sw = U * U / (1.0 + U * U)
+    dd = ka * ra1 + kc * rb1 - delta
+    q = (H * (th[0] * e1 + th[1] * e2 + th[2] * e3 + th[9] * H * e2) + th[3] * (ka - kc) * e2
+         + u * (th[4] * u + th[5] * v + th[7] * ka + th[8] * kc) + th[6] * v * v
+         + w2 * (th[10] + th[12] * H * ra) + th[11] * t2 * e2 + dd * sw * (th[13] + th[14] * U))
+    E = delta + q
+    if abs(E) > E_LIN:
+        w = E_SAT - E_LIN
+        E = math.copysign(E_LIN + w * math.tanh((abs(E) - E_LIN) / w), E)
+    return E
+
+
+@numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
+def _fitted_loop(rho, ang, k1, k2, ang_is_cos2, coef, n_int, coef1, n_int1, alb, mu, z_r, z_b, z_b1, th, out):
+    """Compiled R_d(rho) exp(S(delta + Q)) (eqs. (82)-(84) on the point dipole) over pairs, blockwise like the curved
+    kernel's loop: (1) the exponent per pair from the tabulated a, b (material and matched boundary);
+    (2) the dipole with the exponent folded into its exponentials. Returns True (the caller raises) on a negative
+    or non-finite rho, a bad angle or a non-finite exponent."""
+    z_v = z_r + 2.0 * z_b
+    n = rho.size
+    blk = 512
+    dl = np.empty(blk)
+    for start in range(0, n, blk):
+        m = min(blk, n - start)
+        for j in range(m):
+            k = start + j
+            r = rho[k]
+            if not ((r >= 0.0) & (r < math.inf)):
+                return True
+            c1 = k1[k]
+            c2 = k2[k]
+            if c1 == 0.0 and c2 == 0.0:
+                dl[j] = 0.0
+                continue
+            if ang_is_cos2:
+                cs = ang[k]
+            else:
+                if not abs(ang[k]) <= _PHI_MAX:
+                    return True
+                cs = _cos(2.0 * ang[k])
+            ra, rb = _ratios_at(r, coef, n_int, mu, z_r, z_b)
+            ra1, rb1 = _ratios_at(r, coef1, n_int1, mu, z_r, z_b1)
+            dk = 0.5 * (c1 - c2) * cs
+            t2 = 0.25 * (c1 - c2) * (c1 - c2) * max(1.0 - cs * cs, 0.0)   # tau^2 = ((k1 - k2)/2 sin 2 phi)^2
+            E = pair_exponent(r, 0.5 * (c1 + c2) + dk, 0.5 * (c1 + c2) - dk, t2, ra, rb, ra1, rb1, th)
+            if not (abs(E) < math.inf):
+                return True
+            dl[j] = E
+        _dipole_exp_block(rho[start:start + m], dl[:m], out[start:start + m], alb, mu, z_r, z_v)
+    return False
+
+
+@numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
+def _fitted_pairs_loop(rho, ka, kc, t2, coef, n_int, coef1, n_int1, alb, mu, z_r, z_b, z_b1, th, out):
+    """:func:`_fitted_loop` with each pair's curvatures along and across and squared twist given directly."""
+    z_v = z_r + 2.0 * z_b
+    n = rho.size
+    blk = 512
+    dl = np.empty(blk)
+    for start in range(0, n, blk):
+        m = min(blk, n - start)
+        for j in range(m):
+            k = start + j
+            r = rho[k]
+            if not ((r >= 0.0) & (r < math.inf)):
+                return True
+            if ka[k] == 0.0 and kc[k] == 0.0 and t2[k] == 0.0:
+                dl[j] = 0.0
+                continue
+            ra, rb = _ratios_at(r, coef, n_int, mu, z_r, z_b)
+            ra1, rb1 = _ratios_at(r, coef1, n_int1, mu, z_r, z_b1)
+            E = pair_exponent(r, ka[k], kc[k], t2[k], ra, rb, ra1, rb1, th)
+            if not (abs(E) < math.inf):
+                return True
+            dl[j] = E
+        _dipole_exp_block(rho[start:start + m], dl[:m], out[start:start + m], alb, mu, z_r, z_v)
+    return False
+
+
+def chord_curvature(x_src, n_src, x_rcv, n_rcv, fallback):
+    """The normal-section curvature between two surface points, ``(n_r - n_s).(x_r - x_s)/|x_r - x_s|^2``
+    (docs/physics.md eq. (85); 1/R on a sphere of radius R at any distance, -1/R in a cavity); ``fallback`` where
+    the points coincide. All (p, 3) / (p,) arrays, any length unit (curvature in its inverse)."""
+    v = np.asarray(x_rcv, dtype=np.float64) - np.asarray(x_src, dtype=np.float64)
+    dn = np.asarray(n_rcv, dtype=np.float64) - np.asarray(n_src, dtype=np.float64)
+    c2 = np.einsum("ij,ij->i", v, v)
+    ok = c2 > 0.0
+    return np.where(ok, np.einsum("ij,ij->i", dn, v) / np.where(ok, c2, 1.0), fallback)
+
+
+def helix_chord_curvature(r, phi, R):
+    """:func:`chord_curvature` on a cylinder of radius R between the entry point and the point at geodesic distance
+    r in direction phi from the direction around the axis (all optical units or all mm): the helix's
+    ``2 R (1 - cos t) / (2 R^2 (1 - cos t) + z^2)``, t = r cos(phi)/R, z = r sin(phi); k cos^2(phi) near the
+    entry point (Euler's formula), less far along a helix; 1/R at r = 0."""
+    r, phi, R = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (r, phi, R)))
+    th = r * np.cos(phi) / R
+    z = r * np.sin(phi)
+    one_c = 2.0 * np.sin(0.5 * th) ** 2
+    den = 2.0 * R * R * one_c + z * z
+    near = np.cos(phi) ** 2 / R
+    return np.where(den > 0.0, 2.0 * R * one_c / np.where(den > 0.0, den, 1.0), near)
+
+
+def fitted_dipole_pairs(tab: CurvatureTable, rho_opt, k_along_opt, k_across_opt, tau2_opt, *, coef=None,
+                        matched: CurvatureTable | None = None):
+    """:func:`fitted_dipole_profile` with each pair's curvatures along and across and squared twist given (optical
+    units; (p,) arrays): the bake's form, where the curvature along a pair is measured between its two points."""
+    th = effective_coefficients(table.COEF if coef is None else coef, _boundary(tab.albedo_prime, tab.eta))
+    m1 = matched_table(tab) if matched is None else matched
+    r, ka, kc, t2 = (np.ascontiguousarray(x, dtype=np.float64).ravel()
+                     for x in np.broadcast_arrays(rho_opt, k_along_opt, k_across_opt, tau2_opt))
+    out = np.empty(r.size)
+    with np.errstate(under="ignore"):
+        bad = _fitted_pairs_loop(r, ka, kc, t2, tab.coef, tab.n_intervals, m1.coef, m1.n_intervals, tab.albedo_prime,
+                                 tab.mu, tab.z_r, tab.z_b, m1.z_b, th, out)
+    if bad:
+        raise ValueError("rho_opt must be finite and >= 0 and the curvatures finite")
+    return out
+
+
+def matched_table(tab: CurvatureTable) -> CurvatureTable:
+    """The curvature table of ``tab``'s albedo with a matched boundary (eta = 1), over the same distances."""
+    return CurvatureTable(tab.albedo_prime, 1.0, tab.rho_max_opt)
+
+
+def fitted_dipole_profile(tab: CurvatureTable, rho_opt, phi=None, *, k1_opt, k2_opt, cos2phi=None, coef=None,
+                          matched: CurvatureTable | None = None):
+    """The fitted curvature factor on the planar dipole, ``R_d(rho) exp(S(delta + Q))`` (optical units), in one
+    compiled loop over ``tab``'s tabulated a, b and those of ``matched`` (:func:`matched_table`, built when not
+    given). This is the bake's kernel: the near field, when asked for, multiplies it by R_near/R_d as for every
+    model (docs/physics.md eq. (80)). Arguments as :meth:`CurvatureTable.profile`; ``coef`` the theta_j (default:
+    the shipped fit)."""
+    if (phi is None) == (cos2phi is None):
+        raise ValueError("give exactly one of phi and cos2phi")
+    th = effective_coefficients(table.COEF if coef is None else coef, _boundary(tab.albedo_prime, tab.eta))
+    m1 = matched_table(tab) if matched is None else matched
+    ang = phi if cos2phi is None else cos2phi
+    arrs = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (rho_opt, ang, k1_opt, k2_opt)))
+    shape = arrs[0].shape
+    r, ang, c1, c2 = (np.ascontiguousarray(x).ravel() for x in arrs)
+    out = np.empty(r.size)
+    with np.errstate(under="ignore"):
+        bad = _fitted_loop(r, ang, c1, c2, cos2phi is not None, tab.coef, tab.n_intervals, m1.coef, m1.n_intervals,
+                           tab.albedo_prime, tab.mu, tab.z_r, tab.z_b, m1.z_b, th, out)
+    if bad:
+        raise ValueError("rho_opt must be finite and >= 0; k1_opt, k2_opt and cos2phi must be finite; "
+                         f"phi must be finite with |phi| <= {_PHI_MAX:g}")
+    return out.reshape(shape)
+
+
+def _check_coef(theta) -> None:
+    if not (theta.shape == (len(FEATURES),) and np.all(np.isfinite(theta))):
+        raise ValueError(f"fitted curvature coefficients must be {len(FEATURES)} finite numbers")
