@@ -340,10 +340,10 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
         s = s_all
         if shape.kind in ("sphere", "cavity") and np.any(s_all > np.pi * shape.radius_mm):
             s = s_all[s_all <= np.pi * shape.radius_mm]  # no point on a sphere is further than half its girth
-            warnings.warn(f"sphere of radius {shape.radius_mm:g} mm: distances beyond {np.pi * shape.radius_mm:.4g} mm "
+            warnings.warn(f"{shape.kind} of radius {shape.radius_mm:g} mm: distances beyond {np.pi * shape.radius_mm:.4g} mm "
                           "(half the circumference) are left out of its curves", stacklevel=2)
             if s.size == 0:
-                raise ParameterError(f"no requested distance lies on the sphere of radius {shape.radius_mm:g} mm")
+                raise ParameterError(f"no requested distance lies on the {shape.kind} of radius {shape.radius_mm:g} mm")
         for az in azimuths_deg:
             for model in models:
                 for nf in (near_fields if model != "mc" else near_fields[:1]):

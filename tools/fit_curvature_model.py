@@ -173,11 +173,12 @@ def main(argv=None):
             f"  fitted {datetime.date.today().isoformat()} at commit {rev} from {Path(args.data).name} "
             f"(sha256 {digest}), whose header reads:"]
     text += ["    " + h.lstrip("# ") for h in header]
-    text += [f"  train: every shape but those of radius {HELD_OUT_RADII_TR} / sigma_tr, every medium but "
-             f"{', '.join(str(m) for m in HELD_OUT_MEDIA)} (alpha', eta, g); {int((train & ok).sum())} rings.",
+    text += [f"  train: every shape but those of radius {HELD_OUT_RADII_TR} / sigma_tr, every medium but",
+             f"  {', '.join(str(m) for m in HELD_OUT_MEDIA)} (alpha', eta, g); {int((train & ok).sum())} rings.",
              '"""', "import numpy as np", "",
-             "#: theta_j, in the order of fitted_curvature.FEATURES", "FEATURES = " + repr(tuple(FEATURES)),
-             "COEF = np.array([" + ", ".join(f"{t:.9g}" for t in theta) + "])", "",
+             "#: theta_j, in the order of fitted_curvature.FEATURES",
+             "FEATURES = (\n" + "".join(f"    {f!r},\n" for f in FEATURES) + ")",
+             "COEF = np.array([\n" + "".join(f"    {t:.9g},  # {f}\n" for t, f in zip(theta, FEATURES)) + "])", "",
              "#: mean |R / R_mc - 1| per ring of the curvature factor: fitted model, first-order kernel (soft), plane;",
              "#: split by the validity measure nu of docs/physics.md eq. (55)",
              "ERRORS = " + json.dumps(report, indent=1), ""]

@@ -21,7 +21,7 @@ exactly and fits only the rest to Monte Carlo:
   travel, which first order cannot see); two terms that move delta towards its value for a matched boundary
   (eta = 1) where |delta| is large (Monte Carlo's curvature response hardly depends on eta, the diffusion
   kernel's grows with the extrapolation distance; the switch U^2/(1 + U^2) is of second order); and the thirteen
-  base terms again times A - 1 (A the boundary mismatch of eq. (9), 0 for eta = 1), so that every coefficient may
+  base terms again times A - 1 (A the boundary mismatch of eq. (7), 0 for eta = 1), so that every coefficient may
   depend on the boundary. Per material the last group folds into the first: 15 effective coefficients;
 * ``S`` is the identity for |E| <= E_LIN and saturates smoothly (C^2) towards +-E_SAT beyond it (eq. (84)), so the
   model is positive, bounded by ``R_near e^{+-E_SAT}`` and smooth for every input.
@@ -40,13 +40,14 @@ import numpy as np
 from meshshade.kernels import fitted_curvature_table as table
 from meshshade.kernels.curvature import CurvatureTable, curvature_ratios
 from meshshade.kernels.curvature.coefficients import _ratios_direct
-from meshshade.kernels.curvature.table import _MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _cos, _dipole_exp_block, _table_eval
+from meshshade.kernels.curvature.table import (_MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _cos, _dipole_exp_block,
+                                              _table_eval)
 from meshshade.kernels.near_field import near_field_profile
 from meshshade.kernels.optics import diffusion_params
 
 __all__ = ["FEATURES", "E_LIN", "E_SAT", "N_BASE", "fitted_features", "fitted_saturation", "fitted_exponent",
            "effective_coefficients", "fitted_curvature_factor", "fitted_curvature_profile", "fitted_dipole_profile",
-           "fitted_dipole_pairs", "chord_curvature", "helix_chord_curvature", "matched_table", "normal_curvatures", "pair_exponent"]
+           "fitted_dipole_pairs", "chord_curvature", "helix_chord_curvature", "matched_table", "normal_curvatures", "pair_exponent", "shipped_coefficients"]
 
 #: decay lengths (transport lengths) of the near-source terms: 3/10, 3/3 and 3, so that one exponential gives all
 #: three (e2 = e3^3, e1 = e3^10) in the compiled loop
@@ -119,7 +120,7 @@ def fitted_saturation(E):
 def fitted_exponent(r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt, A_minus_1, coef=None):
     """``S(delta + Q)`` of eq. (82) from the first-order ratios (optical units; arrays broadcast; arguments as
     :func:`fitted_features`); ``coef`` the theta_j (default: the shipped fit)."""
-    theta = np.asarray(table.COEF if coef is None else coef, dtype=np.float64)
+    theta = shipped_coefficients() if coef is None else np.asarray(coef, dtype=np.float64)
     _check_coef(theta)
     ka, kc, a, b = (np.asarray(x, dtype=np.float64) for x in (k_along, k_across, a_opt, b_opt))
     delta = ka * a + kc * b
@@ -284,7 +285,7 @@ def fitted_dipole_pairs(tab: CurvatureTable, rho_opt, k_along_opt, k_across_opt,
                         matched: CurvatureTable | None = None):
     """:func:`fitted_dipole_profile` with each pair's curvatures along and across and squared twist given (optical
     units; (p,) arrays): the bake's form, where the curvature along a pair is measured between its two points."""
-    th = effective_coefficients(table.COEF if coef is None else coef, _boundary(tab.albedo_prime, tab.eta))
+    th = effective_coefficients(shipped_coefficients() if coef is None else coef, _boundary(tab.albedo_prime, tab.eta))
     m1 = matched_table(tab) if matched is None else matched
     r, ka, kc, t2 = (np.ascontiguousarray(x, dtype=np.float64).ravel()
                      for x in np.broadcast_arrays(rho_opt, k_along_opt, k_across_opt, tau2_opt))
@@ -311,7 +312,7 @@ def fitted_dipole_profile(tab: CurvatureTable, rho_opt, phi=None, *, k1_opt, k2_
     the shipped fit)."""
     if (phi is None) == (cos2phi is None):
         raise ValueError("give exactly one of phi and cos2phi")
-    th = effective_coefficients(table.COEF if coef is None else coef, _boundary(tab.albedo_prime, tab.eta))
+    th = effective_coefficients(shipped_coefficients() if coef is None else coef, _boundary(tab.albedo_prime, tab.eta))
     m1 = matched_table(tab) if matched is None else matched
     ang = phi if cos2phi is None else cos2phi
     arrs = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (rho_opt, ang, k1_opt, k2_opt)))
@@ -325,6 +326,13 @@ def fitted_dipole_profile(tab: CurvatureTable, rho_opt, phi=None, *, k1_opt, k2_
         raise ValueError("rho_opt must be finite and >= 0; k1_opt, k2_opt and cos2phi must be finite; "
                          f"phi must be finite with |phi| <= {_PHI_MAX:g}")
     return out.reshape(shape)
+
+
+def shipped_coefficients() -> np.ndarray:
+    """The shipped coefficients, after checking they were fitted for these features."""
+    if tuple(getattr(table, "FEATURES", ())) != FEATURES:
+        raise ValueError("fitted_curvature_table.py was fitted for other features: rerun tools/fit_curvature_model.py")
+    return np.asarray(table.COEF, dtype=np.float64)
 
 
 def _check_coef(theta) -> None:

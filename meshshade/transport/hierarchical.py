@@ -33,9 +33,8 @@ from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError, ParameterError
 from meshshade.geometry.curvature import principal_curvatures
-from meshshade.kernels import fitted_curvature_table
 from meshshade.kernels.curvature import CurvatureTable
-from meshshade.kernels.fitted_curvature import effective_coefficients, matched_table
+from meshshade.kernels.fitted_curvature import effective_coefficients, matched_table, shipped_coefficients
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.optics import diffusion_params
 from meshshade.kernels.sphere import sphere_series_profile
@@ -455,7 +454,7 @@ def _channel_params(material: Material, cut):
     fit_coef = np.zeros_like(coef)
     for c, t in enumerate(matched):
         fit_coef[c, :t.coef.shape[0]] = t.coef
-    fit = np.stack([effective_coefficients(fitted_curvature_table.COEF, float(np.ravel(p.A)[0]) - 1.0)] * 3)
+    fit = np.stack([effective_coefficients(shipped_coefficients(), float(np.ravel(p.A)[0]) - 1.0)] * 3)
     fit_zb = np.array([t.z_b for t in matched])
     return (st, b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_b), b3(p.z_v), a0, coef, n_int, fit, fit_coef,
             fit_zb)
