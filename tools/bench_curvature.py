@@ -11,9 +11,13 @@ processes affects all of them alike. Variants:
 * ``curved_api``: ``curvature_profile`` with phi (builds its CurvatureTable per call, included in the time);
 * ``curved_api_cos2phi``: the same with ``cos2phi=`` (callers with tangent-plane x, y: (x^2 - y^2)/rho^2);
 * ``curved_table_phi``: ``CurvatureTable.profile`` with phi (one cosine per pair);
-* ``curved_table_cos2phi``: ``CurvatureTable.profile(..., cos2phi=...)``.
+* ``curved_table_cos2phi``: ``CurvatureTable.profile(..., cos2phi=...)``;
+* ``fitted_table_phi`` / ``fitted_table_cos2phi``: the fitted curvature model on the dipole
+  (``fitted_dipole_profile``, physics §14) from the same table and its matched-boundary table;
+* ``fitted_pairs``: ``fitted_dipole_pairs``, the bake's form (curvatures along and across and the twist given per
+  pair).
 
-Ratios are curved time / dipole time per evaluation. Also reports the table build time and its measured
+Ratios are curved time / dipole time per evaluation, and fitted time / curved time (the issue's budget: 1.5). Also reports the table build time and its measured
 interpolation error.
 
 Usage:  python tools/bench_curvature.py [--n 1000000] [--repeat 7] [--out bench.json]
@@ -32,6 +36,8 @@ import numpy as np
 
 from meshshade.kernels.curvature import CurvatureTable, curvature_profile
 from meshshade.kernels.dipole import dipole_diffuse_reflectance, dipole_profile
+from meshshade.kernels.fitted_curvature import (fitted_dipole_pairs, fitted_dipole_profile, matched_table,
+                                                normal_curvatures)
 from meshshade.kernels.optics import diffusion_params
 
 SIGMA_S, SIGMA_A, ETA = 1.0, 0.01, 1.3
@@ -71,6 +77,8 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     table = CurvatureTable(ALB, ETA, float(rho.max()))
     t_build = time.perf_counter() - t0
+    matched = matched_table(table)
+    ka, kc, t2 = normal_curvatures(phi, k1, k2)
 
     variants = {
         "dipole_numpy": lambda: dipole_profile(rho, **par),
@@ -80,6 +88,10 @@ def main(argv=None) -> int:
         "curved_api_cos2phi": lambda: curvature_profile(rho, cos2phi=cos2, k1_opt=k1, k2_opt=k2, **par),
         "curved_table_phi": lambda: table.profile(rho, phi, k1_opt=k1, k2_opt=k2),
         "curved_table_cos2phi": lambda: table.profile(rho, cos2phi=cos2, k1_opt=k1, k2_opt=k2),
+        "fitted_table_phi": lambda: fitted_dipole_profile(table, rho, phi, k1_opt=k1, k2_opt=k2, matched=matched),
+        "fitted_table_cos2phi": lambda: fitted_dipole_profile(table, rho, cos2phi=cos2, k1_opt=k1, k2_opt=k2,
+                                                              matched=matched),
+        "fitted_pairs": lambda: fitted_dipole_pairs(table, rho, ka, kc, t2, matched=matched),
     }
     for fn in variants.values():  # warm-up: compilation, caches
         fn()
@@ -95,6 +107,9 @@ def main(argv=None) -> int:
     for c in ("curved_api", "curved_api_cos2phi", "curved_table_phi", "curved_table_cos2phi"):
         for d in ("dipole_numpy", "dipole_compiled"):
             ratios[f"{c}/{d}"] = round(best[c] / best[d], 3)
+    for f, c in (("fitted_table_phi", "curved_table_phi"), ("fitted_table_cos2phi", "curved_table_cos2phi"),
+                 ("fitted_pairs", "curved_table_cos2phi")):
+        ratios[f"{f}/{c}"] = round(best[f] / best[c], 3)
     report = {
         "case": {"sigma_s_prime_per_mm": SIGMA_S, "sigma_a_per_mm": SIGMA_A, "eta": ETA,
                  "rho_mm": [0.0, RHO_MAX_MM], "k_per_mm": [-K_MAX_MM, K_MAX_MM], "n_pairs": n},

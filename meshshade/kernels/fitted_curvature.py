@@ -40,8 +40,7 @@ import numpy as np
 from meshshade.kernels import fitted_curvature_table as table
 from meshshade.kernels.curvature import CurvatureTable, curvature_ratios
 from meshshade.kernels.curvature.coefficients import _ratios_direct
-from meshshade.kernels.curvature.table import (_MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _cos, _dipole_exp_block,
-                                              _table_eval)
+from meshshade.kernels.curvature.table import _MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _cos, _dipole_exp_block
 from meshshade.kernels.near_field import near_field_profile
 from meshshade.kernels.optics import diffusion_params
 
@@ -152,14 +151,35 @@ def fitted_curvature_profile(r_opt, phi, k1_opt, k2_opt, *, albedo_prime, eta, g
     return base * fitted_curvature_factor(r_opt, phi, k1_opt, k2_opt, albedo_prime=albedo_prime, eta=eta)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _ratios_at(r, coef, n_int, mu, z_r, z_b):
-    u_t = math.sqrt(r) * _PER_UNIT
-    if u_t < n_int:
-        return _table_eval(u_t, coef)
+@numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
+def _ratios4_at(r, coef4, n_int, mu, z_r, z_b, z_b1):
+    """(a, b, a1, b1) at r from the side-by-side table of the material and its matched boundary (one row gathered,
+    the Chebyshev pieces of both tables share their nodes); direct quadrature beyond it."""
+    u = math.sqrt(r) * _PER_UNIT
+    if u < n_int:
+        iu = np.uint64(u)
+        t = 2.0 * (u - iu) - 1.0
+        t2 = t * t
+        t4 = t2 * t2
+        c = coef4[iu]
+        ra = ((c[0] + c[2] * t) + t2 * (c[4] + c[6] * t)) + t4 * ((c[8] + c[10] * t) + t2 * (c[12] + c[14] * t))
+        rb = ((c[1] + c[3] * t) + t2 * (c[5] + c[7] * t)) + t4 * ((c[9] + c[11] * t) + t2 * (c[13] + c[15] * t))
+        ra1 = (((c[16] + c[18] * t) + t2 * (c[20] + c[22] * t))
+               + t4 * ((c[24] + c[26] * t) + t2 * (c[28] + c[30] * t)))
+        rb1 = (((c[17] + c[19] * t) + t2 * (c[21] + c[23] * t))
+               + t4 * ((c[25] + c[27] * t) + t2 * (c[29] + c[31] * t)))
+        return ra, rb, ra1, rb1
     if r * mu >= _MU_RHO_ZERO:
-        return 0.0, 0.0
-    return _ratios_direct(r, mu, z_r, z_b)
+        return 0.0, 0.0, 0.0, 0.0
+    ra, rb = _ratios_direct(r, mu, z_r, z_b)
+    ra1, rb1 = _ratios_direct(r, mu, z_r, z_b1)
+    return ra, rb, ra1, rb1
+
+
+def _side_by_side(tab: CurvatureTable, matched: CurvatureTable) -> np.ndarray:
+    if matched.n_intervals != tab.n_intervals or matched.albedo_prime != tab.albedo_prime:
+        raise ValueError("the matched-boundary table must have the material's albedo and extent")
+    return np.ascontiguousarray(np.hstack([tab.coef, matched.coef]))
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
@@ -190,7 +210,7 @@ def pair_exponent(r, ka, kc, t2, ra, rb, ra1, rb1, th):
 
 
 @numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _fitted_loop(rho, ang, k1, k2, ang_is_cos2, coef, n_int, coef1, n_int1, alb, mu, z_r, z_b, z_b1, th, out):
+def _fitted_loop(rho, ang, k1, k2, ang_is_cos2, coef4, n_int, alb, mu, z_r, z_b, z_b1, th, out):
     """Compiled R_d(rho) exp(S(delta + Q)) (eqs. (82)-(84) on the point dipole) over pairs, blockwise like the curved
     kernel's loop: (1) the exponent per pair from the tabulated a, b (material and matched boundary);
     (2) the dipole with the exponent folded into its exponentials. Returns True (the caller raises) on a negative
@@ -217,8 +237,7 @@ def _fitted_loop(rho, ang, k1, k2, ang_is_cos2, coef, n_int, coef1, n_int1, alb,
                 if not abs(ang[k]) <= _PHI_MAX:
                     return True
                 cs = _cos(2.0 * ang[k])
-            ra, rb = _ratios_at(r, coef, n_int, mu, z_r, z_b)
-            ra1, rb1 = _ratios_at(r, coef1, n_int1, mu, z_r, z_b1)
+            ra, rb, ra1, rb1 = _ratios4_at(r, coef4, n_int, mu, z_r, z_b, z_b1)
             dk = 0.5 * (c1 - c2) * cs
             t2 = 0.25 * (c1 - c2) * (c1 - c2) * max(1.0 - cs * cs, 0.0)   # tau^2 = ((k1 - k2)/2 sin 2 phi)^2
             E = pair_exponent(r, 0.5 * (c1 + c2) + dk, 0.5 * (c1 + c2) - dk, t2, ra, rb, ra1, rb1, th)
@@ -230,7 +249,7 @@ def _fitted_loop(rho, ang, k1, k2, ang_is_cos2, coef, n_int, coef1, n_int1, alb,
 
 
 @numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _fitted_pairs_loop(rho, ka, kc, t2, coef, n_int, coef1, n_int1, alb, mu, z_r, z_b, z_b1, th, out):
+def _fitted_pairs_loop(rho, ka, kc, t2, coef4, n_int, alb, mu, z_r, z_b, z_b1, th, out):
     """:func:`_fitted_loop` with each pair's curvatures along and across and squared twist given directly."""
     z_v = z_r + 2.0 * z_b
     n = rho.size
@@ -246,8 +265,7 @@ def _fitted_pairs_loop(rho, ka, kc, t2, coef, n_int, coef1, n_int1, alb, mu, z_r
             if ka[k] == 0.0 and kc[k] == 0.0 and t2[k] == 0.0:
                 dl[j] = 0.0
                 continue
-            ra, rb = _ratios_at(r, coef, n_int, mu, z_r, z_b)
-            ra1, rb1 = _ratios_at(r, coef1, n_int1, mu, z_r, z_b1)
+            ra, rb, ra1, rb1 = _ratios4_at(r, coef4, n_int, mu, z_r, z_b, z_b1)
             E = pair_exponent(r, ka[k], kc[k], t2[k], ra, rb, ra1, rb1, th)
             if not (abs(E) < math.inf):
                 return True
@@ -291,7 +309,7 @@ def fitted_dipole_pairs(tab: CurvatureTable, rho_opt, k_along_opt, k_across_opt,
                      for x in np.broadcast_arrays(rho_opt, k_along_opt, k_across_opt, tau2_opt))
     out = np.empty(r.size)
     with np.errstate(under="ignore"):
-        bad = _fitted_pairs_loop(r, ka, kc, t2, tab.coef, tab.n_intervals, m1.coef, m1.n_intervals, tab.albedo_prime,
+        bad = _fitted_pairs_loop(r, ka, kc, t2, _side_by_side(tab, m1), tab.n_intervals, tab.albedo_prime,
                                  tab.mu, tab.z_r, tab.z_b, m1.z_b, th, out)
     if bad:
         raise ValueError("rho_opt must be finite and >= 0 and the curvatures finite")
@@ -320,7 +338,7 @@ def fitted_dipole_profile(tab: CurvatureTable, rho_opt, phi=None, *, k1_opt, k2_
     r, ang, c1, c2 = (np.ascontiguousarray(x).ravel() for x in arrs)
     out = np.empty(r.size)
     with np.errstate(under="ignore"):
-        bad = _fitted_loop(r, ang, c1, c2, cos2phi is not None, tab.coef, tab.n_intervals, m1.coef, m1.n_intervals,
+        bad = _fitted_loop(r, ang, c1, c2, cos2phi is not None, _side_by_side(tab, m1), tab.n_intervals,
                            tab.albedo_prime, tab.mu, tab.z_r, tab.z_b, m1.z_b, th, out)
     if bad:
         raise ValueError("rho_opt must be finite and >= 0; k1_opt, k2_opt and cos2phi must be finite; "
