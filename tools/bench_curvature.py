@@ -13,9 +13,10 @@ processes affects all of them alike. Variants:
 * ``curved_table_phi``: ``CurvatureTable.profile`` with phi (one cosine per pair);
 * ``curved_table_cos2phi``: ``CurvatureTable.profile(..., cos2phi=...)``;
 * ``fitted_table_phi`` / ``fitted_table_cos2phi``: the fitted curvature model on the dipole
-  (``fitted_dipole_profile``, physics §14) from the same table and its matched-boundary table;
+  (``fitted_dipole_profile``, physics §14: numpy turns k1, k2, phi into each pair's curvatures, then the compiled
+  loop) from the same table and its matched-boundary table;
 * ``fitted_pairs``: ``fitted_dipole_pairs``, the bake's form (curvatures along and across and the twist given per
-  pair).
+  pair; the compiled loop alone).
 
 Ratios are curved time / dipole time per evaluation, and fitted time / curved time (the issue's budget: 1.5). Also reports the table build time and its measured
 interpolation error.

@@ -40,7 +40,7 @@ import numpy as np
 from meshshade.kernels import fitted_curvature_table as table
 from meshshade.kernels.curvature import CurvatureTable, curvature_ratios
 from meshshade.kernels.curvature.coefficients import _ratios_direct
-from meshshade.kernels.curvature.table import _MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _cos, _dipole_exp_block
+from meshshade.kernels.curvature.table import _MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _dipole_exp_block, _piece_pair
 from meshshade.kernels.near_field import near_field_profile
 from meshshade.kernels.optics import diffusion_params
 
@@ -162,12 +162,8 @@ def _ratios4_at(r, coef4, n_int, mu, z_r, z_b, z_b1):
         t2 = t * t
         t4 = t2 * t2
         c = coef4[iu]
-        ra = ((c[0] + c[2] * t) + t2 * (c[4] + c[6] * t)) + t4 * ((c[8] + c[10] * t) + t2 * (c[12] + c[14] * t))
-        rb = ((c[1] + c[3] * t) + t2 * (c[5] + c[7] * t)) + t4 * ((c[9] + c[11] * t) + t2 * (c[13] + c[15] * t))
-        ra1 = (((c[16] + c[18] * t) + t2 * (c[20] + c[22] * t))
-               + t4 * ((c[24] + c[26] * t) + t2 * (c[28] + c[30] * t)))
-        rb1 = (((c[17] + c[19] * t) + t2 * (c[21] + c[23] * t))
-               + t4 * ((c[25] + c[27] * t) + t2 * (c[29] + c[31] * t)))
+        ra, rb = _piece_pair(c, 0, t, t2, t4)
+        ra1, rb1 = _piece_pair(c, 16, t, t2, t4)
         return ra, rb, ra1, rb1
     if r * mu >= _MU_RHO_ZERO:
         return 0.0, 0.0, 0.0, 0.0
@@ -210,47 +206,11 @@ def pair_exponent(r, ka, kc, t2, ra, rb, ra1, rb1, th):
 
 
 @numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _fitted_loop(rho, ang, k1, k2, ang_is_cos2, coef4, n_int, alb, mu, z_r, z_b, z_b1, th, out):
-    """Compiled R_d(rho) exp(S(delta + Q)) (eqs. (82)-(84) on the point dipole) over pairs, blockwise like the curved
-    kernel's loop: (1) the exponent per pair from the tabulated a, b (material and matched boundary);
-    (2) the dipole with the exponent folded into its exponentials. Returns True (the caller raises) on a negative
-    or non-finite rho, a bad angle or a non-finite exponent."""
-    z_v = z_r + 2.0 * z_b
-    n = rho.size
-    blk = 512
-    dl = np.empty(blk)
-    for start in range(0, n, blk):
-        m = min(blk, n - start)
-        for j in range(m):
-            k = start + j
-            r = rho[k]
-            if not ((r >= 0.0) & (r < math.inf)):
-                return True
-            c1 = k1[k]
-            c2 = k2[k]
-            if c1 == 0.0 and c2 == 0.0:
-                dl[j] = 0.0
-                continue
-            if ang_is_cos2:
-                cs = ang[k]
-            else:
-                if not abs(ang[k]) <= _PHI_MAX:
-                    return True
-                cs = _cos(2.0 * ang[k])
-            ra, rb, ra1, rb1 = _ratios4_at(r, coef4, n_int, mu, z_r, z_b, z_b1)
-            dk = 0.5 * (c1 - c2) * cs
-            t2 = 0.25 * (c1 - c2) * (c1 - c2) * max(1.0 - cs * cs, 0.0)   # tau^2 = ((k1 - k2)/2 sin 2 phi)^2
-            E = pair_exponent(r, 0.5 * (c1 + c2) + dk, 0.5 * (c1 + c2) - dk, t2, ra, rb, ra1, rb1, th)
-            if not (abs(E) < math.inf):
-                return True
-            dl[j] = E
-        _dipole_exp_block(rho[start:start + m], dl[:m], out[start:start + m], alb, mu, z_r, z_v)
-    return False
-
-
-@numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
 def _fitted_pairs_loop(rho, ka, kc, t2, coef4, n_int, alb, mu, z_r, z_b, z_b1, th, out):
-    """:func:`_fitted_loop` with each pair's curvatures along and across and squared twist given directly."""
+    """Compiled R_d(rho) exp(S(delta + Q)) (eqs. (82)-(84) on the point dipole) over pairs with their curvatures along
+    and across and squared twist, blockwise like the curved kernel's loop: (1) the exponent per pair from one
+    side-by-side table row (material and matched boundary); (2) the dipole with the exponent folded into its
+    exponentials. Returns True (the caller raises) on a negative or non-finite rho or a non-finite exponent."""
     z_v = z_r + 2.0 * z_b
     n = rho.size
     blk = 512
@@ -323,27 +283,26 @@ def matched_table(tab: CurvatureTable) -> CurvatureTable:
 
 def fitted_dipole_profile(tab: CurvatureTable, rho_opt, phi=None, *, k1_opt, k2_opt, cos2phi=None, coef=None,
                           matched: CurvatureTable | None = None):
-    """The fitted curvature factor on the planar dipole, ``R_d(rho) exp(S(delta + Q))`` (optical units), in one
-    compiled loop over ``tab``'s tabulated a, b and those of ``matched`` (:func:`matched_table`, built when not
-    given). This is the bake's kernel: the near field, when asked for, multiplies it by R_near/R_d as for every
-    model (docs/physics.md eq. (80)). Arguments as :meth:`CurvatureTable.profile`; ``coef`` the theta_j (default:
-    the shipped fit)."""
+    """The fitted curvature factor on the planar dipole, ``R_d(rho) exp(S(delta + Q))`` (optical units), with the
+    entry point's curvatures k1, k2 and the direction ``phi`` from the first principal direction (or ``cos2phi``),
+    from ``tab``'s tabulated a, b and those of ``matched`` (:func:`matched_table`, built when not given); arguments
+    as :meth:`CurvatureTable.profile`, ``coef`` the theta_j (default: the shipped fit). The bake measures each
+    pair's curvatures between its points instead and calls :func:`fitted_dipole_pairs`; with the near field, as
+    every model, it multiplies this by R_near/R_d (docs/physics.md eq. (80))."""
     if (phi is None) == (cos2phi is None):
         raise ValueError("give exactly one of phi and cos2phi")
-    th = effective_coefficients(shipped_coefficients() if coef is None else coef, _boundary(tab.albedo_prime, tab.eta))
-    m1 = matched_table(tab) if matched is None else matched
-    ang = phi if cos2phi is None else cos2phi
-    arrs = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (rho_opt, ang, k1_opt, k2_opt)))
-    shape = arrs[0].shape
-    r, ang, c1, c2 = (np.ascontiguousarray(x).ravel() for x in arrs)
-    out = np.empty(r.size)
-    with np.errstate(under="ignore"):
-        bad = _fitted_loop(r, ang, c1, c2, cos2phi is not None, _side_by_side(tab, m1), tab.n_intervals,
-                           tab.albedo_prime, tab.mu, tab.z_r, tab.z_b, m1.z_b, th, out)
-    if bad:
-        raise ValueError("rho_opt must be finite and >= 0; k1_opt, k2_opt and cos2phi must be finite; "
-                         f"phi must be finite with |phi| <= {_PHI_MAX:g}")
-    return out.reshape(shape)
+    arrs = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64)
+                                 for x in (rho_opt, phi if cos2phi is None else cos2phi, k1_opt, k2_opt)))
+    r, ang, k1, k2 = arrs
+    if cos2phi is None:
+        if not np.all(np.abs(ang) <= _PHI_MAX):
+            raise ValueError(f"phi must be finite with |phi| <= {_PHI_MAX:g}")
+        ang = np.cos(2.0 * ang)
+    # Euler's formula with cos 2 phi: k_n(phi) = H + (k1 - k2)/2 cos 2 phi, tau^2 = ((k1 - k2)/2)^2 (1 - cos^2 2 phi)
+    H, dk = 0.5 * (k1 + k2), 0.5 * (k1 - k2)
+    t2 = dk * dk * np.maximum(1.0 - ang * ang, 0.0)
+    out = fitted_dipole_pairs(tab, r, H + dk * ang, H - dk * ang, t2, coef=coef, matched=matched)
+    return out.reshape(r.shape)
 
 
 def shipped_coefficients() -> np.ndarray:

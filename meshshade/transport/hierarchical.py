@@ -448,12 +448,12 @@ def _channel_params(material: Material, cut):
     for c, t in enumerate(tables):
         coef[c, :t.coef.shape[0]] = t.coef
     a0 = np.array([t.a0 for t in tables])
-    # the fitted model: per channel its effective coefficients and the tables of the matched boundary (eta = 1),
-    # padded to the material's table lengths (same nodes: the same distances)
+    # the fitted model: per channel its effective coefficients and the material's and the matched boundary's
+    # (eta = 1) tables side by side (same nodes: the same distances), padded as coef
     matched = [matched_table(t) for t in tables]
-    fit_coef = np.zeros_like(coef)
-    for c, t in enumerate(matched):
-        fit_coef[c, :t.coef.shape[0]] = t.coef
+    fit_coef = np.zeros((3, coef.shape[1], 2 * coef.shape[2]))
+    for c, (t, m) in enumerate(zip(tables, matched)):
+        fit_coef[c, :t.coef.shape[0]] = np.hstack([t.coef, m.coef])
     fit = np.stack([effective_coefficients(shipped_coefficients(), float(np.ravel(p.A)[0]) - 1.0)] * 3)
     fit_zb = np.array([t.z_b for t in matched])
     return (st, b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_b), b3(p.z_v), a0, coef, n_int, fit, fit_coef,

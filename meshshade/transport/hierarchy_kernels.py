@@ -13,8 +13,9 @@ of a curved cluster) is dropped: (k a^2/2)^2 against a^2.
 Kernels (``kind``): 0 dipole of the chord, 1 dipole of the surface distance, 2 the first-order curved kernel
 (soft policy, docs/physics.md eqs. (49)-(53)) with the source's shape operator, 3 the exact sphere of the source's
 local radius (tabulated per radius bin, log-linear in theta), 4 the fitted curvature model on the dipole
-(docs/physics.md eq. (82); per channel its 15 effective coefficients ``fit`` (3, 15), and the curvature tables of the
-matched boundary ``fit_coef`` (same layout as ``coef``) with their extrapolation distances ``fit_zb``). The surface distance of a far pair is the arc of
+(docs/physics.md eq. (82); per channel its 15 effective coefficients ``fit`` (3, 15), the curvature tables of the
+material and of its matched boundary side by side ``fit_coef`` (3, n_int, 32), and the matched boundary's
+extrapolation distances ``fit_zb``). The surface distance of a far pair is the arc of
 docs/physics.md eq. (59) from the chord and the two normals.
 """
 from __future__ import annotations
@@ -28,7 +29,7 @@ from meshshade.kernels.curvature.coefficients import _ratios_direct
 from meshshade.kernels.curvature.policies import _DELTA_MAX, _INV_SAT
 from meshshade.kernels.curvature.table import _PER_UNIT, _table_eval
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
-from meshshade.kernels.fitted_curvature import pair_exponent
+from meshshade.kernels.fitted_curvature import _ratios4_at, pair_exponent
 
 STACK_SIZE = 256
 KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_CURVED, KIND_SPHERE, KIND_FITTED = 0, 1, 2, 3, 4
@@ -76,26 +77,22 @@ def pair_geometry(x0, x1, x2, nx0, nx1, nx2, y0, y1, y2, ny0, ny1, ny2, S, srow)
 
 
 @njit(cache=True, inline="always")
-def along_curvature(kind, kn, x0, x1, x2, nx0, nx1, nx2, y0, y1, y2, ny0, ny1, ny2):
-    """The normal curvature along a pair that the kernel uses: for the fitted model (kind 4) the normal-section
-    curvature between the two points, ``(n_x - n_y).(x - y)/|x - y|^2`` (docs/physics.md eq. (85)); the source's
-    own ``kn`` for every other kernel (and for a pair of coincident points)."""
+def fitted_geometry(kind, kn, knp, S, srow, x0, x1, x2, nx0, nx1, nx2, y0, y1, y2, ny0, ny1, ny2):
+    """(k_along, tau^2) of a pair receiver x (normal nx) <- source y (normal ny, shape operator S[srow]) for the
+    kernel: for the fitted model (kind 4) the normal-section curvature between the two points,
+    ``(n_x - n_y).(x - y)/|x - y|^2`` (docs/physics.md eq. (85); the source's ``kn`` for coincident points), and
+    the source's squared twist from tr(S^2) = kn^2 + knp^2 + 2 tau^2 (S tangent; clamped at 0 against rounding);
+    ``(kn, 0)`` for every other kernel."""
     if kind != KIND_FITTED:
-        return kn
+        return kn, 0.0
+    sxx, syy, szz, sxy, sxz, syz = S[srow, 0], S[srow, 1], S[srow, 2], S[srow, 3], S[srow, 4], S[srow, 5]
+    tr2 = sxx * sxx + syy * syy + szz * szz + 2.0 * (sxy * sxy + sxz * sxz + syz * syz)
+    t2 = max(0.5 * (tr2 - kn * kn - knp * knp), 0.0)
     v0, v1, v2 = x0 - y0, x1 - y1, x2 - y2
     c2 = v0 * v0 + v1 * v1 + v2 * v2
     if c2 <= 0.0:
-        return kn
-    return ((nx0 - ny0) * v0 + (nx1 - ny1) * v1 + (nx2 - ny2) * v2) / c2
-
-
-@njit(cache=True, inline="always")
-def twist2(S, srow, kn, knp):
-    """Squared twist tau^2 of the shape operator S[srow] in the frame of a pair: from tr(S^2) = kn^2 + knp^2 + 2 tau^2
-    (S tangent, so its normal eigenvalue is 0; clamped at 0 against rounding)."""
-    sxx, syy, szz, sxy, sxz, syz = S[srow, 0], S[srow, 1], S[srow, 2], S[srow, 3], S[srow, 4], S[srow, 5]
-    tr2 = sxx * sxx + syy * syy + szz * szz + 2.0 * (sxy * sxy + sxz * sxz + syz * syz)
-    return max(0.5 * (tr2 - kn * kn - knp * knp), 0.0)
+        return kn, t2
+    return ((nx0 - ny0) * v0 + (nx1 - ny1) * v1 + (nx2 - ny2) * v2) / c2, t2
 
 
 # ---------------------------------------------------------------------------------------------------- kernels
@@ -114,15 +111,8 @@ def kernel_value(kind, c, chord, s, kn, knp, t2, sph_row, st, al, mu, zr, zb, zv
         rho = s * sc
         if rho * mu[c] >= 1500.0:
             return 0.0
-        k1o, k2o = kn / sc, knp / sc
-        u = math.sqrt(rho) * _PER_UNIT
-        if u < n_int[c]:
-            ra, rb = _table_eval(u, coef[c])
-            ra1, rb1 = _table_eval(u, fit_coef[c])
-        else:
-            ra, rb = _ratios_direct(rho, mu[c], zr[c], zb[c])
-            ra1, rb1 = _ratios_direct(rho, mu[c], zr[c], fit_zb[c])
-        E = pair_exponent(rho, k1o, k2o, t2 / (sc * sc), ra, rb, ra1, rb1, fit[c])
+        ra, rb, ra1, rb1 = _ratios4_at(rho, fit_coef[c], n_int[c], mu[c], zr[c], zb[c], fit_zb[c])
+        E = pair_exponent(rho, kn / sc, knp / sc, t2 / (sc * sc), ra, rb, ra1, rb1, fit[c])
         return dipole_diffuse_reflectance(rho, al[c], mu[c], zr[c], zv[c], E) * sc * sc
     if kind == KIND_CURVED:
         rho = s * sc
@@ -364,12 +354,12 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                     ch, s, kn, knp = pair_geometry(x0, x1, x2, nx0, nx1, nx2, sig[node, q, 0], sig[node, q, 1],
                                                    sig[node, q, 2], nsig[node, q, 0], nsig[node, q, 1],
                                                    nsig[node, q, 2], ssig[node], q)
+                    ka, t2 = fitted_geometry(kind, kn, knp, ssig[node], q, x0, x1, x2, nx0, nx1, nx2,
+                                             sig[node, q, 0], sig[node, q, 1], sig[node, q, 2], nsig[node, q, 0],
+                                             nsig[node, q, 1], nsig[node, q, 2])
                     for c in range(3):
                         if (use >> c) & 1:
-                            acc[c] += w * kernel_value(kind, c, ch, s, along_curvature(
-                                kind, kn, x0, x1, x2, nx0, nx1, nx2, sig[node, q, 0], sig[node, q, 1], sig[node, q, 2],
-                                nsig[node, q, 0], nsig[node, q, 1], nsig[node, q, 2]), knp, twist2(ssig[node], q, kn, knp),
-                                                       srow[node], st, al, mu, zr, zb,
+                            acc[c] += w * kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], st, al, mu, zr, zb,
                                                        zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
                 n_clu += 1
             if open_mask == 0:
@@ -382,13 +372,13 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                                                    nrm[j, 0], nrm[j, 1], nrm[j, 2], shape, j)
                     if ch <= near[j]:
                         continue
+                    ka, t2 = fitted_geometry(kind, kn, knp, shape, j, x0, x1, x2, nx0, nx1, nx2, pos[j, 0],
+                                             pos[j, 1], pos[j, 2], nrm[j, 0], nrm[j, 1], nrm[j, 2])
                     for c in range(3):
                         if (open_mask >> c) & 1 and s <= cutoff[c]:
-                            acc[c] += power[j] * kernel_value(kind, c, ch, s, along_curvature(
-                                kind, kn, x0, x1, x2, nx0, nx1, nx2, pos[j, 0], pos[j, 1], pos[j, 2], nrm[j, 0],
-                                nrm[j, 1], nrm[j, 2]), knp, twist2(shape, j, kn, knp),
-                                                              sph[j], st, al, mu, zr, zb,
-                                                              zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
+                            acc[c] += power[j] * kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], st, al, mu, zr,
+                                                              zb, zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab,
+                                                              sph_r0)
                     n_leaf += 1
                 continue
             stack[top], smask[top] = 2 * node + 1, open_mask

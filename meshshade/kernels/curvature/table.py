@@ -68,16 +68,22 @@ def _build_table(n_int, mu, z_r, z_b, cheb_t, to_mono, out):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
+def _piece_pair(c, o, t, t2, t4):
+    """(a, b) of the interleaved degree-7 piece at ``c[o:o + 16]`` at t in [-1, 1] (Estrin's scheme)."""
+    ra = (((c[o] + c[o + 2] * t) + t2 * (c[o + 4] + c[o + 6] * t))
+          + t4 * ((c[o + 8] + c[o + 10] * t) + t2 * (c[o + 12] + c[o + 14] * t)))
+    rb = (((c[o + 1] + c[o + 3] * t) + t2 * (c[o + 5] + c[o + 7] * t))
+          + t4 * ((c[o + 9] + c[o + 11] * t) + t2 * (c[o + 13] + c[o + 15] * t)))
+    return ra, rb
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
 def _table_eval(u, coef):
     """(a, b) from the piece containing u = 16 sqrt(rho), 0 <= u < n_int (Estrin's scheme, degree 7)."""
     iu = np.uint64(u)  # unsigned: no negative-index wraparound code
     t = 2.0 * (u - iu) - 1.0
     t2 = t * t
-    t4 = t2 * t2
-    c = coef[iu]
-    ra = ((c[0] + c[2] * t) + t2 * (c[4] + c[6] * t)) + t4 * ((c[8] + c[10] * t) + t2 * (c[12] + c[14] * t))
-    rb = ((c[1] + c[3] * t) + t2 * (c[5] + c[7] * t)) + t4 * ((c[9] + c[11] * t) + t2 * (c[13] + c[15] * t))
-    return ra, rb
+    return _piece_pair(coef[iu], 0, t, t2, t2 * t2)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
