@@ -338,10 +338,10 @@ def shape_mc_profiles(material: Material, distances_mm, *, shape: str = "plane",
                     ring[q, :, j] += np.bincount(bq[sel], weights=wq[sel], minlength=n_batches)
                     one = sel & (oq == 1)
                     ring1[q, :, j] += np.bincount(bq[one], weights=wq[one], minlength=n_batches)
-            if like != "cylinder":
-                ring[1:], ring1[1:] = ring[0], ring1[0]
             if progress is not None:
                 progress(n)
+        if like != "cylinder":   # no sectors: every azimuth has the one full ring
+            ring[1:], ring1[1:] = ring[0], ring1[0]
         # batch sums of the estimate per unit entering power (every photon enters with weight 1)
         for q in range(n_az):
             out["R"][q, ch], out["Re"][q, ch] = batch_stats(ring[q] / areas[q] / photons)
