@@ -33,7 +33,10 @@ ROOT = Path(__file__).resolve().parents[1]
 #: (alpha', eta, g) of the media; sigma_s' = 1 /mm
 MEDIA = ((0.8, 1.3, 0.0), (0.9, 1.3, 0.0), (0.97, 1.3, 0.0), (0.99, 1.3, 0.0), (0.998, 1.3, 0.0),
          (0.9, 1.0, 0.0), (0.99, 1.0, 0.0), (0.9, 1.5, 0.0), (0.99, 1.5, 0.0), (0.9, 1.3, 0.8), (0.99, 1.3, 0.8),
-         (0.95, 1.4, 0.0))
+         (0.95, 1.4, 0.0),
+         # a fuller (alpha', eta) grid, so that the fit interpolates in the medium rather than extrapolating
+         (0.8, 1.0, 0.0), (0.97, 1.0, 0.0), (0.998, 1.0, 0.0), (0.9, 1.15, 0.0), (0.97, 1.15, 0.0), (0.99, 1.15, 0.0),
+         (0.9, 1.4, 0.0), (0.99, 1.4, 0.0), (0.8, 1.5, 0.0), (0.97, 1.5, 0.0), (0.998, 1.5, 0.0), (0.95, 1.2, 0.8))
 #: curvature radii in units of the diffusion length 1/sigma_tr
 RADII_TR = (0.5, 1.0, 2.0, 4.0)
 #: (shape, azimuth deg) tallies; one Monte Carlo run per shape serves all its azimuths
@@ -75,7 +78,7 @@ def run_one(medium, shape, radius, photons, seed, cache_dir):
     name = Path(cache_dir) / (f"{medium[0]:g}_{medium[1]:g}_{medium[2]:g}_{shape}_{radius:.9g}_{photons}_{seed}"
                               ".json")
     if name.exists():
-        return json.loads(name.read_text())
+        return json.loads(name.read_text()), True
     m = _material(*medium)
     s = _distances(medium, shape, radius)
     kw = dict(photons=photons_for(medium[0], photons), seed=seed, sector_deg=SECTOR_DEG)
@@ -96,7 +99,7 @@ def run_one(medium, shape, radius, photons, seed, cache_dir):
     tmp = name.with_suffix(".tmp")
     tmp.write_text(json.dumps(rows))
     tmp.replace(name)
-    return rows
+    return rows, False
 
 
 def main(argv=None):
@@ -119,9 +122,11 @@ def main(argv=None):
     cluster = None if args.scheduler else LocalCluster(threads_per_worker=1, processes=True)
     with Client(args.scheduler or cluster) as client:
         futs = [client.submit(run_one, *job, args.photons, args.seed, cache, pure=False) for job in jobs]
-        rows, done = [], 0
+        rows, done, cached = [], 0, 0
         for f in as_completed(futs):
-            rows.extend(f.result())
+            got, hit = f.result()
+            rows.extend(got)
+            cached += hit
             done += 1
             print(f"{done}/{len(jobs)} runs, {time.time() - t0:.0f} s", file=sys.stderr, flush=True)
     if cluster is not None:
@@ -135,7 +140,8 @@ def main(argv=None):
         fh.write(f"# meshshade curvature training set: exact-shape Monte Carlo (meshshade.montecarlo.shapes)\n"
                  f"# command: python tools/curvature_training_set.py --photons {args.photons} --seed {args.seed}\n"
                  f"# photons per run: the budget for alpha' <= 0.95, half to 0.99, a quarter beyond\n"
-                 f"# commit {rev}, {datetime.date.today().isoformat()}, {time.time() - t0:.0f} s; sigma_s' = 1 /mm;\n"
+                 f"# commit {rev}, {datetime.date.today().isoformat()}, {time.time() - t0:.0f} s for "
+                 f"{len(jobs) - cached} runs ({cached} more read from --cache); sigma_s' = 1 /mm;\n"
                  f"# R_* per unit entering power [mm^-2], ring-averaged over [lo, hi], batch-mean standard errors\n")
         fh.write(",".join(COLUMNS) + "\n")
         for r in rows:

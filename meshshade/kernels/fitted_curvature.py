@@ -18,11 +18,13 @@ exactly and fits only the rest to Monte Carlo:
   not diffusion: Monte Carlo's response to curvature near the source is two to three times the diffusion
   kernel's there); nine terms of second order and beyond (delta^2-like, delta times k where a curvature radius near
   the transport length makes diffusion itself fail, and the twist tau of the shape operator in the direction of
-  travel, which first order cannot see); two terms that move delta towards its value for a matched boundary
-  (eta = 1) where |delta| is large (Monte Carlo's curvature response hardly depends on eta, the diffusion
-  kernel's grows with the extrapolation distance; the switch U^2/(1 + U^2) is of second order); and the thirteen
+  travel, which first order cannot see); three terms that move delta towards its value for a matched boundary
+  (eta = 1) where |delta| or |U| is large (Monte Carlo's curvature response hardly depends on eta, the diffusion
+  kernel's grows with the extrapolation distance; the switches U^2/(1 + U^2) and delta^2/(D^2 + delta^2) are of
+  second order, and the fit gives the second a coefficient near 1: where |delta| >> D = 1/2 the exponent is the
+  matched boundary's delta_1); and the thirteen
   base terms again times A - 1 (A the boundary mismatch of eq. (7), 0 for eta = 1), so that every coefficient may
-  depend on the boundary. Per material the last group folds into the first: 15 effective coefficients;
+  depend on the boundary. Per material the last group folds into the first: 16 effective coefficients;
 * ``S`` is the identity for |E| <= E_LIN and saturates smoothly (C^2) towards +-E_SAT beyond it (eq. (84)), so the
   model is positive, bounded by ``R_near e^{+-E_SAT}`` and smooth for every input.
 
@@ -44,7 +46,7 @@ from meshshade.kernels.curvature.table import _MU_RHO_ZERO, _PER_UNIT, _PHI_MAX,
 from meshshade.kernels.near_field import near_field_profile
 from meshshade.kernels.optics import diffusion_params
 
-__all__ = ["FEATURES", "E_LIN", "E_SAT", "N_BASE", "fitted_features", "fitted_saturation", "fitted_exponent",
+__all__ = ["FEATURES", "E_LIN", "E_SAT", "N_BASE", "N_SWITCH", "DELTA_SWITCH", "fitted_features", "fitted_saturation", "fitted_exponent",
            "effective_coefficients", "fitted_curvature_factor", "fitted_curvature_profile", "fitted_dipole_profile",
            "fitted_dipole_pairs", "chord_curvature", "helix_chord_curvature", "matched_table", "normal_curvatures", "pair_exponent", "shipped_coefficients"]
 
@@ -56,7 +58,12 @@ _BASE = ("H e1", "H e2", "H e3", "(ka - kc) e2", "u^2", "u v", "v^2", "u ka", "u
 #: number of base features (those that appear again times A - 1)
 N_BASE = len(_BASE)
 #: names of the features f_j of eq. (83), in the order of the coefficients
-FEATURES = _BASE + ("(d1 - d) U^2/(1 + U^2)", "(d1 - d) U^3/(1 + U^2)") + tuple(f"(A - 1) {f}" for f in _BASE)
+_SWITCH = ("(d1 - d) U^2/(1 + U^2)", "(d1 - d) U^3/(1 + U^2)", "(d1 - d) d^2/(D^2 + d^2)")
+#: number of matched-boundary terms (between the base terms and their boundary copies)
+N_SWITCH = len(_SWITCH)
+FEATURES = _BASE + _SWITCH + tuple(f"(A - 1) {f}" for f in _BASE)
+#: the scale D of |delta| beyond which Monte Carlo's curvature response is that of the matched boundary
+DELTA_SWITCH = 0.5
 #: the saturation S of eq. (84): identity up to E_LIN, then towards +-E_SAT
 E_LIN = 4.0
 E_SAT = 6.0
@@ -83,8 +90,9 @@ def fitted_features(r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt
 
     ``H e1, H e2, H e3, (ka - kc) e2`` (first order, near the source); ``u^2, u v, v^2, u ka, u kc, H^2 e2, w^2,
     tau^2 e2, w^2 H a`` (second order and beyond; the twist enters squared, as symmetry requires);
-    ``(delta_1 - delta) U^2/(1 + U^2)`` and ``(delta_1 - delta) U^3/(1 + U^2)`` (third order at small k); and the
-    first thirteen again times A - 1. Every feature is 0 at k = 0."""
+    ``(delta_1 - delta) U^2/(1 + U^2)``, ``(delta_1 - delta) U^3/(1 + U^2)`` and
+    ``(delta_1 - delta) delta^2/(D^2 + delta^2)`` (D = DELTA_SWITCH; third order at small k: the matched-boundary
+    switches); and the first thirteen again times A - 1. Every feature is 0 at k = 0."""
     r, ka, kc, t2, a, b, a1, b1, Am1 = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (
         r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt, A_minus_1)))
     H = 0.5 * (ka + kc)
@@ -94,17 +102,20 @@ def fitted_features(r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt
             w2 * H * a]
     U = H * a
     sw = U * U / (1.0 + U * U)
-    dd = (ka * a1 + kc * b1) - (ka * a + kc * b)
-    return np.stack(base + [dd * sw, dd * sw * U] + [Am1 * f for f in base], axis=-1)
+    delta = ka * a + kc * b
+    dd = (ka * a1 + kc * b1) - delta
+    d2 = delta * delta
+    return np.stack(base + [dd * sw, dd * sw * U, dd * d2 / (DELTA_SWITCH ** 2 + d2)] + [Am1 * f for f in base],
+                    axis=-1)
 
 
 def effective_coefficients(coef, A_minus_1) -> np.ndarray:
-    """The 15 per-material coefficients of the compiled kernel: the base thirteen plus (A - 1) times their
-    boundary terms, then the two matched-boundary terms."""
+    """The 16 per-material coefficients of the compiled kernel: the base thirteen plus (A - 1) times their
+    boundary terms, then the three matched-boundary terms."""
     th = np.asarray(coef, dtype=np.float64)
     _check_coef(th)
-    return np.ascontiguousarray(np.concatenate([th[:N_BASE] + float(A_minus_1) * th[N_BASE + 2:],
-                                                th[N_BASE:N_BASE + 2]]))
+    return np.ascontiguousarray(np.concatenate([th[:N_BASE] + float(A_minus_1) * th[N_BASE + N_SWITCH:],
+                                                th[N_BASE:N_BASE + N_SWITCH]]))
 
 
 def fitted_saturation(E):
@@ -178,11 +189,14 @@ def _side_by_side(tab: CurvatureTable, matched: CurvatureTable) -> np.ndarray:
     return np.ascontiguousarray(np.hstack([tab.coef, matched.coef]))
 
 
+_D2 = DELTA_SWITCH ** 2
+
+
 @numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
 def pair_exponent(r, ka, kc, t2, ra, rb, ra1, rb1, th):
     """S(delta + Q) of eq. (82) for one pair (compiled; the loop below and the hierarchical far field): distance r,
     normal curvatures along and across ka, kc, squared twist t2, first-order ratios ra, rb of the material and
-    ra1, rb1 of its matched boundary, all optical units; ``th`` the 15 effective coefficients
+    ra1, rb1 of its matched boundary, all optical units; ``th`` the 16 effective coefficients
     (:func:`effective_coefficients`). One exponential (e3; e2 = e3^3, e1 = e2^3 e3). NaN in, NaN out."""
     H = 0.5 * (ka + kc)
     e3 = math.exp(-r / 3.0)
@@ -195,9 +209,11 @@ def pair_exponent(r, ka, kc, t2, ra, rb, ra1, rb1, th):
     U = H * ra
     sw = U * U / (1.0 + U * U)
     dd = ka * ra1 + kc * rb1 - delta
+    d2 = delta * delta
     q = (H * (th[0] * e1 + th[1] * e2 + th[2] * e3 + th[9] * H * e2) + th[3] * (ka - kc) * e2
          + u * (th[4] * u + th[5] * v + th[7] * ka + th[8] * kc) + th[6] * v * v
-         + w2 * (th[10] + th[12] * H * ra) + th[11] * t2 * e2 + dd * sw * (th[13] + th[14] * U))
+         + w2 * (th[10] + th[12] * H * ra) + th[11] * t2 * e2
+         + dd * (sw * (th[13] + th[14] * U) + th[15] * d2 / (_D2 + d2)))
     E = delta + q
     if abs(E) > E_LIN:
         w = E_SAT - E_LIN

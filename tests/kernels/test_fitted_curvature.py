@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from meshshade.kernels import fitted_curvature_table as table
 from meshshade.kernels.curvature import CurvatureTable, curvature_profile, curvature_ratios
 from meshshade.kernels.dipole import dipole_profile
-from meshshade.kernels.fitted_curvature import (E_LIN, E_SAT, FEATURES, N_BASE, fitted_curvature_factor,
+from meshshade.kernels.fitted_curvature import (E_LIN, E_SAT, FEATURES, N_BASE, N_SWITCH, fitted_curvature_factor,
                                                 fitted_curvature_profile, fitted_dipole_profile, fitted_exponent,
                                                 fitted_features, fitted_saturation, normal_curvatures)
 from meshshade.kernels.near_field import near_field_profile
@@ -46,7 +46,7 @@ def test_first_order_term_is_the_kernel_and_the_rest_is_second_order(a, eta):
     a1, b1 = curvature_ratios(r, albedo_prime=a, eta=1.0)
     Am1 = float(diffusion_params(a, eta).A) - 1.0
     th = table.COEF
-    first_order = [0, 1, 2, 3, N_BASE + 2, N_BASE + 3, N_BASE + 4, N_BASE + 5]   # the near-source terms
+    first_order = [0, 1, 2, 3] + [N_BASE + N_SWITCH + j for j in range(4)]   # the near-source terms
     rem = []
     for eps in (2e-3, 1e-3, 5e-4):
         ka, kc, t2 = normal_curvatures(phi, eps * k1, eps * k2)
