@@ -42,16 +42,18 @@ import numpy as np
 from meshshade.kernels import fitted_curvature_table as table
 from meshshade.kernels.curvature import CurvatureTable, curvature_ratios
 from meshshade.kernels.curvature.coefficients import _ratios_direct
-from meshshade.kernels.curvature.table import _MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _dipole_exp_block, _piece_pair
+from meshshade.kernels.curvature.table import (_MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _cheb_to_monomial,
+                                               _dipole_exp_block, _piece_pair)
 from meshshade.kernels.near_field import near_field_profile
 from meshshade.kernels.optics import diffusion_params
 
 __all__ = ["FEATURES", "E_LIN", "E_SAT", "N_BASE", "N_SWITCH", "DELTA_SWITCH", "fitted_features", "fitted_saturation", "fitted_exponent",
-           "effective_coefficients", "fitted_curvature_factor", "fitted_curvature_profile", "fitted_dipole_profile",
-           "fitted_dipole_pairs", "chord_curvature", "helix_chord_curvature", "matched_table", "normal_curvatures", "pair_exponent", "shipped_coefficients"]
+           "effective_coefficients", "fitted_row_table", "near_source_functions", "fitted_curvature_factor", "fitted_curvature_profile", "fitted_dipole_profile",
+           "fitted_dipole_pairs", "chord_curvature", "helix_chord_curvature", "matched_table", "normal_curvatures",
+           "pair_exponent", "shipped_coefficients"]
 
-#: decay lengths (transport lengths) of the near-source terms: 3/10, 3/3 and 3, so that one exponential gives all
-#: three (e2 = e3^3, e1 = e3^10) in the compiled loop
+#: decay lengths (transport lengths) of the near-source terms; the compiled kernel reads them from its table
+#: (:func:`fitted_row_table`)
 NEAR_LENGTHS = (0.3, 1.0, 3.0)
 _BASE = ("H e1", "H e2", "H e3", "(ka - kc) e2", "u^2", "u v", "v^2", "u ka", "u kc", "H^2 e2", "w^2", "tau^2 e2",
          "w^2 H a")
@@ -162,58 +164,90 @@ def fitted_curvature_profile(r_opt, phi, k1_opt, k2_opt, *, albedo_prime, eta, g
     return base * fitted_curvature_factor(r_opt, phi, k1_opt, k2_opt, albedo_prime=albedo_prime, eta=eta)
 
 
+def near_source_functions(r_opt, th):
+    """The two near-source functions of the compiled kernel (optical units; ``th`` the effective coefficients):
+    ``g(r) = th0 e1 + th1 e2 + th2 e3`` (the coefficient of H) and ``e2(r)``, e_j = exp(-r / l_j) (NEAR_LENGTHS)."""
+    r = np.asarray(r_opt, dtype=np.float64)
+    e1, e2, e3 = (np.exp(-r / length) for length in NEAR_LENGTHS)
+    return th[0] * e1 + th[1] * e2 + th[2] * e3, e2
+
+
+#: degree of the pieces of the matched boundary's ratios and the near-source functions in the compiled kernel's
+#: table (cubic: their interpolation errors, below 1e-8 and 2e-6 of their largest values, enter the exponent only
+#: through second-order switches and decaying near-source terms)
+_NEAR_DEG = 3
+_NEAR_T, _NEAR_TO_MONO = _cheb_to_monomial(_NEAR_DEG)
+
+
+def fitted_row_table(tab: CurvatureTable, matched: CurvatureTable, th) -> np.ndarray:
+    """The compiled kernel's per-material table, (n_int, 32), on the curvature table's intervals (u = sqrt(r) in
+    [i/16, (i+1)/16]): the material's a, b (the curvature table's degree-7 row, exact to ~1e-11) and, as cubic
+    pieces, its matched boundary's a1, b1 and the near-source functions g, e2 of :func:`near_source_functions`
+    (coefficient j of the four at 16 + 4 j .. 19 + 4 j). A pair reads one row (256 bytes, as the curvature table's
+    two rows) and evaluates no exponential beyond the dipole's."""
+    if matched.n_intervals != tab.n_intervals or matched.albedo_prime != tab.albedo_prime:
+        raise ValueError("the matched-boundary table must have the material's albedo and extent")
+    n = tab.n_intervals
+    u = (np.arange(n)[:, None] + 0.5 * (_NEAR_T[None, :] + 1.0)) / _PER_UNIT        # (n, 4) Chebyshev nodes
+    g, e2 = near_source_functions(u * u, th)
+    # a1, b1 at the cubic's nodes from the matched table's own degree-7 pieces (t the nodes' position in a piece)
+    powers = _NEAR_T[:, None] ** np.arange(matched.coef.shape[1] // 2)[None, :]      # (4, 8)
+    a1, b1 = matched.coef[:, 0::2] @ powers.T, matched.coef[:, 1::2] @ powers.T
+    near = np.empty((n, 4, 4))
+    for f, vals in enumerate((a1, b1, g, e2)):
+        near[:, :, f] = vals @ _NEAR_TO_MONO.T
+    return np.ascontiguousarray(np.hstack([tab.coef, near.reshape(n, 16)]))
+
+
 @numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
-def _ratios4_at(r, coef4, n_int, mu, z_r, z_b, z_b1):
-    """(a, b, a1, b1) at r from the side-by-side table of the material and its matched boundary (one row gathered,
-    the Chebyshev pieces of both tables share their nodes); direct quadrature beyond it."""
+def _row_at(r, row, n_int, mu, z_r, z_b, z_b1, th):
+    """(a, b, a1, b1, g, e2) at r from :func:`fitted_row_table` (one row gathered: a degree-7 piece pair and four
+    cubics); direct quadrature and exponentials beyond it."""
     u = math.sqrt(r) * _PER_UNIT
     if u < n_int:
         iu = np.uint64(u)
         t = 2.0 * (u - iu) - 1.0
         t2 = t * t
-        t4 = t2 * t2
-        c = coef4[iu]
-        ra, rb = _piece_pair(c, 0, t, t2, t4)
-        ra1, rb1 = _piece_pair(c, 16, t, t2, t4)
-        return ra, rb, ra1, rb1
+        c = row[iu]
+        ra, rb = _piece_pair(c, 0, t, t2, t2 * t2)
+        ra1 = (c[16] + c[20] * t) + t2 * (c[24] + c[28] * t)
+        rb1 = (c[17] + c[21] * t) + t2 * (c[25] + c[29] * t)
+        g = (c[18] + c[22] * t) + t2 * (c[26] + c[30] * t)
+        e2 = (c[19] + c[23] * t) + t2 * (c[27] + c[31] * t)
+        return ra, rb, ra1, rb1, g, e2
     if r * mu >= _MU_RHO_ZERO:
-        return 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     ra, rb = _ratios_direct(r, mu, z_r, z_b)
     ra1, rb1 = _ratios_direct(r, mu, z_r, z_b1)
-    return ra, rb, ra1, rb1
-
-
-def _side_by_side(tab: CurvatureTable, matched: CurvatureTable) -> np.ndarray:
-    if matched.n_intervals != tab.n_intervals or matched.albedo_prime != tab.albedo_prime:
-        raise ValueError("the matched-boundary table must have the material's albedo and extent")
-    return np.ascontiguousarray(np.hstack([tab.coef, matched.coef]))
+    e2 = math.exp(-r / NEAR_LENGTHS[1])
+    return ra, rb, ra1, rb1, th[0] * math.exp(-r / NEAR_LENGTHS[0]) + th[1] * e2 + th[2] * math.exp(
+        -r / NEAR_LENGTHS[2]), e2
 
 
 _D2 = DELTA_SWITCH ** 2
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
-def pair_exponent(r, ka, kc, t2, ra, rb, ra1, rb1, th):
-    """S(delta + Q) of eq. (82) for one pair (compiled; the loop below and the hierarchical far field): distance r,
-    normal curvatures along and across ka, kc, squared twist t2, first-order ratios ra, rb of the material and
-    ra1, rb1 of its matched boundary, all optical units; ``th`` the 16 effective coefficients
-    (:func:`effective_coefficients`). One exponential (e3; e2 = e3^3, e1 = e2^3 e3). NaN in, NaN out."""
+def pair_exponent(ka, kc, t2, ra, rb, ra1, rb1, g, e2, th):
+    """S(delta + Q) of eq. (82) for one pair (compiled; the loop below and the hierarchical far field): normal
+    curvatures along and across ka, kc, squared twist t2, first-order ratios ra, rb of the material and ra1, rb1 of
+    its matched boundary, the near-source functions g, e2 at the pair's distance (:func:`near_source_functions`),
+    all optical units; ``th`` the 16 effective coefficients (:func:`effective_coefficients`). The two switches
+    share one division. NaN in, NaN out."""
     H = 0.5 * (ka + kc)
-    e3 = math.exp(-r / 3.0)
-    e2 = e3 * e3 * e3
-    e1 = e2 * e2 * e2 * e3
     u = ka * ra
     v = kc * ra
     w2 = t2 * ra * ra
     delta = ka * ra + kc * rb
     U = H * ra
-    sw = U * U / (1.0 + U * U)
     dd = ka * ra1 + kc * rb1 - delta
+    U2 = U * U
     d2 = delta * delta
-    q = (H * (th[0] * e1 + th[1] * e2 + th[2] * e3 + th[9] * H * e2) + th[3] * (ka - kc) * e2
+    # dd (U^2/(1 + U^2) (th13 + th14 U) + th15 d^2/(D^2 + d^2)) over the common denominator
+    sw = (U2 * (_D2 + d2) * (th[13] + th[14] * U) + th[15] * d2 * (1.0 + U2)) / ((1.0 + U2) * (_D2 + d2))
+    q = (H * (g + th[9] * H * e2) + th[3] * (ka - kc) * e2
          + u * (th[4] * u + th[5] * v + th[7] * ka + th[8] * kc) + th[6] * v * v
-         + w2 * (th[10] + th[12] * H * ra) + th[11] * t2 * e2
-         + dd * (sw * (th[13] + th[14] * U) + th[15] * d2 / (_D2 + d2)))
+         + w2 * (th[10] + th[12] * H * ra) + th[11] * t2 * e2 + dd * sw)
     E = delta + q
     if abs(E) > E_LIN:
         w = E_SAT - E_LIN
@@ -222,11 +256,11 @@ def pair_exponent(r, ka, kc, t2, ra, rb, ra1, rb1, th):
 
 
 @numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _fitted_pairs_loop(rho, ka, kc, t2, coef4, n_int, alb, mu, z_r, z_b, z_b1, th, out):
+def _fitted_pairs_loop(rho, ka, kc, t2, row, n_int, alb, mu, z_r, z_b, z_b1, th, out):
     """Compiled R_d(rho) exp(S(delta + Q)) (eqs. (82)-(84) on the point dipole) over pairs with their curvatures along
-    and across and squared twist, blockwise like the curved kernel's loop: (1) the exponent per pair from one
-    side-by-side table row (material and matched boundary); (2) the dipole with the exponent folded into its
-    exponentials. Returns True (the caller raises) on a negative or non-finite rho or a non-finite exponent."""
+    and across and squared twist, blockwise like the curved kernel's loop: (1) the exponent per pair from one row of
+    :func:`fitted_row_table`; (2) the dipole with the exponent folded into its exponentials. Returns True (the
+    caller raises) on a negative or non-finite rho or a non-finite exponent."""
     z_v = z_r + 2.0 * z_b
     n = rho.size
     blk = 512
@@ -241,8 +275,8 @@ def _fitted_pairs_loop(rho, ka, kc, t2, coef4, n_int, alb, mu, z_r, z_b, z_b1, t
             if ka[k] == 0.0 and kc[k] == 0.0 and t2[k] == 0.0:
                 dl[j] = 0.0
                 continue
-            ra, rb, ra1, rb1 = _ratios4_at(r, coef4, n_int, mu, z_r, z_b, z_b1)
-            E = pair_exponent(r, ka[k], kc[k], t2[k], ra, rb, ra1, rb1, th)
+            ra, rb, ra1, rb1, g, e2 = _row_at(r, row, n_int, mu, z_r, z_b, z_b1, th)
+            E = pair_exponent(ka[k], kc[k], t2[k], ra, rb, ra1, rb1, g, e2, th)
             if not (abs(E) < math.inf):
                 return True
             dl[j] = E
@@ -285,7 +319,7 @@ def fitted_dipole_pairs(tab: CurvatureTable, rho_opt, k_along_opt, k_across_opt,
                      for x in np.broadcast_arrays(rho_opt, k_along_opt, k_across_opt, tau2_opt))
     out = np.empty(r.size)
     with np.errstate(under="ignore"):
-        bad = _fitted_pairs_loop(r, ka, kc, t2, _side_by_side(tab, m1), tab.n_intervals, tab.albedo_prime,
+        bad = _fitted_pairs_loop(r, ka, kc, t2, fitted_row_table(tab, m1, th), tab.n_intervals, tab.albedo_prime,
                                  tab.mu, tab.z_r, tab.z_b, m1.z_b, th, out)
     if bad:
         raise ValueError("rho_opt must be finite and >= 0 and the curvatures finite")

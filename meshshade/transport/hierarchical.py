@@ -34,7 +34,8 @@ from scipy.spatial import cKDTree
 from meshshade.errors import MeshshadeError, ParameterError
 from meshshade.geometry.curvature import principal_curvatures
 from meshshade.kernels.curvature import CurvatureTable
-from meshshade.kernels.fitted_curvature import effective_coefficients, matched_table, shipped_coefficients
+from meshshade.kernels.fitted_curvature import (effective_coefficients, fitted_row_table, matched_table,
+                                                shipped_coefficients)
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.optics import diffusion_params
 from meshshade.kernels.sphere import sphere_series_profile
@@ -448,13 +449,14 @@ def _channel_params(material: Material, cut):
     for c, t in enumerate(tables):
         coef[c, :t.coef.shape[0]] = t.coef
     a0 = np.array([t.a0 for t in tables])
-    # the fitted model: per channel its effective coefficients and the material's and the matched boundary's
-    # (eta = 1) tables side by side (same nodes: the same distances), padded as coef
-    matched = [matched_table(t) for t in tables]
-    fit_coef = np.zeros((3, coef.shape[1], 2 * coef.shape[2]))
-    for c, (t, m) in enumerate(zip(tables, matched)):
-        fit_coef[c, :t.coef.shape[0]] = np.hstack([t.coef, m.coef])
+    # the fitted model: per channel its effective coefficients and its table (fitted_row_table: the material's and
+    # the matched boundary's ratios and the near-source functions on the same intervals), padded as coef
     fit = np.stack([effective_coefficients(shipped_coefficients(), float(np.ravel(p.A)[0]) - 1.0)] * 3)
+    matched = [matched_table(t) for t in tables]
+    rows = [fitted_row_table(t, m, fit[c]) for c, (t, m) in enumerate(zip(tables, matched))]
+    fit_coef = np.zeros((3, coef.shape[1], rows[0].shape[1]))
+    for c, r in enumerate(rows):
+        fit_coef[c, :r.shape[0]] = r
     fit_zb = np.array([t.z_b for t in matched])
     return (st, b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_b), b3(p.z_v), a0, coef, n_int, fit, fit_coef,
             fit_zb)

@@ -13,8 +13,9 @@ of a curved cluster) is dropped: (k a^2/2)^2 against a^2.
 Kernels (``kind``): 0 dipole of the chord, 1 dipole of the surface distance, 2 the first-order curved kernel
 (soft policy, docs/physics.md eqs. (49)-(53)) with the source's shape operator, 3 the exact sphere of the source's
 local radius (tabulated per radius bin, log-linear in theta), 4 the fitted curvature model on the dipole
-(docs/physics.md eq. (82); per channel its 15 effective coefficients ``fit`` (3, 15), the curvature tables of the
-material and of its matched boundary side by side ``fit_coef`` (3, n_int, 32), and the matched boundary's
+(docs/physics.md eq. (82); per channel its 16 effective coefficients ``fit`` (3, 16), the fitted model's table
+``fit_coef`` (3, n_int, 32: the material's and its matched boundary's curvature ratios and the near-source
+functions side by side, :func:`~meshshade.kernels.fitted_curvature.fitted_row_table`), and the matched boundary's
 extrapolation distances ``fit_zb``). The surface distance of a far pair is the arc of
 docs/physics.md eq. (59) from the chord and the two normals.
 """
@@ -29,7 +30,7 @@ from meshshade.kernels.curvature.coefficients import _ratios_direct
 from meshshade.kernels.curvature.policies import _DELTA_MAX, _INV_SAT
 from meshshade.kernels.curvature.table import _PER_UNIT, _table_eval
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
-from meshshade.kernels.fitted_curvature import _ratios4_at, pair_exponent
+from meshshade.kernels.fitted_curvature import _row_at, pair_exponent
 
 STACK_SIZE = 256
 KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_CURVED, KIND_SPHERE, KIND_FITTED = 0, 1, 2, 3, 4
@@ -111,8 +112,8 @@ def kernel_value(kind, c, chord, s, kn, knp, t2, sph_row, st, al, mu, zr, zb, zv
         rho = s * sc
         if rho * mu[c] >= 1500.0:
             return 0.0
-        ra, rb, ra1, rb1 = _ratios4_at(rho, fit_coef[c], n_int[c], mu[c], zr[c], zb[c], fit_zb[c])
-        E = pair_exponent(rho, kn / sc, knp / sc, t2 / (sc * sc), ra, rb, ra1, rb1, fit[c])
+        ra, rb, ra1, rb1, g, e2 = _row_at(rho, fit_coef[c], n_int[c], mu[c], zr[c], zb[c], fit_zb[c], fit[c])
+        E = pair_exponent(kn / sc, knp / sc, t2 / (sc * sc), ra, rb, ra1, rb1, g, e2, fit[c])
         return dipole_diffuse_reflectance(rho, al[c], mu[c], zr[c], zv[c], E) * sc * sc
     if kind == KIND_CURVED:
         rho = s * sc
