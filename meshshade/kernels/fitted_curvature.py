@@ -47,10 +47,11 @@ from meshshade.kernels.curvature.table import (_MU_RHO_ZERO, _PER_UNIT, _PHI_MAX
 from meshshade.kernels.near_field import near_field_profile
 from meshshade.kernels.optics import diffusion_params
 
-__all__ = ["FEATURES", "E_LIN", "E_SAT", "N_BASE", "N_SWITCH", "DELTA_SWITCH", "fitted_features", "fitted_saturation", "fitted_exponent",
-           "effective_coefficients", "fitted_row_table", "near_source_functions", "fitted_curvature_factor", "fitted_curvature_profile", "fitted_dipole_profile",
-           "fitted_dipole_pairs", "chord_curvature", "helix_chord_curvature", "matched_table", "normal_curvatures",
-           "pair_exponent", "shipped_coefficients"]
+__all__ = ["FEATURES", "E_LIN", "E_SAT", "N_BASE", "N_SWITCH", "DELTA_SWITCH", "fitted_features", "fitted_saturation",
+           "fitted_exponent", "effective_coefficients", "fitted_row_table", "near_source_functions",
+           "fitted_curvature_factor", "fitted_curvature_profile", "fitted_dipole_profile", "fitted_dipole_pairs",
+           "chord_curvature", "helix_chord_curvature", "matched_table", "normal_curvatures", "pair_exponent",
+           "shipped_coefficients"]
 
 #: decay lengths (transport lengths) of the near-source terms; the compiled kernel reads them from its table
 #: (:func:`fitted_row_table`)
@@ -183,8 +184,8 @@ def fitted_row_table(tab: CurvatureTable, matched: CurvatureTable, th) -> np.nda
     """The compiled kernel's per-material table, (n_int, 32), on the curvature table's intervals (u = sqrt(r) in
     [i/16, (i+1)/16]): the material's a, b (the curvature table's degree-7 row, exact to ~1e-11) and, as cubic
     pieces, its matched boundary's a1, b1 and the near-source functions g, e2 of :func:`near_source_functions`
-    (coefficient j of the four at 16 + 4 j .. 19 + 4 j). A pair reads one row (256 bytes, as the curvature table's
-    two rows) and evaluates no exponential beyond the dipole's."""
+    (coefficient j of the four at 16 + 4 j .. 19 + 4 j). A pair reads one row (32 float64, 256 bytes) and
+    evaluates no exponential beyond the dipole's."""
     if matched.n_intervals != tab.n_intervals or matched.albedo_prime != tab.albedo_prime:
         raise ValueError("the matched-boundary table must have the material's albedo and extent")
     n = tab.n_intervals
