@@ -71,8 +71,8 @@ def photons_for(albedo, photons):
 
 
 def run_one(medium, shape, radius, photons, seed, cache_dir):
-    """Rows of one (medium, shape, radius): every azimuth of the shape (one run tallies them all), with the plane
-    on the same rings. Cached as JSON in ``cache_dir`` (a re-run resumes)."""
+    """(rows, from_cache) of one (medium, shape, radius): every azimuth of the shape (one run tallies them all), with
+    the plane on the same rings. Cached as JSON in ``cache_dir`` (a re-run resumes; ``from_cache`` says so)."""
     import json
     from meshshade.montecarlo.shapes import shape_mc_profile, shape_mc_profiles
     name = Path(cache_dir) / (f"{medium[0]:g}_{medium[1]:g}_{medium[2]:g}_{shape}_{radius:.9g}_{photons}_{seed}"
