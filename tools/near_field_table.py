@@ -56,6 +56,28 @@ _U, _W = np.polynomial.legendre.leggauss(48)
 _U, _W = 0.5 * (_U + 1.0), 0.5 * _W
 
 
+def model_rings(model, lo, hi, m: Material, ch):
+    """Ring averages (mm^-2) of one half-space model over rings [lo, hi] (mm), and its total diffuse reflectance."""
+    st = float(m.sigma_t_prime[ch])
+    a, eta, g = float(m.albedo_prime[ch]), m.eta, m.g
+    lo_o, hi_o = lo * st, hi * st
+    if model == "point":
+        # the planar dipole is alpha' times Jensen's point source at depth 1 (closed-form ring average)
+        ring = a * point_source_ring(lo_o, hi_o, 1.0, albedo_prime=a, eta=eta, variant="jensen")
+        total = dipole_total_reflectance(albedo_prime=a, eta=eta)
+    elif model == "fitted":
+        ring, total = (near_field_ring(lo_o, hi_o, albedo_prime=a, eta=eta, g=g),
+                       near_field_total(albedo_prime=a, eta=eta, g=g))
+    else:
+        variant = "jensen" if model == "beam-jensen" else "better"
+        ring = beam_diffusion_ring(lo_o, hi_o, albedo_prime=a, eta=eta, variant=variant)
+        total = beam_diffusion_total(albedo_prime=a, eta=eta, variant=variant)
+        if not model.endswith("-ms"):
+            ring = ring + single_scattering_ring(lo_o, hi_o, albedo_prime=a, eta=eta, g=g)
+            total = total + single_scattering_total(albedo_prime=a, eta=eta, g=g)
+    return ring * st * st, float(total)
+
+
 def _sphere_model(model, th, R0, par, g):
     """One model's reflectance (optical units) at polar angles ``th`` on the sphere of radius R0 (optical)."""
     r, chord = th * R0, 2.0 * R0 * np.sin(0.5 * th)

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from meshshade.kernels import incidence_table
 from meshshade.kernels import near_field_table as table
 from meshshade.kernels.beam_diffusion import (dipole_variant, point_source_reflectance, point_source_ring,
                                               point_source_total)
@@ -32,7 +33,7 @@ from meshshade.kernels.sphere import sphere_point_source_exitance
 from meshshade.kernels.single_scattering import (real_coefficients, single_scattering_profile,
                                                  single_scattering_ring, single_scattering_total)
 
-__all__ = ["near_field_sources", "near_field_profile", "near_field_ring", "near_field_total",
+__all__ = ["near_field_sources", "near_field_profile", "near_field_ring", "near_field_total", "incidence_gain",
            "near_field_sphere_profile", "near_field_cylinder_profile", "FIT_DOMAIN"]
 
 #: (alpha', eta, g) ranges of the fitted grid
@@ -96,6 +97,36 @@ def near_field_total(*, albedo_prime, eta, g=0.0, cos_t=1.0) -> float:
     ms = float(sum(wk * point_source_total(cos_t * t, albedo_prime=albedo_prime, eta=eta)
                    for t, wk in zip(depths, w)))
     return single_scattering_total(albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) + ms
+
+
+def incidence_gain(*, albedo_prime, eta, g=0.0, cos_t=1.0) -> float:
+    """T(theta) / T(0): how much more of the light entering at refracted angle theta_t (``cos_t``) the half-space
+    returns than of light entering along the normal (docs/physics.md eq. (86)). Eq. (81)'s depth projection gives
+    W_81 = near_field_total(cos_t) / near_field_total(1); exact transport shows only the fraction RHO of that growth
+    (:mod:`meshshade.kernels.incidence_table`, fitted to the exact half-space Monte Carlo per incidence angle by
+    ``tools/make_incidence_table.py``), interpolated trilinearly in (log10(1 - alpha'), eta, g) and linearly in
+    the incidence angle outside, sin(theta_i) = eta sin(theta_t) (below the first tabulated angle its value, where
+    the gain itself is small; beyond the last, the last)."""
+    cos_t = float(cos_t)
+    if cos_t >= 1.0:
+        return 1.0
+    w81 = near_field_total(albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) / near_field_total(
+        albedo_prime=albedo_prime, eta=eta, g=g)
+    x = math.log10(max(1.0 - float(albedo_prime), 1e-300))
+    (i, fx, _), (j, fe, _), (k, fg, _) = (_bracket(incidence_table.X_NODES, x),
+                                          _bracket(incidence_table.ETA_NODES, float(eta)),
+                                          _bracket(incidence_table.G_NODES, float(g)))
+    rho = np.zeros(incidence_table.ANGLES.size)
+    for di, wi in ((0, 1.0 - fx), (1, fx)):
+        for dj, wj in ((0, 1.0 - fe), (1, fe)):
+            for dk, wk in ((0, 1.0 - fg), (1, fg)):
+                c = wi * wj * wk
+                if c:
+                    rho += c * incidence_table.RHO[i + di, j + dj, k + dk]
+    sin_i = min(1.0, float(eta) * math.sqrt(max(0.0, 1.0 - cos_t * cos_t)))
+    theta_i = math.degrees(math.asin(sin_i))
+    r = float(np.interp(theta_i, incidence_table.ANGLES, rho))
+    return 1.0 + r * (w81 - 1.0)
 
 
 def _variant_kw(albedo_prime, eta):

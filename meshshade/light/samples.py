@@ -58,6 +58,10 @@ class EntrySamples:
         Cosine between the reversed light direction and ``normals``.
     light_index : (k,) int64
         Index of the light in the list passed to :func:`entry_samples`.
+    directions : (k, 3) float64
+        Unit direction in which the light travels when it reaches the sample (the beam's or directional light's
+        direction; from a point light to the vertex). Inside, it refracts to the direction whose tangential part
+        is that of ``directions`` over eta (the near field's lateral shift, docs/physics.md eq. (87)).
     incident_power : (n_lights,) float64 W
         Power arriving on the sampled surface from each light (before Fresnel), shadowed parts excluded.
     specular_power : (n_lights,) float64 W
@@ -77,6 +81,7 @@ class EntrySamples:
     power: np.ndarray
     cos_incidence: np.ndarray
     light_index: np.ndarray
+    directions: np.ndarray
     incident_power: np.ndarray
     specular_power: np.ndarray
     stats: dict = field(default_factory=dict)
@@ -207,6 +212,7 @@ def entry_samples(vertices, faces, vertex_normals, vertex_areas, lights, scene=N
         power=cat("power", (0,), np.float64),
         cos_incidence=cat("cos", (0,), np.float64),
         light_index=cat("light_index", (0,), np.int64),
+        directions=cat("directions", (0, 3), np.float64),
         incident_power=incident,
         specular_power=specular,
         stats=stats,
@@ -341,7 +347,8 @@ def _beam_samples(light: BeamLight, i: int, V, F, N, A, get_scene, eta) -> dict:
         idx, cos_v = beam_footprint(light, V, N, A, scene)
         if idx.size > int(hit.sum()):  # the vertices resolve the beam's footprint better than its rays
             irradiance = light.power / light.radius / light.radius / math.pi   # W/mm^2, without overflow
-            return {**_vertex_part(i, V, N, A, idx, cos_v, np.full(idx.size, irradiance), eta), "rays": k}
+            return {**_vertex_part(i, V, N, A, idx, cos_v, np.full(idx.size, irradiance), eta,
+                                   np.broadcast_to(d, (idx.size, 3))), "rays": k}
     m = int(hit.sum())
     if m == 0:
         raise beam_miss_error(light, i, V, N, A, get_scene)
@@ -349,21 +356,22 @@ def _beam_samples(light: BeamLight, i: int, V, F, N, A, get_scene, eta) -> dict:
     return {
         "positions": points[hit], "face": face[hit], "bary": bary[hit], "vertex": np.full(m, -1),
         "normals": n, "power": share * fresnel_transmittance_entry(cos, eta), "cos": cos,
-        "light_index": np.full(m, i), "incident": share * m,
+        "light_index": np.full(m, i), "directions": np.broadcast_to(d, (m, 3)), "incident": share * m,
         "specular": float(np.sum(share * fresnel_reflectance(cos, 1.0, eta))), "rays": k,
     }
 
 
 # ------------------------------------------------------------------------------------------------ area lights
-def _vertex_part(i, V, N, A, idx, cos, irradiance, eta) -> dict:
-    """Vertex samples ``idx`` of light ``i`` with incidence cosines ``cos`` and ``irradiance`` W/mm^2 across the
-    light (per sample): power ``irradiance cos A_v F_t(cos)``."""
+def _vertex_part(i, V, N, A, idx, cos, irradiance, eta, directions) -> dict:
+    """Vertex samples ``idx`` of light ``i`` with incidence cosines ``cos``, ``irradiance`` W/mm^2 across the
+    light and unit ``directions`` of travel (per sample): power ``irradiance cos A_v F_t(cos)``."""
     incident_v = irradiance * cos * A[idx]
     power = incident_v * fresnel_transmittance_entry(cos, eta)
     return {
         "positions": V[idx], "face": np.full(idx.size, -1), "bary": np.full((idx.size, 3), np.nan),
         "vertex": idx, "normals": N[idx], "power": np.asarray(power, dtype=np.float64).reshape(-1),
-        "cos": cos, "light_index": np.full(idx.size, i), "incident": float(incident_v.sum()),
+        "cos": cos, "light_index": np.full(idx.size, i), "directions": np.asarray(directions, dtype=np.float64),
+        "incident": float(incident_v.sum()),
         "specular": float(np.sum(incident_v * fresnel_reflectance(cos, 1.0, eta))),
     }
 
@@ -394,4 +402,8 @@ def _vertex_samples(light, i, V, F, N, A, culler, eta, stats) -> dict:
         irradiance = light.emission(V[idx] - target) / dist_all[idx] ** 2   # W/sr / mm^2
         keep = irradiance > 0.0        # outside a spot's cone: no sample
         idx, irradiance = idx[keep], irradiance[keep]
-    return _vertex_part(i, V, N, A, idx, cos_all[idx], irradiance, eta)
+    if target is None:
+        directions = np.broadcast_to(-toward, (idx.size, 3))
+    else:
+        directions = -delta[idx] / dist_all[idx, None]
+    return _vertex_part(i, V, N, A, idx, cos_all[idx], irradiance, eta, directions)

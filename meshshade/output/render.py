@@ -36,7 +36,7 @@ from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.output.tonemap import srgb_encode, tonemap_linear
 from meshshade.raycast import make_scene
 from meshshade.transport.gather import gather
-from meshshade.transport.near_field import near_field_factors
+from meshshade.transport.near_field import drift_angles, near_field_factors, refracted_drift
 from meshshade.transport.pair_kernel import PairKernel, source_frames, source_patch_radius
 
 
@@ -226,6 +226,7 @@ class _Windowed:
         self.kernel, self.near = kernel, near_mm
         self.channels, self.material = kernel.channels, kernel.material
         self.near_factors, self.source_scale = kernel.near_factors, kernel.source_scale
+        self.source_drift = kernel.source_drift
 
     def evaluate(self, c, src, s, chord, phi, vtx=None):
         t = np.clip((chord - 0.5 * self.near) / (0.5 * self.near), 0.0, 1.0)
@@ -259,6 +260,9 @@ class PixelGather:
                                  near=near_field_factors(result.material) if beam else None)
         if beam:
             self.kernel.source_scale = self.kernel.near_factors.incidence_scale(result.samples.cos_incidence)
+            self.kernel.source_drift = drift_angles(
+                refracted_drift(self.frames.normals, result.samples.directions, result.material.eta),
+                self.frames.d1, self.frames.d2)
         if near_mm is None:  # few sources (beams): a wide near field is cheap and takes the peak's whole shoulder
             near_mm = (16.0 if len(result.samples) <= 4096 else 8.0) * mesh.mean_edge_length
         self.near_mm = float(near_mm)

@@ -37,10 +37,10 @@ from meshshade.raycast import make_scene
 from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
 from meshshade.transport.farfield import far_field_exitance, far_field_exitance_direct, far_field_radius
 from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
-                                              vertex_power)
+                                              vertex_drift, vertex_power)
 from meshshade.transport.gather import PairStream, Stopwatch, chunk_size, cutoff_radii, gather
 from meshshade.transport.models import MODELS
-from meshshade.transport.near_field import check_near_field, near_field_factors
+from meshshade.transport.near_field import check_near_field, drift_angles, near_field_factors, refracted_drift
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, source_frames, source_patch_radius
 from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, clusters_pay, neighbourhood_solver
 
@@ -185,7 +185,8 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
         if near_field == "beam":   # per channel: each sample's power times its incidence scale
             pv_c = vertex_power(samples, mesh.n_vertices,
                                 near_field_factors(material).incidence_scale(samples.cos_incidence))
-        M, hstats = core.exitance(pv_c, progress=progress)
+        drift = vertex_drift(samples, mesh.n_vertices, material.eta) if near_field == "beam" else None
+        M, hstats = core.exitance(pv_c, drift=drift, progress=progress)
         if transport == "auto":  # the far field's distances on this light's configuration, or the direct sum
             t_v = time.perf_counter()
             verified = verify_far_field(core, M, pv)
@@ -247,6 +248,8 @@ def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field,
     kernel.pair_points = (samples.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
     if factors is not None:
         kernel.source_scale = factors.incidence_scale(samples.cos_incidence)
+        kernel.source_drift = drift_angles(refracted_drift(frames.normals, samples.directions, material.eta),
+                                           frames.d1, frames.d2)
     methods = {m for z, _ in groups for m in ZONES[z].solver_methods}
     solvers = {m: neighbourhood_solver(m, mesh) for m in methods}
     clock.lap("neighbourhoods")
@@ -278,7 +281,7 @@ def subset_samples(samples, mask):
     """The EntrySamples rows ``mask`` (per-light totals unchanged)."""
     return replace(samples, **{k: getattr(samples, k)[mask] for k in
                                ("positions", "face", "bary", "vertex", "normals", "power", "cos_incidence",
-                                "light_index")})
+                                "light_index", "directions")})
 
 
 def merge_plans(vertex_plan, point_plan, point):
@@ -459,7 +462,9 @@ def _gather_near(kernel, stream: PairStream, groups, chord_cut, progress) -> tup
 def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, far_rel_tol: float, scale=None):
     """The far field of the clustered sources (pairs with chord beyond r_near): M (n, 3) W/mm^2 and stats.
     ``scale`` (k, 3) or None: per-sample, per-channel power factors (the near field's incidence scale); channels
-    whose factors differ are summed in separate passes."""
+    whose factors differ are summed in separate passes. The planar dipole of the chord from each entry point: the
+    light's sideways drift (docs/physics.md §13.4) is left out here, beyond r_near, where the far field carries
+    the kernel's faint tail (``far_tol``)."""
     fn = far_field_exitance if far_field == "clustered" else far_field_exitance_direct
     pos = samples.positions[clustered]
     columns = [None] if scale is None else [0, 1, 2]

@@ -43,7 +43,8 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
     (k, 3) or None: pairs must also have chord <= it (the near zone of sources whose far field is summed by
     clusters). ``source_radius`` (k,) mm: patch radius of each source (0 for a pencil beam), see
     :func:`~meshshade.transport.pair_kernel.patch_average_factor`. With the near field of ``kernel.near_factors``
-    (transport/near_field.py) every pair is also multiplied by its near-field factor, and a point source (a beam)
+    (transport/near_field.py) every pair is also multiplied by its near-field factor (and, with
+    ``kernel.source_drift``, by the drift factor of eq. (88)), and a point source (a beam)
     is averaged over the receiver's patch, of radius ``receiver_radius`` (n_vertices,) mm: a vertex's exitance
     stands for its patch, and the near field peaks within it. Returns M (n_vertices, 3) W/mm^2 and counts.
     """
@@ -72,6 +73,11 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
                 R *= kernel.near_factors.pair_factor(c, s[keep], 0.0 if a is None else a)
                 if kernel.source_scale is not None:
                     R *= kernel.source_scale[src[keep], c]
+                if kernel.source_drift is not None:
+                    sin_t, psi = kernel.source_drift
+                    sk = src[keep]
+                    R *= kernel.near_factors.drift_factor(c, s[keep], 0.0 if a is None else a, sin_t[sk],
+                                                          np.cos(phi[keep] - psi[sk]))
             acc = np.bincount(vtx[keep], weights=power[src[keep]] * R, minlength=n_vertices)
             n_pairs[c] += int(keep.sum())
             for cc in same:

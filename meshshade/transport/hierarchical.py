@@ -49,7 +49,8 @@ from meshshade.transport.gather import cutoff_radii
 from meshshade.transport.hierarchy_kernels import (KIND_CURVED, KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_FITTED,
                                                    KIND_SPHERE, cluster_geometry, far_traverse)
 from meshshade.transport.models import MODELS
-from meshshade.transport.near_field import check_near_field, near_field_factors
+from meshshade.transport.near_field import (check_near_field, drift_angles, near_field_factors,
+                                            refracted_drift)
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, patch_average_factor, source_frames
 from meshshade.transport.zones import NEAR_MARGIN, neighbourhood_solver
 
@@ -241,6 +242,9 @@ class SurfaceTransport:
     #: median near radius (ones for "point")
     near_field: str = "point"
     far_scale: np.ndarray = field(default_factory=lambda: np.ones(3))
+    #: with near_field "beam": the near pairs' sources, distances and azimuths (:class:`NearPairs`) for the drift
+    #: factor of each light; None otherwise
+    near_pairs: object = None
 
     # ------------------------------------------------------------------------------------------------ build
     @classmethod
@@ -321,8 +325,8 @@ class SurfaceTransport:
         else:
             exact = np.full(n, geodesic == "exact")
         sph_row, logr, sph_tab, sph_r0 = _sphere_tables(material, H, kind == KIND_SPHERE, rtol)
-        near, nstats = _near_matrices(mesh, src, frames, kernel, exact, near_mm, patch, progress,
-                                      (sph_row, sph_tab, sph_r0))
+        near, near_pairs, nstats = _near_matrices(mesh, src, frames, kernel, exact, near_mm, patch, progress,
+                                                  (sph_row, sph_tab, sph_r0))
         timings["near field"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         shape = _shape_operators(frames)
@@ -342,7 +346,7 @@ class SurfaceTransport:
             stats["exact_sphere_fallback_dipole"] = int((H <= 0).sum())
         return cls(mesh, material, model, curv, frames, plan, kind, cut, near_mm, patch, kernel.channels, near,
                    float(theta), trees, shape, sph_row, logr, sph_tab, sph_r0, _channel_params(material, cut),
-                   timings, stats, near_field, far_scale)
+                   timings, stats, near_field, far_scale, near_pairs)
 
     # ------------------------------------------------------------------------------------------------ use
     def sample_plan(self, samples):
@@ -352,25 +356,41 @@ class SurfaceTransport:
         v = np.maximum(samples.vertex, 0)
         return AutoPlan(self.plan.kernel[v], self.plan.exact_geodesic[v], self.plan.far_dipole[v])
 
-    def exitance(self, vertex_power, *, progress: bool | str = False) -> tuple[np.ndarray, dict]:
+    def exitance(self, vertex_power, *, drift=None, progress: bool | str = False) -> tuple[np.ndarray, dict]:
         """Exitance M (n, 3) [W/mm^2] of the vertex sources with powers ``vertex_power`` (n,) W (0 where unlit),
         or (n, 3) per channel (the near field's incidence scale makes them differ: one pass per distinct column),
-        and stats (timings, cluster and pair counts)."""
+        and stats (timings, cluster and pair counts). ``drift`` (n, 3) or None (only with the near field "beam"):
+        each vertex's refracted tangential direction (near_field.refracted_drift, power-weighted over its lights:
+        :func:`vertex_drift`); its light then drifts sideways by drift / sigma_t' (docs/physics.md §13.4): the
+        near pairs and the far field's pairs and clusters carry the drift factor of eq. (88), one pass per channel."""
         mesh = self.mesh
         n = mesh.n_vertices
         pv = np.asarray(vertex_power, dtype=np.float64)
+        if drift is not None:
+            if self.near_pairs is None:
+                raise ParameterError("a light's drift needs a transport built with near_field='beam'")
+            drift = np.asarray(drift, dtype=np.float64)
+            if drift.shape != (n, 3) or not np.all(np.isfinite(drift)):
+                raise ParameterError(f"drift must be a finite (n, 3) = ({n}, 3) array")
+            if pv.ndim == 1:
+                pv = np.repeat(pv[:, None], 3, axis=1)
         if pv.ndim == 2 and pv.shape == (n, 3):
+            st = np.asarray(self.material.sigma_t_prime, dtype=np.float64)
+
+            def alike(k, c):
+                return np.array_equal(pv[:, k], pv[:, c]) and (drift is None or st[k] == st[c])
+
             M = np.zeros((n, 3))
             stats: dict = {"far_pairs": 0, "far_clusters": 0, "timings": {}}
             done: list = []
             for c in range(3):
-                j = next((k for k in done if np.array_equal(pv[:, k], pv[:, c])), None)
+                j = next((k for k in done if alike(k, c)), None)
                 if j is not None:
                     M[:, c] = M[:, j]
                     continue
                 done.append(c)
-                Mc, sc = self.exitance(pv[:, c], progress=progress)
-                same = [k for k in range(3) if np.array_equal(pv[:, k], pv[:, c])]
+                Mc, sc = self._exitance(pv[:, c], None if drift is None else (c, drift), progress)
+                same = [k for k in range(3) if alike(k, c)]
                 M[:, same] = Mc[:, same]
                 stats["far_pairs"] += sc["far_pairs"]
                 stats["far_clusters"] += sc["far_clusters"]
@@ -379,11 +399,34 @@ class SurfaceTransport:
             return M, stats
         if pv.shape != (n,) or not np.all(np.isfinite(pv)) or np.any(pv < 0):
             raise ParameterError(f"vertex_power must be a finite (n,) = ({n},) array >= 0 [W]")
+        return self._exitance(pv, None, progress)
+
+    def _exitance(self, pv, drift, progress):
+        """:meth:`exitance` of one power column ``pv`` (n,); ``drift``: None or (channel, (n, 3) drift), which
+        makes only that channel's column right."""
+        mesh = self.mesh
+        n = mesh.n_vertices
+        if pv.shape != (n,) or not np.all(np.isfinite(pv)) or np.any(pv < 0):
+            raise ParameterError(f"vertex_power must be a finite (n,) = ({n},) array >= 0 [W]")
+        chan = None
+        dslope, dlog0, dlogstep, dst = np.zeros(0), 0.0, 1.0, 1.0
+        if drift is not None:
+            chan, d = drift
+            dst = float(self.material.sigma_t_prime[chan])
+            d_mm = d / dst    # the drift in mm (eq. (87))
+            sin_t, psi = drift_angles(d, self.frames.d1, self.frames.d2)
+            dslope, dlog0, dlogstep = near_field_factors(self.material).slope_table(chan)
         timings: dict = {}
         t0 = time.perf_counter()
         M = np.zeros((n, 3))
         for c, same in self.channels:
-            m = self.near[c] @ pv
+            W = self.near[c]
+            if chan is not None and chan in same:   # this light's drift factor on every near pair (eq. (88))
+                P = self.near_pairs
+                W = W.copy()
+                W.data *= near_field_factors(self.material).drift_factor(
+                    chan, P.s, self.patch_mm[P.source], sin_t[P.source], np.cos(P.phi - psi[P.source]))
+            m = W @ pv
             for cc in same:
                 M[:, cc] = m
         timings["near field"] = time.perf_counter() - t0
@@ -419,7 +462,8 @@ class SurfaceTransport:
                         np.ascontiguousarray(self.shape[r]), power, np.ascontiguousarray(self.near_mm[r]),
                         np.ascontiguousarray(self.sphere_row[r]), tree.lo, tree.hi, tree.first_leaf, P, sig, nsig, ssig, nmean,
                         cone, Smean, rad, rn, srow, self.cutoff_mm, self.theta, CONE_MIN, rep, st, al, mu, zr, zb,
-                        zv, a0, coef, n_int, fit, fit_coef, fit_zb, self.sphere_table, self.sphere_r0)
+                        zv, a0, coef, n_int, fit, fit_coef, fit_zb, self.sphere_table, self.sphere_r0,
+                        *_drift_args(None if chan is None else d_mm[r], power, tree), dslope, dlog0, dlogstep, dst)
                 for a in range(0, n, RECEIVER_BLOCK):
                     blk = order[a:a + RECEIVER_BLOCK]
                     with kernel_interrupts():
@@ -516,7 +560,7 @@ def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch,
     sph_row, sph_tab, sph_r0 = sphere
     n = mesh.n_vertices
     parts = {c: [] for c, _ in kernel.channels}
-    rows_all, cols_all = [], []
+    rows_all, cols_all, geo_s, geo_phi = [], [], [], []
     n_pairs = n_exact = 0
     bar = Progress(progress if isinstance(progress, str) else "bake", n, "sources (near field)",
                    enabled=bool(progress))
@@ -561,6 +605,9 @@ def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch,
                     parts[c].append(R)
                 rows_all.append(vtx)
                 cols_all.append(s_idx)
+                if kernel.near_factors is not None:   # the drift factor (eq. (88)) needs each pair's s and phi
+                    geo_s.append(s.astype(np.float32))
+                    geo_phi.append(phi.astype(np.float32))
                 n_pairs += vtx.size
                 n_exact += vtx.size if method == "exact" else 0
                 bar.update(sel.size - done[0])
@@ -570,7 +617,26 @@ def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch,
     for c, _ in kernel.channels:
         vals = np.concatenate(parts[c]) if parts[c] else np.zeros(0)
         near[c] = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
-    return near, {"pairs": int(n_pairs), "exact_pairs": int(n_exact)}
+    geometry = None
+    if kernel.near_factors is not None:
+        # the CSR order of the pairs (each (receiver, source) pair occurs once): the drift factor is computed in
+        # pair order and permuted into the matrices' data
+        order = sp.csr_matrix((np.arange(1, rows.size + 1, dtype=np.float64), (rows, cols)), shape=(n, n))
+        perm = order.data.astype(np.int64) - 1
+        cat = (lambda parts_: np.concatenate(parts_) if parts_ else np.zeros(0, np.float32))
+        geometry = NearPairs(cols[perm].astype(np.int32), cat(geo_s)[perm], cat(geo_phi)[perm])
+    return near, geometry, {"pairs": int(n_pairs), "exact_pairs": int(n_exact)}
+
+
+@dataclass(frozen=True)
+class NearPairs:
+    """The near matrices' pairs in their CSR data order: source vertex (nnz,) int32, geodesic distance s (mm) and
+    azimuth phi in the source frame (rad), float32 (12 bytes per pair, a third of the three channels' matrices):
+    what the drift factor of eq. (88) needs per light."""
+
+    source: np.ndarray
+    s: np.ndarray
+    phi: np.ndarray
 
 
 def verify_far_field(core: "SurfaceTransport", M, vertex_power, *, n_receivers: int = VERIFY_RECEIVERS,
@@ -615,3 +681,28 @@ def vertex_power(samples, n_vertices: int, scale=None) -> np.ndarray:
     return np.stack([np.bincount(samples.vertex[at_v], weights=samples.power[at_v] * scale[at_v, c],
                                  minlength=n_vertices) for c in range(3)], axis=1)
 
+
+def _drift_args(drift_rows, power, tree):
+    """(drift (k, 3) mm in tree order, its power-weighted mean per node (nodes, 3)) for far_traverse; zero-size
+    placeholders without a drift."""
+    if drift_rows is None:
+        return np.zeros((1, 3)), np.zeros((1, 3))
+    w = power[:, None] * drift_rows
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(w, axis=0)])
+    cp = np.concatenate([[0.0], np.cumsum(power)])
+    tot = cp[tree.hi] - cp[tree.lo]
+    node = (cs[tree.hi] - cs[tree.lo]) / np.where(tot > 0, tot, 1.0)[:, None]
+    return np.ascontiguousarray(drift_rows), np.ascontiguousarray(node)
+
+
+def vertex_drift(samples, n_vertices: int, eta: float) -> np.ndarray:
+    """(n, 3): each vertex's refracted tangential direction (near_field.refracted_drift) averaged over the vertex
+    samples of ``samples`` at it, weighted by their power (several lights at one vertex: to first order the drift
+    of their sum is the power-weighted mean); zero where no light enters."""
+    at_v = samples.vertex >= 0
+    v = refracted_drift(samples.normals[at_v], samples.directions[at_v], eta)
+    w = samples.power[at_v]
+    num = np.stack([np.bincount(samples.vertex[at_v], weights=w * v[:, k], minlength=n_vertices) for k in range(3)],
+                   axis=1)
+    den = np.bincount(samples.vertex[at_v], weights=w, minlength=n_vertices)
+    return np.where(den[:, None] > 0, num / np.where(den > 0, den, 1.0)[:, None], 0.0)

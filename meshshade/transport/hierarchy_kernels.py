@@ -291,23 +291,70 @@ def cluster_geometry(pos, nrm, shape, power, patch, near, sph, logr, lo, hi):
     return P, sig, nsig, ssig, nmean, cone, Smean, rad, rn, srow
 
 
+@njit(cache=True)
+def bessel_i0e(x):
+    """exp(-x) I0(x) for x >= 0 (Abramowitz & Stegun 9.8.1-9.8.2, relative error < 2e-7; checked against
+    scipy.special.i0e in tests/transport/test_drift.py)."""
+    if x < 3.75:
+        t = (x / 3.75) ** 2
+        return math.exp(-x) * (1.0 + t * (3.5156229 + t * (3.0899424 + t * (1.2067492 + t * (0.2659732 + t * (
+            0.0360768 + t * 0.0045813))))))
+    t = 3.75 / x
+    return (0.39894228 + t * (0.01328592 + t * (0.00225319 + t * (-0.00157565 + t * (0.00916281 + t * (
+        -0.02057706 + t * (0.02635537 + t * (-0.01647633 + t * 0.00392377)))))))) / math.sqrt(x)
+
+
+@njit(cache=True)
+def drift_factor(u0, u1, u2, n0, n1, n2, d0, d1, d2, s, dslope, dlog0, dlogstep, dst):
+    """The drift factor exp(A (cos psi - 1)) / i0e(A) of eq. (88) for one far pair: chord u = receiver - source,
+    source normal n, the source's drift D (mm, tangent), surface distance s (mm); A = |D| lambda(s~) s / s~ with
+    s~ = sqrt(s^2 + |D|^2), and cos psi the angle between D and the chord's tangential part."""
+    un = u0 * n0 + u1 * n1 + u2 * n2
+    t0, t1, t2 = u0 - un * n0, u1 - un * n1, u2 - un * n2
+    tl = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    dl = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if tl <= 0.0 or dl <= 0.0 or s <= 0.0:
+        return 1.0
+    sm = math.sqrt(s * s + dl * dl)   # the kernel smoothed over the drift, as NearFieldFactors.drift_factor
+    x = (math.log(sm * dst) - dlog0) / dlogstep
+    m = dslope.shape[0]
+    if x <= 0.0:
+        g = dslope[0]
+    elif x >= m - 1:
+        g = dslope[m - 1]
+    else:
+        i = int(x)
+        f = x - i
+        g = dslope[i] * (1.0 - f) + dslope[i + 1] * f
+    A = dl * g * s / (sm * sm)
+    cos_psi = (d0 * t0 + d1 * t1 + d2 * t2) / (dl * tl)
+    return math.exp(A * (cos_psi - 1.0)) / bessel_i0e(A)
+
+
 # ---------------------------------------------------------------------------------------------------- traversal
 @njit(cache=True, parallel=True)
 def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo, hi, first_leaf, P, sig, nsig, ssig, nmean,
                  cone, Smean, rad, rn, srow, cutoff, theta, cone_min, rep, st, al, mu, zr, zb, zv, a0, coef, n_int,
-                 fit, fit_coef, fit_zb, sph_tab, sph_r0):
+                 fit, fit_coef, fit_zb, sph_tab, sph_r0, drift, ndrift, dslope, dlog0, dlogstep, dst):
     """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in ``order``.
 
     A node is skipped when its sources are all beyond the cutoff (chord), used whole (sigma points, mean normal,
     mean shape operator, representative sphere row) when all its pairs are far (d - a > its largest near
-    radius), a <= theta d and its normal cone is within acos(cone_min), else opened; at leaves each source
-    counts when its chord exceeds its near radius and its surface distance is within the cutoff. ``rep[c]``
-    is the channel computed for channel c (equal channels are computed once). Returns M and per-receiver counts
+    radius + ``margin``), a <= theta d and its normal cone is within acos(cone_min), else opened; at leaves each
+    source counts when the chord from its ``home`` position exceeds its near radius and its surface distance is
+    within the cutoff. ``rep[c]`` is the channel computed for channel c (equal channels are computed once).
+
+    The light's sideways drift (docs/physics.md §13.4, eq. (88)): with ``dslope`` non-empty every pair is
+    multiplied by exp(A (cos psi - 1)) / i0e(A), A = |D| lambda(s~) s / s~, from the source's drift D (``drift`` (k, 3) mm;
+    a whole node: its power-weighted mean ``ndrift``) and the slope lambda(s) = g(ln(s dst)) / s of the near-field
+    model, g tabulated in ``dslope`` on the uniform grid ``dlog0 + i dlogstep`` of ln(r sigma_t'), ``dst`` that
+    channel's sigma_t' (one channel per pass: the others' columns are not used). Returns M and per-receiver counts
     (n, 2): kernel evaluations at leaves, clusters used.
     """
     n = recv.shape[0]
     M = np.zeros((n, 3))
     counts = np.zeros((n, 2), np.int64)
+    use_drift = dslope.shape[0] > 0
     full = 0
     for c in range(3):
         if rep[c] == c:
@@ -358,10 +405,15 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                     ka, t2 = fitted_geometry(kind, kn, knp, ssig[node], q, x0, x1, x2, nx0, nx1, nx2,
                                              sig[node, q, 0], sig[node, q, 1], sig[node, q, 2], nsig[node, q, 0],
                                              nsig[node, q, 1], nsig[node, q, 2])
+                    wq = w
+                    if use_drift:
+                        wq *= drift_factor(x0 - sig[node, q, 0], x1 - sig[node, q, 1], x2 - sig[node, q, 2],
+                                           nsig[node, q, 0], nsig[node, q, 1], nsig[node, q, 2], ndrift[node, 0],
+                                           ndrift[node, 1], ndrift[node, 2], s, dslope, dlog0, dlogstep, dst)
                     for c in range(3):
                         if (use >> c) & 1:
-                            acc[c] += w * kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], st, al, mu, zr, zb,
-                                                       zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
+                            acc[c] += wq * kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], st, al, mu, zr, zb,
+                                                        zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
                 n_clu += 1
             if open_mask == 0:
                 continue
@@ -375,11 +427,16 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                         continue
                     ka, t2 = fitted_geometry(kind, kn, knp, shape, j, x0, x1, x2, nx0, nx1, nx2, pos[j, 0],
                                              pos[j, 1], pos[j, 2], nrm[j, 0], nrm[j, 1], nrm[j, 2])
+                    pj = power[j]
+                    if use_drift:
+                        pj *= drift_factor(x0 - pos[j, 0], x1 - pos[j, 1], x2 - pos[j, 2], nrm[j, 0], nrm[j, 1],
+                                           nrm[j, 2], drift[j, 0], drift[j, 1], drift[j, 2], s, dslope, dlog0,
+                                           dlogstep, dst)
                     for c in range(3):
                         if (open_mask >> c) & 1 and s <= cutoff[c]:
-                            acc[c] += power[j] * kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], st, al, mu, zr,
-                                                              zb, zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab,
-                                                              sph_r0)
+                            acc[c] += pj * kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], st, al, mu, zr,
+                                                        zb, zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab,
+                                                        sph_r0)
                     n_leaf += 1
                 continue
             stack[top], smask[top] = 2 * node + 1, open_mask

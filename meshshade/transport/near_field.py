@@ -14,11 +14,21 @@ same near field as the factor of eq. (79):
   kernels' tails ``T_near(r) / T_d(r)``, so that the energy it carries is the near-field model's;
 * the direction the light travels inside (docs/physics.md eq. (81)): an entry sample whose light enters at
   incidence theta_i refracts to theta_t, and the near-field model's sources then lie at depths cos(theta_t) t_k;
-  the sample's power is scaled by ``W(cos theta_t) = T_near(0; cos theta_t) / T_near(0; 1)``, the ratio of the
-  model's totals (its profile keeps the normal-incidence shape).
+  the sample's power is scaled by the half-space's gain in total reflectance at that angle, W(cos theta_t) of
+  eq. (86) (kernels.near_field.incidence_gain: the ratio of eq. (81)'s totals, corrected towards exact transport;
+  the profile keeps its normal-incidence shape);
+* the sideways drift of the light inside (docs/physics.md §13.4, eqs. (87)-(88)): light refracted at theta_t
+  drifts on average one transport length 1/sigma_t' along the refracted ray before it has forgotten its
+  direction, so its diffusion sources sit sin(theta_t)/sigma_t' *sideways* of the entry point, towards where
+  the light was heading. A pair in direction psi from that drift (cos psi = 1 straight ahead) is multiplied by
+  ``exp(A (cos psi - 1)) / i0e(A)`` with ``A = d lambda(s~) s / s~`` (d = sin(theta_t), optical units): to first
+  order in the drift the kernel shifted by it (lambda = -d ln R_near/dr, the slope of the near-field model, taken
+  at s~ = sqrt(s^2 + a^2 + d^2), i.e. of the kernel smoothed over a patch of radius a and over the drift),
+  normalised so that every ring around the source keeps its energy: the drift moves light, it does not make or
+  absorb any (:meth:`NearFieldFactors.drift_factor`).
 
-Tables per channel: N in log-log on a grid of r sigma_t' in [1e-4, 1e3] (beyond, its end values), G as a bicubic
-spline of ln G over (s/a, ln(a sigma_t')) on [0, PATCH_AVERAGE_RADII] x [1e-3, 8] (beyond: N(s) below 1e-3, the
+Tables per channel: N and the slope lambda in log-log on a grid of r sigma_t' in [1e-4, 1e3] (beyond, its end
+values), G as a bicubic spline of ln G over (s/a, ln(a sigma_t')) on [0, PATCH_AVERAGE_RADII] x [1e-3, 8] (beyond: N(s) below 1e-3, the
 quadrature above 8). Built once per material (:func:`near_field_factors`, ~1 s).
 
 Pure array work; no I/O.
@@ -32,7 +42,8 @@ import numpy as np
 
 from meshshade.errors import ParameterError
 from meshshade.kernels.dipole import dipole_profile, dipole_tail_reflectance
-from meshshade.kernels.near_field import near_field_profile, near_field_ring, near_field_sources, near_field_total
+from meshshade.kernels.near_field import (incidence_gain, near_field_profile, near_field_ring, near_field_sources,
+                                          near_field_total)
 from meshshade.materials import Material
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, _disc_average
 
@@ -67,8 +78,16 @@ class _Channel:
         last = int(np.flatnonzero(ok)[-1])
         log_n[last + 1:] = log_n[last]
         self.log_n = log_n
+        # the near-field model's logarithmic slope -d ln R_near / d ln r (eq. (88)); where R_near underflows its
+        # exponential tail continues the slope in proportion to r
+        with np.errstate(under="ignore", divide="ignore"):
+            log_near = np.log(near_field_profile(r, g=g, **self.kw))
+        fin = np.isfinite(log_near)
+        lastn = int(np.flatnonzero(fin)[-1])
+        slope = -np.gradient(log_near[:lastn + 1], _N_LOG_R[:lastn + 1])
+        self.slope = np.concatenate([slope, slope[-1] * r[lastn + 1:] / r[lastn]])
         self._spline = None
-        self.incidence = np.array([near_field_total(g=g, cos_t=c, **self.kw) for c in _COS_T]) / self.total
+        self.incidence = np.array([incidence_gain(g=g, cos_t=c, **self.kw) for c in _COS_T])
 
     # kernels and tails
     def near(self, r):
@@ -88,6 +107,11 @@ class _Channel:
         """N(r) at optical distances r > 0."""
         lr = np.log(np.clip(r, np.exp(_N_LOG_R[0]), np.exp(_N_LOG_R[-1])))
         return np.exp(np.interp(lr, _N_LOG_R, self.log_n))
+
+    def drift_slope(self, r):
+        """lambda(r) = -d ln R_near/dr at optical distances r > 0 (per optical length)."""
+        lr = np.log(np.clip(r, np.exp(_N_LOG_R[0]), np.exp(_N_LOG_R[-1])))
+        return np.interp(lr, _N_LOG_R, self.slope) / r
 
     def disc_ratio_direct(self, s, a):
         """G(s, a) by quadrature (optical units, arrays, a > 0)."""
@@ -159,6 +183,32 @@ class NearFieldFactors:
         ct = np.sqrt(np.maximum(0.0, 1.0 - (1.0 - ci * ci) / (eta * eta)))
         return np.stack([np.interp(ct, _COS_T, self._channels[self._key[c]].incidence) for c in range(3)], axis=1)
 
+    def drift_factor(self, c: int, s_mm, a_mm, sin_t, cos_psi) -> np.ndarray:
+        """(p,) factor of pairs at distances ``s_mm`` from sources of patch radius ``a_mm`` (0: a point) whose
+        light drifts sideways by ``sin_t`` / sigma_t' (sin theta_t, (p,)), the receiver lying at angle psi from the
+        drift (``cos_psi`` (p,)), channel ``c`` (eq. (88)): exp(A (cos psi - 1)) / i0e(A),
+        A = d lambda(s~) s / s~ with d = sin_t and s~ = sqrt(s^2 + a^2 + d^2) (optical): the slope of the kernel
+        smoothed over the patch and over the drift itself, so that A stays bounded where s << d and vanishes at
+        s = 0. Averages to 1 over every ring."""
+        from scipy.special import i0e   # lazy, as the disc spline
+
+        st = float(self.material.sigma_t_prime[c])
+        ch = self._channels[self._key[c]]
+        s = np.asarray(s_mm, dtype=np.float64) * st
+        a = np.broadcast_to(np.asarray(a_mm, dtype=np.float64) * st, s.shape)
+        d = np.broadcast_to(np.asarray(sin_t, dtype=np.float64), s.shape)   # the drift, optical units
+        st2 = np.sqrt(s * s + a * a + d * d)
+        pos = (st2 > 0.0) & (d > 0.0)
+        A = np.zeros(s.shape)
+        A[pos] = d[pos] * ch.drift_slope(st2[pos]) * s[pos] / st2[pos]
+        return np.exp(A * (np.clip(cos_psi, -1.0, 1.0) - 1.0)) / i0e(A)
+
+    def slope_table(self, c: int) -> tuple[np.ndarray, float, float]:
+        """(g (m,), ln r0, step): channel ``c``'s slope g = -d ln R_near / d ln r on the uniform grid ln r0 + i step
+        of ln(r sigma_t') (lambda(r) = g / r), for the compiled far field."""
+        ch = self._channels[self._key[c]]
+        return np.ascontiguousarray(ch.slope), float(_N_LOG_R[0]), float(_N_LOG_R[1] - _N_LOG_R[0])
+
     def far_scale(self, c: int, r_mm: float) -> float:
         """T_near(r) / T_d(r): the energy of the near-field model beyond r over the dipole's (channel c)."""
         st = float(self.material.sigma_t_prime[c])
@@ -166,6 +216,24 @@ class NearFieldFactors:
         r = float(r_mm) * st
         flat = float(dipole_tail_reflectance(r, **ch.kw))
         return float(ch.near_tail(np.array([r]))[0] / flat) if flat > 0 else 1.0
+
+
+def refracted_drift(normals, directions, eta: float) -> np.ndarray:
+    """(k, 3): the tangential part of the refracted direction of light travelling along ``directions`` (k, 3) unit
+    into a surface of outward unit ``normals`` (k, 3) with relative index ``eta``: (d - (d.n) n) / eta, of length
+    sin(theta_t) (Snell's law keeps the tangential component over eta). The light's sideways drift inside is
+    this over sigma_t' (eq. (87))."""
+    d = np.asarray(directions, dtype=np.float64)
+    n = np.asarray(normals, dtype=np.float64)
+    return (d - np.einsum("ij,ij->i", d, n)[:, None] * n) / float(eta)
+
+
+def drift_angles(drift, d1, d2) -> tuple[np.ndarray, np.ndarray]:
+    """(sin theta_t (k,), psi (k,)): the length of each source's drift ``drift`` (k, 3) and its azimuth in the
+    source's tangent frame (``d1``, ``d2`` (k, 3)), measured as the pairs' azimuth phi is."""
+    sin_t = np.linalg.norm(drift, axis=1)
+    psi = np.arctan2(np.einsum("ij,ij->i", drift, d2), np.einsum("ij,ij->i", drift, d1))
+    return sin_t, psi
 
 
 @lru_cache(maxsize=16)

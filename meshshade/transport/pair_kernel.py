@@ -89,6 +89,10 @@ class PairKernel:
         #: scale per channel (NearFieldFactors.incidence_scale), or None
         self.near_factors = near
         self.source_scale = None
+        #: with the near-field factors, each source's sideways drift (sin theta_t (k,), its azimuth psi (k,) in the
+        #: source frame; transport.near_field.drift_angles), or None: the gather multiplies pairs by
+        #: NearFieldFactors.drift_factor (docs/physics.md eq. (88))
+        self.source_drift = None
         if model == "auto" and plan is None:
             raise ValueError("model 'auto' needs the per-sample plan (meshshade.transport.auto.plan_sources)")
         self.model, self.material, self.frames, self.plan = model, material, frames, plan

@@ -15,7 +15,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.io import write_ply
 from meshshade.kernels.dipole import dipole_total_reflectance
-from meshshade.kernels.near_field import near_field_profile, near_field_total
+from meshshade.kernels.near_field import incidence_gain, near_field_profile, near_field_total
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.output.render import PixelGather
@@ -51,9 +51,10 @@ def test_a_beam_delivers_the_near_field_total_at_any_resolution(level, sphere5):
 @pytest.mark.parametrize("material", [SKIN, Material(1.0, 0.002, 1.3, 0.0)], ids=["skin1", "alpha0.998"])
 @pytest.mark.parametrize("transport", ["direct", "hierarchical"])
 def test_directional_light_carries_the_near_field_total(transport, material, sphere5):
-    """Vertex samples (patch factors, the self pair, the far field's tail scale, the incidence scale): the exitant
-    power is each sample's entering power times the near-field model's total at its refracted angle (eq. (81),
-    computed here sample by sample from kernels.near_field), where the point source gives the dipole's total
+    """Vertex samples (patch factors, the self pair, the far field's tail scale, the incidence scale, the drift):
+    the exitant power is each sample's entering power times the near-field model's total times its incidence gain
+    (eq. (86), computed here sample by sample from kernels.near_field; the drift of eq. (88) moves light, not
+    energy), where the point source gives the dipole's total
     (skin1 at normal incidence: +0.7 %, -6.5 %, -12.2 %; grazing light adds up to 16-28 %). At alpha' = 0.998 most
     of the light travels beyond the near radius, into the far field (clusters), whose tail scale is 0.96."""
     light = DirectionalLight((0.0, 0.0, -1.0))
@@ -66,7 +67,7 @@ def test_directional_light_carries_the_near_field_total(transport, material, sph
     ratio = []
     for c in range(3):
         kw = {"albedo_prime": float(material.albedo_prime[c]), "eta": material.eta}
-        tot = np.array([near_field_total(cos_t=x, **kw) for x in u])[inv.ravel()]
+        tot = near_field_total(**kw) * np.array([incidence_gain(cos_t=x, **kw) for x in u])[inv.ravel()]
         ratio.append(np.sum(smp.power * tot) / (np.sum(smp.power) * dipole_total_reflectance(**kw)))
     np.testing.assert_allclose(P["beam"] / P["point"], ratio, rtol=5e-3)
 
@@ -137,7 +138,12 @@ def test_cli_near_field_switch(tmp_path):
 def test_the_far_field_carries_the_near_field_models_tail(kw, sphere5):
     """Clusters sum the planar dipole; scaled by T_near/T_d at the near radius (0.96 here) they match the direct
     sum of every pair with its near-field factor: measured 6e-5 in energy, 2e-4-9e-4 mean per vertex (without
-    the scale: 0.6 % and 1.1 %). alpha' = 0.998, most light beyond the near radius (8.7-9.7 mm)."""
+    the scale: 0.6 % and 1.1 %). alpha' = 0.998, most light beyond the near radius (8.7-9.7 mm).
+
+    The hierarchical far field carries the light's sideways drift (eq. (88)) as the reference does; the direct
+    sum's clustered far field leaves it out beyond r_near (docs/limitations.md), which moves light between
+    vertices but not its energy: measured 1.7 % mean per vertex here, where most light is in the far field
+    (4.4 % with no drift at all), so that case is held to 2.5 %."""
     m = Material(1.0, 0.002, 1.3, 0.0)
     light = DirectionalLight((0.0, 0.0, -1.0))
     ref = bake(sphere5, m, [light], model="dipole", near_field="beam", transport="direct", geodesic="arc",
@@ -146,4 +152,5 @@ def test_the_far_field_carries_the_near_field_models_tail(kw, sphere5):
     e = res.stats["exitant_power"][0] / ref.stats["exitant_power"][0] - 1.0
     lit = ref.radiance[:, 0] > 1e-3 * ref.radiance[:, 0].max()
     rel = np.abs(res.radiance[lit, 0] / ref.radiance[lit, 0] - 1.0)
-    assert abs(e) < 1e-3 and rel.mean() < 3e-3, (e, rel.mean())
+    tol = 3e-3 if kw["transport"] == "hierarchical" else 2.5e-2
+    assert abs(e) < 1e-3 and rel.mean() < tol, (e, rel.mean())
