@@ -238,10 +238,9 @@ class SurfaceTransport:
     params: tuple
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
-    #: "point" or "beam" (transport/near_field.py), and the far field's per-channel energy scale T_near/T_d at the
-    #: median near radius (ones for "point")
+    #: "point" or "beam" (transport/near_field.py: the near matrices and every far pair carry the near-field
+    #: factor N(s) of eq. (80))
     near_field: str = "point"
-    far_scale: np.ndarray = field(default_factory=lambda: np.ones(3))
     #: with near_field "beam": the near pairs' sources, distances and azimuths (:class:`NearPairs`) for the drift
     #: factor of each light; None otherwise
     near_pairs: object = None
@@ -261,7 +260,7 @@ class SurfaceTransport:
         radius in patch radii; None lets :func:`far_distance_check` choose it from NEAR_PATCH_RADII on this mesh,
         and raises :class:`FarFieldUnsupported` when none of them makes the far field's distances accurate
         enough (bake's ``transport="auto"`` then uses the direct sum). ``near_field``: "point" or "beam"
-        (transport/near_field.py: the near matrices carry the near-field factors, the far field its energy scale).
+        (transport/near_field.py: the near matrices and the far field's pairs carry the near-field factor N(s)).
         """
         near_field = check_near_field(near_field)
         if model not in MODELS:
@@ -316,9 +315,6 @@ class SurfaceTransport:
         factors = near_field_factors(material) if near_field == "beam" else None
         kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors)
         kernel.pair_points = (src.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
-        far_scale = np.ones(3)
-        if factors is not None:
-            far_scale = np.array([factors.far_scale(c, float(np.median(near_mm))) for c in range(3)])
         t0 = time.perf_counter()
         if model == "auto":
             exact = plan.exact_geodesic & (geodesic == "exact")
@@ -346,7 +342,7 @@ class SurfaceTransport:
             stats["exact_sphere_fallback_dipole"] = int((H <= 0).sum())
         return cls(mesh, material, model, curv, frames, plan, kind, cut, near_mm, patch, kernel.channels, near,
                    float(theta), trees, shape, sph_row, logr, sph_tab, sph_r0, _channel_params(material, cut),
-                   timings, stats, near_field, far_scale, near_pairs)
+                   timings, stats, near_field, near_pairs)
 
     # ------------------------------------------------------------------------------------------------ use
     def sample_plan(self, samples):
@@ -410,6 +406,11 @@ class SurfaceTransport:
             raise ParameterError(f"vertex_power must be a finite (n,) = ({n},) array >= 0 [W]")
         chan = None
         dslope, dlog0, dlogstep, dst = np.zeros(0), 0.0, 1.0, 1.0
+        nlog = np.zeros((3, 0))
+        if self.near_field == "beam":   # the near field's factor N(s) on every far pair (eq. (80))
+            factors = near_field_factors(self.material)
+            nlog = factors.log_ratio_table()
+            _, dlog0, dlogstep = factors.slope_table(0)
         if drift is not None:
             chan, d = drift
             dst = float(self.material.sigma_t_prime[chan])
@@ -463,12 +464,13 @@ class SurfaceTransport:
                         np.ascontiguousarray(self.sphere_row[r]), tree.lo, tree.hi, tree.first_leaf, P, sig, nsig, ssig, nmean,
                         cone, Smean, rad, rn, srow, self.cutoff_mm, self.theta, CONE_MIN, rep, st, al, mu, zr, zb,
                         zv, a0, coef, n_int, fit, fit_coef, fit_zb, self.sphere_table, self.sphere_r0,
-                        *_drift_args(None if chan is None else d_mm[r], power, tree), dslope, dlog0, dlogstep, dst)
+                        *_drift_args(None if chan is None else d_mm[r], power, tree), dslope, dlog0, dlogstep, dst,
+                        nlog)
                 for a in range(0, n, RECEIVER_BLOCK):
                     blk = order[a:a + RECEIVER_BLOCK]
                     with kernel_interrupts():
                         Mf, cnt = far_traverse(recv, rnrm, blk, *args)
-                    M[blk] += Mf[blk] * self.far_scale[None, :]
+                    M[blk] += Mf[blk]
                     counts += cnt[blk].sum(axis=0)
                     bar.update(blk.size)
         timings["far field"] = time.perf_counter() - t0

@@ -304,6 +304,20 @@ def bessel_i0e(x):
         -0.02057706 + t * (0.02635537 + t * (-0.01647633 + t * 0.00392377)))))))) / math.sqrt(x)
 
 
+@njit(cache=True, inline="always")
+def near_ratio(nlog, c, r_opt, l0, step):
+    """N(r) = exp(nlog[c]) interpolated linearly in ln r on the grid l0 + i step (end values beyond)."""
+    m = nlog.shape[1]
+    x = (math.log(r_opt) - l0) / step if r_opt > 0.0 else 0.0
+    if x <= 0.0:
+        return math.exp(nlog[c, 0])
+    if x >= m - 1:
+        return math.exp(nlog[c, m - 1])
+    i = int(x)
+    f = x - i
+    return math.exp(nlog[c, i] * (1.0 - f) + nlog[c, i + 1] * f)
+
+
 @njit(cache=True)
 def drift_factor(u0, u1, u2, n0, n1, n2, d0, d1, d2, s, dslope, dlog0, dlogstep, dst):
     """The drift factor exp(A (cos psi - 1)) / i0e(A) of eq. (88) for one far pair: chord u = receiver - source,
@@ -335,7 +349,7 @@ def drift_factor(u0, u1, u2, n0, n1, n2, d0, d1, d2, s, dslope, dlog0, dlogstep,
 @njit(cache=True, parallel=True)
 def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo, hi, first_leaf, P, sig, nsig, ssig, nmean,
                  cone, Smean, rad, rn, srow, cutoff, theta, cone_min, rep, st, al, mu, zr, zb, zv, a0, coef, n_int,
-                 fit, fit_coef, fit_zb, sph_tab, sph_r0, drift, ndrift, dslope, dlog0, dlogstep, dst):
+                 fit, fit_coef, fit_zb, sph_tab, sph_r0, drift, ndrift, dslope, dlog0, dlogstep, dst, nlog):
     """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in ``order``.
 
     A node is skipped when its sources are all beyond the cutoff (chord), used whole (sigma points, mean normal,
@@ -348,13 +362,16 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
     multiplied by exp(A (cos psi - 1)) / i0e(A), A = |D| lambda(s~) s / s~, from the source's drift D (``drift`` (k, 3) mm;
     a whole node: its power-weighted mean ``ndrift``) and the slope lambda(s) = g(ln(s dst)) / s of the near-field
     model, g tabulated in ``dslope`` on the uniform grid ``dlog0 + i dlogstep`` of ln(r sigma_t'), ``dst`` that
-    channel's sigma_t' (one channel per pass: the others' columns are not used). Returns M and per-receiver counts
-    (n, 2): kernel evaluations at leaves, clusters used.
+    channel's sigma_t' (one channel per pass: the others' columns are not used). The near field's pair factor
+    (docs/physics.md eq. (80), N(s) = R_near(s) / R_d(s)): with ``nlog`` (3, m) non-empty, each channel's kernel is
+    multiplied by exp(nlog[c]) interpolated at ln(s sigma_t'[c]) on the same grid as ``dslope``. Returns M and
+    per-receiver counts (n, 2): kernel evaluations at leaves, clusters used.
     """
     n = recv.shape[0]
     M = np.zeros((n, 3))
     counts = np.zeros((n, 2), np.int64)
     use_drift = dslope.shape[0] > 0
+    use_n = nlog.shape[1] > 0
     full = 0
     for c in range(3):
         if rep[c] == c:
@@ -412,8 +429,11 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                                            ndrift[node, 1], ndrift[node, 2], s, dslope, dlog0, dlogstep, dst)
                     for c in range(3):
                         if (use >> c) & 1:
-                            acc[c] += wq * kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], st, al, mu, zr, zb,
-                                                        zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
+                            kv = kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], st, al, mu, zr, zb, zv, a0,
+                                              coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
+                            if use_n:
+                                kv *= near_ratio(nlog, c, s * st[c], dlog0, dlogstep)
+                            acc[c] += wq * kv
                 n_clu += 1
             if open_mask == 0:
                 continue
@@ -434,9 +454,11 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                                            dlogstep, dst)
                     for c in range(3):
                         if (open_mask >> c) & 1 and s <= cutoff[c]:
-                            acc[c] += pj * kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], st, al, mu, zr,
-                                                        zb, zv, a0, coef, n_int, fit, fit_coef, fit_zb, sph_tab,
-                                                        sph_r0)
+                            kv = kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], st, al, mu, zr, zb, zv, a0, coef,
+                                              n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
+                            if use_n:
+                                kv *= near_ratio(nlog, c, s * st[c], dlog0, dlogstep)
+                            acc[c] += pj * kv
                     n_leaf += 1
                 continue
             stack[top], smask[top] = 2 * node + 1, open_mask

@@ -203,6 +203,11 @@ class NearFieldFactors:
         A[pos] = d[pos] * ch.drift_slope(st2[pos]) * s[pos] / st2[pos]
         return np.exp(A * (np.clip(cos_psi, -1.0, 1.0) - 1.0)) / i0e(A)
 
+    def log_ratio_table(self) -> np.ndarray:
+        """(3, m): ln N(r) per channel on the slope table's grid of ln(r sigma_t') (the compiled far field's
+        per-pair near-field factor, eq. (80))."""
+        return np.ascontiguousarray(np.stack([self._channels[self._key[c]].log_n for c in range(3)]))
+
     def slope_table(self, c: int) -> tuple[np.ndarray, float, float]:
         """(g (m,), ln r0, step): channel ``c``'s slope g = -d ln R_near / d ln r on the uniform grid ln r0 + i step
         of ln(r sigma_t') (lambda(r) = g / r), for the compiled far field."""
