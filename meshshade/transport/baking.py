@@ -265,9 +265,9 @@ def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field,
         stats.update(gstats)
         if np.any(clustered):
             M_far, fstats = _far_field(samples, clustered, mesh, material, near, cut, far_field, far_rel_tol,
-                                       None if factors is None else kernel.source_scale)
-            if factors is not None:   # the far field carries the near-field model's energy beyond r_near
-                M_far = M_far * np.array([factors.far_scale(c, float(near[c])) for c in range(3)])[None, :]
+                                       None if factors is None else kernel.source_scale,
+                                       None if factors is None else (factors.log_ratio_table(),
+                                                                     *factors.slope_table(0)[1:]))
             M += M_far
             stats.update(fstats)
             clock.lap("far field")
@@ -459,12 +459,14 @@ def _gather_near(kernel, stream: PairStream, groups, chord_cut, progress) -> tup
     return M, {**stats, "pairs_found": stream.pairs_found, "geodesic_pairs_computed": stream.geodesic_pairs}
 
 
-def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, far_rel_tol: float, scale=None):
+def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, far_rel_tol: float, scale=None,
+               near_ratio=None):
     """The far field of the clustered sources (pairs with chord beyond r_near): M (n, 3) W/mm^2 and stats.
     ``scale`` (k, 3) or None: per-sample, per-channel power factors (the near field's incidence scale); channels
-    whose factors differ are summed in separate passes. The planar dipole of the chord from each entry point: the
-    light's sideways drift (docs/physics.md §13.4) is left out here, beyond r_near, where the far field carries
-    the kernel's faint tail (``far_tol``)."""
+    whose factors differ are summed in separate passes; ``near_ratio``: the near field's factor N(r) per pair
+    (farfield.far_field_exitance). The planar dipole of the chord from each entry point: the light's sideways drift
+    (docs/physics.md §13.4) is left out here, beyond r_near, where the far field carries the kernel's faint tail
+    (``far_tol``)."""
     fn = far_field_exitance if far_field == "clustered" else far_field_exitance_direct
     pos = samples.positions[clustered]
     columns = [None] if scale is None else [0, 1, 2]
@@ -479,7 +481,8 @@ def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, fa
                 continue
             done.append(c)
         with kernel_interrupts():  # numba in this thread: a Ctrl-C is a KeyboardInterrupt, not a SystemError
-            Mc, fstats = fn((pos, power), mesh.vertices, material, near, cut, rel_tol=far_rel_tol)
+            Mc, fstats = fn((pos, power), mesh.vertices, material, near, cut, rel_tol=far_rel_tol,
+                            near_ratio=near_ratio)
         if c is None:
             M = Mc
         else:

@@ -182,7 +182,7 @@ def _receiver_order(recv) -> np.ndarray:
 
 def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff_mm, *,
                        rel_tol: float = DEFAULT_REL_TOL, leaf_size: int = DEFAULT_LEAF_SIZE,
-                       budget_share: float = DEFAULT_BUDGET_SHARE) -> tuple[np.ndarray, dict]:
+                       budget_share: float = DEFAULT_BUDGET_SHARE, near_ratio=None) -> tuple[np.ndarray, dict]:
     """Clustered far-field exitance ``M[x, c] = sum_i P_ic R_c(|x - y_i|)`` over ``r_near_c < |x - y_i| <= cutoff_c``.
 
     Parameters
@@ -198,6 +198,10 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
         own-contribution test, or straddles the cutoff (whose sources beyond it then add at most P R(cutoff)),
         is still used whole when its bound is within ``budget_share rel_tol L P / P_total``, L being the running
         lower bound (sum so far minus bounds so far) of M_exact; the guarantee is unchanged
+    near_ratio : None, or (nlog (3, m), l0, step): the near field's factor N(r) (docs/physics.md eq. (80)) as
+        ln N on the grid l0 + i step of ln(r sigma_t') (NearFieldFactors.log_ratio_table / slope_table): each
+        channel's dipole is multiplied by it (per pair at leaves, at the centroid distance for a cluster, whose
+        bound is scaled alike: the guarantee then holds for the dipole times N at the centroid)
 
     Returns
     -------
@@ -223,7 +227,7 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
         M, E, counts = traverse(recv, _receiver_order(recv), tree.positions, tree.power, tree.node_lo,
                                    tree.node_hi, tree.first_leaf, tree.node_power, tree.node_centroid,
                                    tree.node_radius, tree.node_q, tree.node_m3, rn, cut, st, al, mu, zv, float(rel_tol),
-                                   float(budget_share))
+                                   float(budget_share), *_near_ratio_args(near_ratio))
     tot = counts.sum(axis=0)
     stats = {"pairs_exact": int(tot[0]), "clusters_accepted": int(tot[1]), "nodes_visited": int(tot[2]),
              "clusters_from_budget": int(tot[3]),
@@ -231,8 +235,17 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
     return M, stats
 
 
+def _near_ratio_args(near_ratio):
+    """(nlog (3, m), l0, step) for the kernels; a (3, 0) placeholder without the near field."""
+    if near_ratio is None:
+        return np.zeros((3, 0)), 0.0, 1.0
+    nlog, l0, step = near_ratio
+    return np.ascontiguousarray(nlog, dtype=np.float64), float(l0), float(step)
+
+
 def far_field_exitance_direct(sources, receivers, material: Material, r_near_mm, cutoff_mm, *,
-                              rel_tol: float = 0.0, leaf_size: int = DEFAULT_LEAF_SIZE) -> tuple[np.ndarray, dict]:
+                              rel_tol: float = 0.0, leaf_size: int = DEFAULT_LEAF_SIZE,
+                              near_ratio=None) -> tuple[np.ndarray, dict]:
     """Exact twin of :func:`far_field_exitance` (same signature; ``rel_tol`` and ``leaf_size`` are ignored).
 
     Candidate pairs come from scipy's cKDTree (``sparse_distance_matrix`` between a receiver chunk and the
@@ -259,6 +272,7 @@ def far_field_exitance_direct(sources, receivers, material: Material, r_near_mm,
     n_eval = n_cand = 0
     if n and len(pos):
         src_tree = cKDTree(pos)
+        nr = _near_ratio_args(near_ratio)
         radius = float(cut.max()) * (1.0 + 1e-9)
         order = _receiver_order(recv)
         a, chunk = 0, 256
@@ -267,7 +281,7 @@ def far_field_exitance_direct(sources, receivers, material: Material, r_near_mm,
             pairs = cKDTree(recv[idx]).sparse_distance_matrix(src_tree, radius, output_type="ndarray")
             # (whether coincident pairs are listed does not matter: r = 0 <= r_near is never far field)
             ii, jj = idx[pairs["i"]], pairs["j"].astype(np.int64)
-            n_eval += accumulate_pairs(M, recv, pos, pw, ii, jj, rn, cut, st, al, mu, zv)
+            n_eval += accumulate_pairs(M, recv, pos, pw, ii, jj, rn, cut, st, al, mu, zv, *nr)
             n_cand += len(ii)
             per = max(len(ii) / len(idx), 1.0)
             a += len(idx)

@@ -213,7 +213,7 @@ def node_moments(pos, power, lo, hi):
 # --------------------------------------------------------------------------------------------------------------
 @njit(cache=True, parallel=True)
 def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near, cutoff, st, al, mu, zv, tau,
-             budget_share):
+             budget_share, nlog, nl0, nstep):
     """Clustered far-field sum for each receiver (rows of ``recv``, processed in ``order`` for locality).
 
     A cluster wholly inside the annulus r_near < r <= cutoff is accepted when its Taylor remainder bound E is at
@@ -222,6 +222,11 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
     running lower bound (the traversal goes nearest child first so that L grows fast). A cluster that lies past
     r_near but straddles the cutoff may use the budget too, with E + P R(cutoff) (the most the sources beyond the
     cutoff can add) in place of E. Summed: error <= (1 - share) tau M_exact + share tau M_exact = tau M_exact.
+
+    With ``nlog`` (nc, m) non-empty (the near field "beam", docs/physics.md eq. (80)), each channel's dipole is
+    multiplied by the near-field factor N(r) = exp(nlog[c]) interpolated at ln(r sigma_t') on the grid
+    nl0 + i nstep: per pair at leaves, at the centroid distance for an accepted cluster (its bound, that of the
+    dipole, scaled alike).
 
     Returns M (n, 3) W/mm^2, the summed error bounds of the accepted clusters (n, 3) W/mm^2, and per receiver
     counts (n, 4): exact pair evaluations at leaves, clusters accepted (channel-wise), nodes visited, clusters
@@ -248,6 +253,7 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
         per_power[c] = budget_share * tau / (P[0, c] * st[c] * st[c]) if P[0, c] > 0.0 else 0.0
     tau_own = (1.0 - budget_share) * tau
     full = (1 << nc) - 1
+    use_n = nlog.shape[1] > 0
     for t in prange(n):
         o = order[t]
         x0, x1, x2 = recv[o, 0], recv[o, 1], recv[o, 2]
@@ -294,8 +300,9 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
                                + 2.0 * (q[3] * dx * dy + q[4] * dx * dz + q[5] * dy * dz))
                         # optical units: Q s^2 and v s, so vQv s^4 and tr Q s^2; the sum is rescaled by s^2
                         quad = 0.5 * (G2 * vqv * s**4 + G1 * (q[0] + q[1] + q[2]) * s * s)
-                        m_acc[c] += (P[node, c] * G + quad) * s * s
-                        e_acc[c] += P[node, c] * bound * s * s
+                        nf = near_factor(nlog, c, d * s, nl0, nstep) if use_n else 1.0
+                        m_acc[c] += (P[node, c] * G + quad) * s * s * nf
+                        e_acc[c] += P[node, c] * bound * s * s * nf
                         n_clusters += 1
                         continue
                 open_mask |= 1 << c
@@ -308,7 +315,8 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
                     for c in range(nc):
                         if (open_mask >> c) & 1 and power[j, c] > 0.0 and r_near[c] < r <= cutoff[c]:
                             s = st[c]
-                            m_acc[c] += power[j, c] * dipole_opt(r * s, al[c], mu[c], zv[c]) * s * s
+                            nf = near_factor(nlog, c, r * s, nl0, nstep) if use_n else 1.0
+                            m_acc[c] += power[j, c] * dipole_opt(r * s, al[c], mu[c], zv[c]) * s * s * nf
                             n_pairs += 1
             else:  # nearer child on top of the stack (by the first open channel's centroids)
                 c0 = 0
@@ -329,13 +337,29 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
     return M, E, counts
 
 
+@njit(cache=True, inline="always")
+def near_factor(nlog, c, r_opt, l0, step):
+    """N(r) = exp(nlog[c]) interpolated linearly in ln r on the grid l0 + i step (end values beyond)."""
+    m = nlog.shape[1]
+    x = (np.log(r_opt) - l0) / step if r_opt > 0.0 else 0.0
+    if x <= 0.0:
+        return np.exp(nlog[c, 0])
+    if x >= m - 1:
+        return np.exp(nlog[c, m - 1])
+    i = int(x)
+    f = x - i
+    return np.exp(nlog[c, i] * (1.0 - f) + nlog[c, i + 1] * f)
+
+
 @njit(cache=True)
-def accumulate_pairs(M, recv, pos, power, ii, jj, r_near, cutoff, st, al, mu, zv):
-    """Direct sum over candidate pairs (receiver ii, source jj) with the exact masks r_near < r <= cutoff.
+def accumulate_pairs(M, recv, pos, power, ii, jj, r_near, cutoff, st, al, mu, zv, nlog, nl0, nstep):
+    """Direct sum over candidate pairs (receiver ii, source jj) with the exact masks r_near < r <= cutoff (times
+    the near-field factor, as :func:`traverse`).
 
     Returns the number of (pair, channel) kernel evaluations."""
     nc = power.shape[1]
     count = 0
+    use_n = nlog.shape[1] > 0
     for p in range(ii.shape[0]):
         i, j = ii[p], jj[p]
         dx, dy, dz = recv[i, 0] - pos[j, 0], recv[i, 1] - pos[j, 1], recv[i, 2] - pos[j, 2]
@@ -343,6 +367,7 @@ def accumulate_pairs(M, recv, pos, power, ii, jj, r_near, cutoff, st, al, mu, zv
         for c in range(nc):
             if power[j, c] > 0.0 and r_near[c] < r <= cutoff[c]:
                 s = st[c]
-                M[i, c] += power[j, c] * dipole_opt(r * s, al[c], mu[c], zv[c]) * s * s
+                nf = near_factor(nlog, c, r * s, nl0, nstep) if use_n else 1.0
+                M[i, c] += power[j, c] * dipole_opt(r * s, al[c], mu[c], zv[c]) * s * s * nf
                 count += 1
     return count

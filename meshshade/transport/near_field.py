@@ -10,8 +10,8 @@ same near field as the factor of eq. (79):
   receiver's own patch, since a vertex's exitance is the average over the patch it stands for):
   ``G(s, a) = <R_near>_a(s) / <R_d>_a(s)``, the ratio of the two kernels' averages over the disc (the same
   quadrature as the dipole's patch average, pair_kernel.py), on top of the dipole's patch factor;
-* the far field (pairs beyond the near radius r, summed by clusters of the planar dipole): the ratio of the two
-  kernels' tails ``T_near(r) / T_d(r)``, so that the energy it carries is the near-field model's;
+* the far field (pairs beyond the near radius r, summed by clusters of the planar dipole): N(s) per pair (per
+  cluster at its centroid distance), from the same table;
 * the direction the light travels inside (docs/physics.md eq. (81)): an entry sample whose light enters at
   incidence theta_i refracts to theta_t, and the near-field model's sources then lie at depths cos(theta_t) t_k;
   the sample's power is scaled by the half-space's gain in total reflectance at that angle, W(cos theta_t) of
@@ -41,7 +41,7 @@ from functools import lru_cache
 import numpy as np
 
 from meshshade.errors import ParameterError
-from meshshade.kernels.dipole import dipole_profile, dipole_tail_reflectance
+from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.near_field import (incidence_gain, near_field_profile, near_field_ring, near_field_sources,
                                           near_field_total)
 from meshshade.materials import Material
@@ -213,15 +213,6 @@ class NearFieldFactors:
         of ln(r sigma_t') (lambda(r) = g / r), for the compiled far field."""
         ch = self._channels[self._key[c]]
         return np.ascontiguousarray(ch.slope), float(_N_LOG_R[0]), float(_N_LOG_R[1] - _N_LOG_R[0])
-
-    def far_scale(self, c: int, r_mm: float) -> float:
-        """T_near(r) / T_d(r): the energy of the near-field model beyond r over the dipole's (channel c)."""
-        st = float(self.material.sigma_t_prime[c])
-        ch = self._channels[self._key[c]]
-        r = float(r_mm) * st
-        flat = float(dipole_tail_reflectance(r, **ch.kw))
-        return float(ch.near_tail(np.array([r]))[0] / flat) if flat > 0 else 1.0
-
 
 def refracted_drift(normals, directions, eta: float) -> np.ndarray:
     """(k, 3): the tangential part of the refracted direction of light travelling along ``directions`` (k, 3) unit
