@@ -32,6 +32,17 @@ import mpmath
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def short_commit() -> str:
+    """The repository's HEAD as ``git rev-parse --short`` gives it, or "unknown" (no git, not a checkout)."""
+    import subprocess
+
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
 def file_sha256(path: Path) -> str:
     """sha256 (hex) of a file's bytes."""
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()

@@ -26,7 +26,6 @@ import argparse
 import datetime
 import json
 import math
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -36,6 +35,7 @@ import numpy as np
 from meshshade.kernels.near_field import near_field_total
 from meshshade.materials import Material
 from meshshade.montecarlo.shapes import shape_mc_profile
+from _refheader import short_commit  # noqa: E402  (tools/ is not a package)
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the grid: x = log10(1 - alpha'), eta, g, and the incidence angles (degrees from the normal, outside)
@@ -158,11 +158,7 @@ def main(argv=None) -> int:
 
 
 def _finish(args, argv, rows, seconds) -> int:
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                                check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
+    commit = short_commit()
     from meshshade import __version__
     given = [a for a in (sys.argv[1:] if argv is None else argv)]
     if args.rows:   # the Monte Carlo run's own options, not the file its lines were kept in

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -31,6 +30,7 @@ from meshshade.kernels.beam_diffusion import point_source_ring, point_source_tot
 from meshshade.kernels.single_scattering import single_scattering_ring, single_scattering_total
 from meshshade.materials import Material
 from meshshade.montecarlo.shapes import shape_mc_profile
+from _refheader import short_commit  # noqa: E402  (tools/ is not a package)
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the grid: x = log10(1 - alpha'), eta, g
@@ -132,11 +132,7 @@ def main(argv=None) -> int:
                 rows.append(row)
                 print(json.dumps({kk: (round(v, 5) if isinstance(v, float) else v) for kk, v in row.items()
                                   if kk != "weights"}), flush=True)
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                                check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
+    commit = short_commit()
     from meshshade import __version__
     meta = {"argv": " ".join(sys.argv[1:]), "version": __version__, "commit": commit,
             "date": datetime.date.today().isoformat(), "photons": args.photons, "seed": args.seed,

@@ -50,23 +50,29 @@ def _bracket(nodes: np.ndarray, x: float) -> tuple[int, float, bool]:
     return i, (x - nodes[i]) / (nodes[i + 1] - nodes[i]), clamped
 
 
-def near_field_sources(albedo_prime: float, eta: float, g: float = 0.0) -> tuple[np.ndarray, np.ndarray, bool]:
-    """(depths (K,), strengths (K,), clamped): the beam's fitted point sources for a medium (optical units);
-    ``clamped`` is True when the medium lies outside :data:`FIT_DOMAIN` and the nearest node's sources are used."""
-    check_material(albedo_prime, eta)
-    real_coefficients(float(albedo_prime), float(g))   # validates g
+def _trilinear(grid, values, albedo_prime, eta, g) -> tuple[np.ndarray, bool]:
+    """(values[i, j, k] interpolated trilinearly at (log10(1 - alpha'), eta, g) on ``grid``'s X_NODES, ETA_NODES,
+    G_NODES, clamped): the tables' common lookup (clamped to the nearest node outside the grid)."""
     x = math.log10(max(1.0 - float(albedo_prime), 1e-300))
-    (i, fx, cx), (j, fe, ce), (k, fg, cg) = (_bracket(table.X_NODES, x), _bracket(table.ETA_NODES, float(eta)),
-                                              _bracket(table.G_NODES, float(g)))
-    W = table.WEIGHTS
-    w = np.zeros(table.DEPTHS.size)
+    (i, fx, cx), (j, fe, ce), (k, fg, cg) = (_bracket(grid.X_NODES, x), _bracket(grid.ETA_NODES, float(eta)),
+                                              _bracket(grid.G_NODES, float(g)))
+    out = np.zeros(values.shape[3:])
     for di, wi in ((0, 1.0 - fx), (1, fx)):
         for dj, wj in ((0, 1.0 - fe), (1, fe)):
             for dk, wk in ((0, 1.0 - fg), (1, fg)):
                 c = wi * wj * wk
                 if c:
-                    w += c * W[i + di, j + dj, k + dk]
-    return table.DEPTHS.copy(), w, bool(cx or ce or cg)
+                    out += c * values[i + di, j + dj, k + dk]
+    return out, bool(cx or ce or cg)
+
+
+def near_field_sources(albedo_prime: float, eta: float, g: float = 0.0) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(depths (K,), strengths (K,), clamped): the beam's fitted point sources for a medium (optical units);
+    ``clamped`` is True when the medium lies outside :data:`FIT_DOMAIN` and the nearest node's sources are used."""
+    check_material(albedo_prime, eta)
+    real_coefficients(float(albedo_prime), float(g))   # validates g
+    w, clamped = _trilinear(table, table.WEIGHTS, albedo_prime, eta, g)
+    return table.DEPTHS.copy(), w, clamped
 
 
 def near_field_profile(r_opt, *, albedo_prime, eta, g=0.0, cos_t=1.0):
@@ -112,17 +118,7 @@ def incidence_gain(*, albedo_prime, eta, g=0.0, cos_t=1.0) -> float:
         return 1.0
     w81 = near_field_total(albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) / near_field_total(
         albedo_prime=albedo_prime, eta=eta, g=g)
-    x = math.log10(max(1.0 - float(albedo_prime), 1e-300))
-    (i, fx, _), (j, fe, _), (k, fg, _) = (_bracket(incidence_table.X_NODES, x),
-                                          _bracket(incidence_table.ETA_NODES, float(eta)),
-                                          _bracket(incidence_table.G_NODES, float(g)))
-    rho = np.zeros(incidence_table.ANGLES.size)
-    for di, wi in ((0, 1.0 - fx), (1, fx)):
-        for dj, wj in ((0, 1.0 - fe), (1, fe)):
-            for dk, wk in ((0, 1.0 - fg), (1, fg)):
-                c = wi * wj * wk
-                if c:
-                    rho += c * incidence_table.RHO[i + di, j + dj, k + dk]
+    rho, _ = _trilinear(incidence_table, incidence_table.RHO, albedo_prime, eta, g)
     sin_i = min(1.0, float(eta) * math.sqrt(max(0.0, 1.0 - cos_t * cos_t)))
     theta_i = math.degrees(math.asin(sin_i))
     r = float(np.interp(theta_i, incidence_table.ANGLES, rho))

@@ -338,17 +338,24 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
 
 
 @njit(cache=True, inline="always")
-def near_factor(nlog, c, r_opt, l0, step):
-    """N(r) = exp(nlog[c]) interpolated linearly in ln r on the grid l0 + i step (end values beyond)."""
-    m = nlog.shape[1]
+def log_grid_interp(row, r_opt, l0, step):
+    """``row`` (m,) tabulated on the grid l0 + i step of ln r, interpolated linearly at ln ``r_opt`` (end values
+    beyond, the first at r <= 0)."""
+    m = row.shape[0]
     x = (np.log(r_opt) - l0) / step if r_opt > 0.0 else 0.0
     if x <= 0.0:
-        return np.exp(nlog[c, 0])
+        return row[0]
     if x >= m - 1:
-        return np.exp(nlog[c, m - 1])
+        return row[m - 1]
     i = int(x)
     f = x - i
-    return np.exp(nlog[c, i] * (1.0 - f) + nlog[c, i + 1] * f)
+    return row[i] * (1.0 - f) + row[i + 1] * f
+
+
+@njit(cache=True, inline="always")
+def near_factor(nlog, c, r_opt, l0, step):
+    """The near field's N(r) = exp(nlog[c]) with ln N interpolated on the grid of :func:`log_grid_interp`."""
+    return np.exp(log_grid_interp(nlog[c], r_opt, l0, step))
 
 
 @njit(cache=True)

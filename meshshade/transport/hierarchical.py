@@ -393,9 +393,7 @@ class SurfaceTransport:
                 for k, v in sc["timings"].items():
                     stats["timings"][k] = stats["timings"].get(k, 0.0) + v
             return M, stats
-        if pv.shape != (n,) or not np.all(np.isfinite(pv)) or np.any(pv < 0):
-            raise ParameterError(f"vertex_power must be a finite (n,) = ({n},) array >= 0 [W]")
-        return self._exitance(pv, None, progress)
+        return self._exitance(pv, None, progress)   # checks the (n,) powers
 
     def _exitance(self, pv, drift, progress):
         """:meth:`exitance` of one power column ``pv`` (n,); ``drift``: None or (channel, (n, 3) drift), which

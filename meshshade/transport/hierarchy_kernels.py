@@ -31,6 +31,7 @@ from meshshade.kernels.curvature.policies import _DELTA_MAX, _INV_SAT
 from meshshade.kernels.curvature.table import _PER_UNIT, _table_eval
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
 from meshshade.kernels.fitted_curvature import _row_at, pair_exponent
+from meshshade.transport.farfield_kernels import log_grid_interp, near_factor
 
 STACK_SIZE = 256
 KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_CURVED, KIND_SPHERE, KIND_FITTED = 0, 1, 2, 3, 4
@@ -304,20 +305,6 @@ def bessel_i0e(x):
         -0.02057706 + t * (0.02635537 + t * (-0.01647633 + t * 0.00392377)))))))) / math.sqrt(x)
 
 
-@njit(cache=True, inline="always")
-def near_ratio(nlog, c, r_opt, l0, step):
-    """N(r) = exp(nlog[c]) interpolated linearly in ln r on the grid l0 + i step (end values beyond)."""
-    m = nlog.shape[1]
-    x = (math.log(r_opt) - l0) / step if r_opt > 0.0 else 0.0
-    if x <= 0.0:
-        return math.exp(nlog[c, 0])
-    if x >= m - 1:
-        return math.exp(nlog[c, m - 1])
-    i = int(x)
-    f = x - i
-    return math.exp(nlog[c, i] * (1.0 - f) + nlog[c, i + 1] * f)
-
-
 @njit(cache=True)
 def drift_factor(u0, u1, u2, n0, n1, n2, d0, d1, d2, s, dslope, dlog0, dlogstep, dst):
     """The drift factor exp(A (cos psi - 1)) / i0e(A) of eq. (88) for one far pair: chord u = receiver - source,
@@ -330,17 +317,7 @@ def drift_factor(u0, u1, u2, n0, n1, n2, d0, d1, d2, s, dslope, dlog0, dlogstep,
     if tl <= 0.0 or dl <= 0.0 or s <= 0.0:
         return 1.0
     sm = math.sqrt(s * s + dl * dl)   # the kernel smoothed over the drift, as NearFieldFactors.drift_factor
-    x = (math.log(sm * dst) - dlog0) / dlogstep
-    m = dslope.shape[0]
-    if x <= 0.0:
-        g = dslope[0]
-    elif x >= m - 1:
-        g = dslope[m - 1]
-    else:
-        i = int(x)
-        f = x - i
-        g = dslope[i] * (1.0 - f) + dslope[i + 1] * f
-    A = dl * g * s / (sm * sm)
+    A = dl * log_grid_interp(dslope, sm * dst, dlog0, dlogstep) * s / (sm * sm)
     cos_psi = (d0 * t0 + d1 * t1 + d2 * t2) / (dl * tl)
     return math.exp(A * (cos_psi - 1.0)) / bessel_i0e(A)
 
@@ -432,7 +409,7 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                             kv = kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], st, al, mu, zr, zb, zv, a0,
                                               coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
                             if use_n:
-                                kv *= near_ratio(nlog, c, s * st[c], dlog0, dlogstep)
+                                kv *= near_factor(nlog, c, s * st[c], dlog0, dlogstep)
                             acc[c] += wq * kv
                 n_clu += 1
             if open_mask == 0:
@@ -457,7 +434,7 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                             kv = kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], st, al, mu, zr, zb, zv, a0, coef,
                                               n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
                             if use_n:
-                                kv *= near_ratio(nlog, c, s * st[c], dlog0, dlogstep)
+                                kv *= near_factor(nlog, c, s * st[c], dlog0, dlogstep)
                             acc[c] += pj * kv
                     n_leaf += 1
                 continue
