@@ -1,4 +1,5 @@
-"""File input and output: the only module that touches the file system.
+"""File input and output: the only module that touches the file system (but for numba's cache folders,
+which ``meshshade.compiled_cache`` places before numba is imported).
 
 Reading meshes
 --------------

@@ -153,11 +153,11 @@ def mc_work_clock(monkeypatch):
         clock = WorkClock()
         real_round = engine.PoolWalk._round
 
-        def timed_round(self, st, live, steps):
-            dt = live * steps * clock.SECONDS_PER_STEP
+        def timed_round(self, st, steps):
+            dt = int(np.count_nonzero(st.status)) * steps * clock.SECONDS_PER_STEP
             clock.t += dt
             clock.longest_round = max(clock.longest_round, dt)
-            return real_round(self, st, live, steps)
+            return real_round(self, st, steps)
 
         monkeypatch.setattr(engine.PoolWalk, "_round", timed_round)
         monkeypatch.setattr(engine, "time", clock)

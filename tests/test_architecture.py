@@ -5,7 +5,8 @@ Rules (the issue "One package per stage"):
 (a) ``meshshade/kernels/`` imports only numpy, scipy, numba, math (and the stdlib __future__, typing,
     dataclasses, functools) and meshshade.errors / meshshade.kernels.*: kernels are pure array functions;
 (b) only ``meshshade/io.py`` (which also creates the output directories, ``io.output_dir``)
-    creates, opens, writes, moves or deletes files;
+    creates, opens, writes, moves or deletes files, and ``meshshade/compiled_cache.py``, which places numba's
+    on-disk cache before anything imports numba (``meshshade.io`` imports numba);
 (c) only ``meshshade/raycast/`` imports embreex or loads a native library (Embree) with ctypes;
 (d) no import cycles among meshshade modules (graph of all imports, module- and function-level);
 (e) no function-level imports of meshshade modules (they hide the dependency graph).
@@ -28,7 +29,7 @@ PACKAGE = "meshshade"
 
 KERNEL_ALLOWED_ROOTS = {"numpy", "scipy", "numba", "math", "__future__", "typing", "dataclasses", "functools"}
 #: (module, function qualname) allowed to touch files; None: the whole module
-FILE_IO_ALLOWED = {("meshshade.io", None)}
+FILE_IO_ALLOWED = {("meshshade.io", None), ("meshshade.compiled_cache", None)}
 #: method names that create, open, write, move or delete files on whatever object they are called
 FILE_METHODS = {"open", "write_text", "write_bytes", "mkdir", "touch", "unlink", "savefig", "tofile", "imsave"}
 #: Path.rename(target) / Path.replace(target): one positional argument (str.replace needs two)

@@ -16,7 +16,7 @@ CHECK = "--check" in sys.argv[1:]
 
 # page -> (package, preferred order of modules / subpackages; the rest follow alphabetically)
 PAGES = {
-    "meshshade": ("meshshade", ["errors", "units", "materials", "io", "memo", "check", "profiles",
+    "meshshade": ("meshshade", ["errors", "units", "materials", "io", "compiled_cache", "memo", "check", "profiles",
                                         "preview", "demo"]),
     "kernels": ("meshshade.kernels", ["optics", "fresnel", "dipole", "single_scattering", "beam_diffusion", "sphere", "cylinder", "curvature",
                                       "auxiliary", "coefficients", "table", "policies", "profile"]),

@@ -1,38 +1,41 @@
 """Pooled Monte Carlo engine: numba walks on a regenerating photon pool, boundary hits from Embree.
 
-A pool of ``pool`` photon slots is advanced in rounds:
+A pool of ``pool`` photon slots is advanced in rounds; every step that touches photons runs on all cores:
 
-1. ``refill`` (serial): free slots take the next photons of the emitter's pre-sampled entry list, in photon-index
-   order (entries are drawn in fixed chunks of ``ENTRY_CHUNK`` photons, chunk ``c`` from
-   ``numpy.random.default_rng([seed, group, c])``, so photon ``i``'s entry does not depend on the pool);
-2. the walk (numba, threads over photons): a photon scatters without any ray while its sampled free path is
-   certified by the :class:`~meshshade.montecarlo.interior.SafeDistanceGrid` (shorter than the conservative
-   distance to the surface, or both ends inside a half-space certificate); otherwise Embree selects the first
-   face hit within the free path (float32), the distance is recomputed in float64 on that face, and the photon
-   scatters before the surface, is Fresnel-reflected or leaves (:func:`~meshshade.montecarlo.kernels.surface_s`).
-   At most ``MAX_STEPS`` events per photon and round.
+1. refill: the free slots among the first ``max_live`` take the next photons in photon-index order; their entries
+   are drawn, cast and refracted by the compiled emitter (:mod:`meshshade.montecarlo.emission`, ``prange`` over
+   photons, each from its own stream), and written straight into the slots;
+2. the walk (numba, threads over the live slots, in dynamic chunks sized to the number of live photons): a photon
+   scatters without any ray while its sampled free path is certified by the
+   :class:`~meshshade.montecarlo.interior.SafeDistanceGrid` (shorter than the conservative distance to the surface,
+   or both ends inside a half-space certificate); otherwise Embree selects the first face hit within the free path
+   (float32), the distance is recomputed in float64 on that face, and the photon scatters before the surface, is
+   Fresnel-reflected or leaves (:func:`~meshshade.montecarlo.kernels.surface_s`). At most ``MAX_STEPS`` events per
+   photon and round.
 
    * ``direct`` (default): every thread calls Embree's ``rtcIntersect1`` itself
      (:mod:`meshshade.montecarlo.direct_walk` through :mod:`meshshade.raycast.embree_direct`), so the boundary
      tests run on all cores;
    * ``batched``: the interior kernel stops every photon at its first uncertified free path, ONE embreex call
      traces all of them (embreex holds the GIL: one core), a second kernel resolves them.
-3. ``reduce_round`` (serial, slot order) adds the round's absorbed/lost/exit weights to the per-batch tallies.
+3. ``reduce_round`` adds the round's absorbed/lost/exit weights to the per-batch tallies, in parallel over
+   batches (slot order within a batch).
 
-Every random number of photon ``i`` comes from its own counter-based stream keyed by (seed, group, i)
-(:mod:`meshshade.montecarlo.kernels`): the result is bitwise identical for any number of numba threads, and
-photon ``i``'s path is the same for any pool size and either Embree mode (the tallies then differ only by the
-floating-point summation order).
+Every random number of photon ``i`` (its entry and its walk) comes from its own counter-based stream keyed by
+(seed, group, i) (:mod:`meshshade.montecarlo.kernels`), and every sum runs in a fixed order: the result is bitwise
+identical for any number of numba threads, and photon ``i``'s path is the same for any pool size and either Embree
+mode (the tallies then differ only by the floating-point summation order).
 
-Time budget: emission stops once ``elapsed + predicted drain >= budget``, where the drain of the photons in flight
-is predicted from the measured seconds per completed photon (x ``DRAIN_SAFETY``); with a budget the number of
-live photons starts at ``BUDGET_START_LIVE`` and doubles only while its predicted drain stays below
-``BUDGET_DRAIN_FRACTION`` of the budget and the last round took less than half of ``ROUND_FRACTION`` of it (a
-round costs at most ``MAX_STEPS`` events per live photon, so rounds stay near ``ROUND_FRACTION * budget``).
-Hard bound: at ``budget * (1 + HARD_OVERSHOOT)`` the photons still in flight are cut off and their weight is
-booked as ``lost`` (the energy balance stays exact and the truncation is visible in the result). The overshoot is
-therefore at most ``HARD_OVERSHOOT * budget`` plus one round (~``ROUND_FRACTION * budget``) plus the result
-assembly; normally the drain prediction ends the walk before the budget and nothing is lost.
+Time budget (:class:`BudgetClock`): emission stops once ``elapsed + predicted drain >= budget``. The drain of the
+photons in flight is predicted from the throughput measured *after the first round* (which carries the one-off
+costs: numba compiling or loading its cache, the thread pool starting, first touches of memory), and only once at
+least ``BUDGET_MIN_DONE`` photons have finished in that window; before that, emission goes on (a warm-up can no
+longer make the walk stop after a handful of photons). With a budget the number of live photons starts at
+``BUDGET_START_LIVE`` and doubles only while its predicted drain stays below ``BUDGET_DRAIN_FRACTION`` of the
+budget and the last round took less than half of ``ROUND_FRACTION`` of it. Hard bound: at
+``budget * (1 + HARD_OVERSHOOT)`` the photons still in flight are cut off and their weight is booked as ``lost``
+(the energy balance stays exact and the truncation is visible in the result). Every run reports the photons it
+emitted, and its tallies are normalised by that count (:func:`meshshade.montecarlo.simulation.simulate`).
 """
 from __future__ import annotations
 
@@ -44,6 +47,7 @@ import numpy as np
 from meshshade.light import BeamLight
 from meshshade.montecarlo import kernels as K
 from meshshade.montecarlo.direct_walk import walk_parallel
+from meshshade.montecarlo.emission import EmitterKernel, emission_base
 from meshshade.montecarlo.sampling import ROULETTE_BOOST as K_BOOST, ROULETTE_THRESHOLD as K_THRESH
 from meshshade.raycast.embree_direct import TFAR_MARGIN_REL
 from meshshade.raycast.scene import OFFSET_ABS, OFFSET_REL
@@ -58,8 +62,14 @@ ROUND_FRACTION = 0.05
 HARD_OVERSHOOT = 0.25
 DEFAULT_POOL = 1 << 18
 SAFE_STEPS_PER_VOXEL = 4
-#: photons per dynamically scheduled chunk of the parallel walk
+#: most photons per dynamically scheduled chunk of the parallel walk
 CHUNK = 1024
+#: chunks per thread at least, while the pool drains (smaller chunks, so no thread is left with the tail)
+CHUNKS_PER_THREAD = 8
+#: photons that must finish after the first round before the budget trusts the measured throughput
+BUDGET_MIN_DONE = 512
+#: refills per round (the slots of shadowed entries are refilled at once)
+REFILL_PASSES = 4
 
 
 def first_hit_faces32(scene, o32, d32, tfar):
@@ -108,6 +118,9 @@ class PoolWalk:
         self._F = np.ascontiguousarray(F, dtype=np.int64)
         self._facing = np.ascontiguousarray(emitter.facing)
         self._base = np.uint64(K.stream_base(np.uint64(self.seed & 0xFFFFFFFFFFFFFFFF), self.group))
+        self._ebase = emission_base(self.seed, self.group)
+        self.emitter = EmitterKernel(emitter, direct)
+        self.emitted = 0
         self._center = np.ascontiguousarray(scene.center, dtype=np.float64)
         self._margin = TFAR_MARGIN_REL * scene.scale
         self.direct = direct
@@ -117,16 +130,6 @@ class PoolWalk:
         self._geo = np.array([*grid.origin, 1.0 / grid.h, unit, grid.h, grid.plane_radius ** 2])
 
 
-    # --- entries ----------------------------------------------------------------------------------------------
-    def _entries(self, chunk, n_photons):
-        """Pre-sampled entries of photons chunk * ENTRY_CHUNK ... (clipped at n_photons)."""
-        start = chunk * ENTRY_CHUNK
-        k = int(min(ENTRY_CHUNK, n_photons - start))
-        rng = np.random.default_rng([self.seed, self.group, chunk])
-        light, _, pos, dirs, w_in, spec, inc = self.em.emit(k, n_photons, rng)
-        return [np.ascontiguousarray(pos), np.ascontiguousarray(dirs), w_in, spec, inc, light.astype(np.int64),
-                start + np.arange(k, dtype=np.int64)]
-
     def run(self, n_photons, *, pool=None, time_budget=None, progress=None, chunks=None):
         """Walk ``n_photons`` photons (fewer if ``time_budget`` seconds run out); returns the number emitted.
 
@@ -135,70 +138,61 @@ class PoolWalk:
         whole run, so the tallies of a partition of the chunks add up to the whole run's (a run split across
         workers, :mod:`meshshade.montecarlo.distributed`).
         """
-        t0 = time.perf_counter()
         c0, n_chunks = (0, -(-n_photons // ENTRY_CHUNK)) if chunks is None else (int(chunks[0]), int(chunks[1]))
-        in_range = max(0, min(n_chunks * ENTRY_CHUNK, n_photons) - c0 * ENTRY_CHUNK)
-        P = int(max(1, min(pool or DEFAULT_POOL, in_range)))
+        first = c0 * ENTRY_CHUNK
+        last = max(first, min(n_chunks * ENTRY_CHUNK, n_photons))
+        P = int(max(1, min(pool or DEFAULT_POOL, last - first)))
         st = _PoolState(P)
-        queue, e, chunk = None, 0, c0   # the current chunk of pre-sampled entries and its next entry
-        emitted = 0
-        stop = False
+        clock = BudgetClock(time_budget)
+        next_pid = first
         max_live = P if time_budget is None else min(P, BUDGET_START_LIVE)
         live = 0
-        last_round = 0.0
         while True:
-            now = time.perf_counter() - t0
-            if time_budget is not None:
-                if now >= time_budget * (1.0 + HARD_OVERSHOOT):
-                    K.cut_off(st.status, st.w, st.batch, self.tot)
-                    break
-                done = emitted - live
-                per_photon = now / done if done > 0 else np.inf
-                if not stop and emitted and now + DRAIN_SAFETY * live * per_photon >= time_budget:
-                    stop = True
-                if (not stop and last_round < 0.5 * ROUND_FRACTION * time_budget
-                        and DRAIN_SAFETY * 2 * max_live * per_photon < BUDGET_DRAIN_FRACTION * time_budget):
+            if clock.cut_off():
+                K.cut_off(st.status, st.w, st.batch, self.tot)
+                break
+            if not clock.stopped:
+                clock.decide(next_pid - first, live, max_live)
+                if clock.may_grow(max_live, P):
                     max_live = min(P, 2 * max_live)
-            if not stop:
-                slot = 0
-                while live < max_live:
-                    if queue is None or e >= queue[0].shape[0]:
-                        if chunk >= n_chunks:
-                            stop = True
-                            break
-                        queue, e = self._entries(chunk, n_photons), 0
-                        chunk += 1
-                    e_old = e
-                    e, live, slot = K.refill(st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr,
-                                             st.batch, st.light, st.pid, *queue, e, queue[0].shape[0], max_live,
-                                             live, slot, self._base, self.B, self.tot)
-                    emitted += e - e_old
-                    if progress is not None:
-                        progress.update(e - e_old)
-                if e >= queue[0].shape[0] and chunk >= n_chunks:
-                    stop = True
+            # a few passes: slots of shadowed entries (no power) stay free and are refilled at once
+            for _ in range(REFILL_PASSES):
+                if clock.stopped or next_pid >= last or live >= max_live:
+                    break
+                free = np.flatnonzero(st.status[:max_live] == K.FREE)[:max(0, min(max_live - live, last - next_pid))]
+                if free.size == 0:
+                    break
+                live += self.emitter.emit_into(st, free, next_pid, self._ebase, self._base, n_photons, self.B,
+                                               self.tot, OFFSET_REL, OFFSET_ABS)
+                next_pid += free.size
+                if progress is not None:
+                    progress.update(int(free.size))
+            if next_pid >= last:
+                clock.stopped = True
             if live == 0:
-                if stop:
+                if clock.stopped:
                     break
                 continue
-            t_round = time.perf_counter()
-            # every live slot lies below max_live (refill fills the lowest free slots first); while photons die
-            # out, more steps per round keep the work per round (and the number of thread launches) bounded
+            # while photons die out, more steps per round keep the work per round (and thread launches) bounded
             steps = MAX_STEPS * min(max_live // live, MAX_STEPS_GROWTH)
-            self._round(st.view(max_live), live, steps)
-            last_round = time.perf_counter() - t_round
+            t_round = time.perf_counter()
+            self._round(st.view(max_live), steps)
             live = int(np.count_nonzero(st.status[:max_live]))
-        return emitted
+            clock.end_round(time.perf_counter() - t_round, next_pid - first - live)
+        self.emitted = next_pid - first
+        return self.emitted
 
-    def _round(self, st, live, steps):
+    def _round(self, st, steps):
         grid = self.grid
         common = (self._v0, self._e1, self._e2, self._N, self._center, self.scene.scale, OFFSET_REL, OFFSET_ABS)
         if self.direct is not None:
-            # dynamic chunks: a thread preempted by another process does not hold up the round
-            with numba.parallel_chunksize(CHUNK):
+            idx = np.flatnonzero(st.status)
+            # dynamic chunks of live photons, small enough that every thread gets several while the pool drains
+            chunk = int(min(CHUNK, max(1, idx.size // (CHUNKS_PER_THREAD * numba.get_num_threads()))))
+            with numba.parallel_chunksize(chunk):
                 ev, bd, nr = walk_parallel(
-                    st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.lost, st.exit_face,
-                    st.exit_bary, st.exit_w, self._safe, self._geo, grid.planes, grid.plane_index,
+                    idx, st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.absorbed, st.lost,
+                    st.exit_face, st.exit_bary, st.exit_w, self._safe, self._geo, grid.planes, grid.plane_index,
                     *common, self._margin, self.sigma_t, self.albedo, self.g, self.eta, K_THRESH, K_BOOST, steps,
                     self.direct.intersect, self.direct.handle)
         else:
@@ -217,14 +211,61 @@ class PoolWalk:
         self.events += int(ev)
         self.boundary += int(bd)
         self.rays += int(nr)
-        beam = -1 if self.beam_light is None or not self.keep_beam else self.beam_light
-        nb = K.reduce_round(st.batch, st.light, st.absorbed, st.lost, st.exit_face, st.exit_bary, st.exit_w,
-                            self._F, self._facing, self.tot, self.face, self.face_vert, beam, st.beam_face,
-                            st.beam_bary, st.beam_w, st.beam_batch)
-        if nb:
-            for k, arr in (("face", st.beam_face), ("bary", st.beam_bary), ("weight", st.beam_w),
-                           ("batch", st.beam_batch)):
-                self.exits[k].append(arr[:nb].copy())
+        if self.beam_light is not None and self.keep_beam:   # the first beam's exits, in slot order
+            sel = np.flatnonzero((st.exit_face >= 0) & (st.light == self.beam_light))
+            if sel.size:
+                for k, arr in (("face", st.exit_face), ("bary", st.exit_bary), ("weight", st.exit_w),
+                               ("batch", st.batch)):
+                    self.exits[k].append(arr[sel].copy())
+        K.reduce_round(st.batch, st.light, st.absorbed, st.lost, st.exit_face, st.exit_bary, st.exit_w, self._F,
+                       self._facing, self.tot, self.face, self.face_vert)
+
+
+class BudgetClock:
+    """When a time-budget walk stops emitting, and when it cuts off (module docstring); no budget: never.
+
+    ``decide(emitted, live, max_live)`` before each refill, ``end_round(seconds, done)`` after each round (done:
+    photons finished so far); ``stopped`` once emission has ended, ``cut_off()`` true past the hard bound.
+    """
+
+    def __init__(self, budget):
+        self.budget = budget
+        self.t0 = time.perf_counter()
+        self.stopped = False
+        self.rounds = 0
+        self.last_round = 0.0
+        self._ref = None          # (time, done) at the end of the first round
+        self._rate = None         # photons finished per second since then (None: not measured yet)
+
+    def elapsed(self):
+        return time.perf_counter() - self.t0
+
+    def cut_off(self):
+        return self.budget is not None and self.elapsed() >= self.budget * (1.0 + HARD_OVERSHOOT)
+
+    def end_round(self, seconds, done):
+        self.rounds += 1
+        self.last_round = seconds
+        now = self.elapsed()
+        if self._ref is None:
+            self._ref = (now, done)
+        elif done - self._ref[1] >= BUDGET_MIN_DONE and now > self._ref[0]:
+            self._rate = (done - self._ref[1]) / (now - self._ref[0])
+
+    def drain(self, live):
+        """Predicted seconds to finish ``live`` photons (inf while the rate is unmeasured)."""
+        return DRAIN_SAFETY * live / self._rate if self._rate else np.inf
+
+    def decide(self, emitted, live, max_live):
+        if self.budget is None or self.stopped:
+            return
+        if emitted and self._rate is not None and self.elapsed() + self.drain(live) >= self.budget:
+            self.stopped = True
+
+    def may_grow(self, max_live, pool):
+        return (self.budget is not None and not self.stopped and max_live < pool and self._rate is not None
+                and self.last_round < 0.5 * ROUND_FRACTION * self.budget
+                and self.drain(2 * max_live) < BUDGET_DRAIN_FRACTION * self.budget)
 
 
 class _PoolState:
@@ -244,5 +285,3 @@ class _PoolState:
         self.batch, self.light, self.pid = (np.zeros(P, dtype=np.int64) for _ in range(3))
         self.absorbed, self.lost, self.need = np.zeros(P), np.zeros(P), np.zeros(P, dtype=np.bool_)
         self.exit_face, self.exit_bary, self.exit_w = np.full(P, -1, dtype=np.int64), np.zeros((P, 3)), np.zeros(P)
-        self.beam_face, self.beam_batch = np.zeros(P, dtype=np.int64), np.zeros(P, dtype=np.int64)
-        self.beam_bary, self.beam_w = np.zeros((P, 3)), np.zeros(P)

@@ -2,8 +2,9 @@
 
 Every photon owns a counter-based random stream (below), so its path depends only on (seed, channel group,
 photon index): never on the thread count, the scheduling or the pool size. Kernels that run over the pool in
-parallel (``prange``) write only to their own photon's slot; every sum over photons is done afterwards by a
-serial kernel in slot order, so the tallies are also bitwise independent of the thread count.
+parallel (``prange``) write only to their own photon's slot; every sum over photons is done afterwards by
+:func:`reduce_round`, in parallel over batches and in slot order within a batch, so the tallies are also bitwise
+independent of the thread count.
 
 Random numbers: photon ``i`` runs its own SplitMix64 generator (Steele, Lea & Flood 2014, OOPSLA; passes
 BigCrush): draw ``k`` is ``u_k = mix(key + k * golden) / 2**64`` (top 53 bits), with the photon's key
@@ -365,74 +366,36 @@ def gather_rays(need, pos, d, pend, center, margin):
     return idx, o32, d32, tfar
 
 
-@njit(nogil=True, **_OPTS)
-def reduce_round(batch, light, absorbed, lost, exit_face, exit_bary, exit_w, F, facing, tot, face, face_vert,
-                 beam_light, beam_face, beam_bary, beam_w, beam_batch):
-    """Serial, slot-ordered sums of one round into the per-batch tallies (bitwise independent of threads).
+def _reduce(batch, light, absorbed, lost, exit_face, exit_bary, exit_w, F, facing, tot, face, face_vert):
+    """One round's absorbed/lost/exit weights into the per-batch tallies, in parallel over batches: batch ``b``'s
+    thread adds the slots of batch ``b`` in slot order, so the sums are bitwise independent of the thread count
+    and no two threads write the same tally row.
 
-    tot[:, 1] diffuse (exit on a face facing the photon's light), 2 transmitted, 3 absorbed, 4 lost. Exits of
-    photons of light ``beam_light`` (-1: none) are copied to ``beam_*``; returns how many.
+    tot[:, 1] diffuse (exit on a face facing the photon's light), 2 transmitted, 3 absorbed, 4 lost.
     """
-    nb = 0
-    for i in range(batch.shape[0]):
-        b = batch[i]
-        if absorbed[i] != 0.0:
-            tot[b, 3] += absorbed[i]
-            absorbed[i] = 0.0
-        if lost[i] != 0.0:
-            tot[b, 4] += lost[i]
-            lost[i] = 0.0
-        f = exit_face[i]
-        if f < 0:
-            continue
-        exit_face[i] = -1
-        we = exit_w[i]
-        face[b, f] += we
-        for a in range(3):
-            face_vert[b, F[f, a]] += we * exit_bary[i, a]
-        tot[b, 1 if facing[light[i], f] else 2] += we
-        if light[i] == beam_light:
-            beam_face[nb], beam_w[nb], beam_batch[nb] = f, we, b
+    n_batches = tot.shape[0]
+    for b in prange(n_batches):
+        for i in range(batch.shape[0]):
+            if batch[i] != b:
+                continue
+            if absorbed[i] != 0.0:
+                tot[b, 3] += absorbed[i]
+                absorbed[i] = 0.0
+            if lost[i] != 0.0:
+                tot[b, 4] += lost[i]
+                lost[i] = 0.0
+            f = exit_face[i]
+            if f < 0:
+                continue
+            exit_face[i] = -1
+            we = exit_w[i]
+            face[b, f] += we
             for a in range(3):
-                beam_bary[nb, a] = exit_bary[i, a]
-            nb += 1
-    return nb
+                face_vert[b, F[f, a]] += we * exit_bary[i, a]
+            tot[b, 1 if facing[light[i], f] else 2] += we
 
 
-@njit(nogil=True, **_OPTS)
-def refill(status, pos, d, w, w0, pend, key, ctr, batch, light, pid, e_pos, e_dir, e_w, e_spec, e_inc, e_light,
-           e_pid, start, limit, max_live, live, slot, base, n_batches, tot):
-    """Fill free slots from ``slot`` on (in slot order) with entries ``start`` .. ``limit - 1`` of an entry chunk.
-
-    Each consumed entry books its incident, specular and entering power (tot[:, 5], 0, 6); entries with no
-    entering weight (shadowed) take no slot. Stops when the entries run out or ``live`` reaches ``max_live``.
-    Returns (next entry, live photons, next slot to look at).
-    """
-    e = start
-    i = slot
-    n = status.shape[0]
-    while i < n and e < limit and live < max_live:
-        if status[i] == ALIVE:
-            i += 1
-            continue
-        b = e_pid[e] % n_batches
-        tot[b, 0] += e_spec[e]
-        tot[b, 5] += e_inc[e]
-        tot[b, 6] += e_w[e]
-        if e_w[e] > 0.0:
-            status[i] = ALIVE
-            for a in range(3):
-                pos[i, a] = e_pos[e, a]
-                d[i, a] = e_dir[e, a]
-            w[i] = w0[i] = e_w[e]
-            pend[i] = -1.0
-            key[i] = photon_key(base, e_pid[e])
-            ctr[i] = np.uint64(0)
-            batch[i], light[i], pid[i] = b, e_light[e], e_pid[e]
-            live += 1
-            i += 1
-        e += 1
-    return e, live, i
+reduce_round = njit(parallel=True, nogil=True, **_OPTS)(_reduce)
 
 
 @njit(nogil=True, **_OPTS)

@@ -103,6 +103,7 @@ class MCResult:
     beam_distance: np.ndarray | None = None
     boundary_tests: int = 0
     cpu_seconds: float = 0.0
+    photons_per_channel: np.ndarray | None = None
 
     @property
     def events_per_second(self) -> float:
@@ -308,14 +309,15 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     tot = np.zeros((7, 3)); tot_se = np.zeros((7, 3))
     frac = np.zeros((5, 3)); frac_se = np.zeros((5, 3))
     events = boundary = rays = 0
-    emitted_max = 0
+    per_channel = np.zeros(3, dtype=np.int64)
     exits = [None] * 3
     for ((_ss, _sa), chans), walk in zip(groups, tallies):
         emitted = walk.emitted
         rays += walk.rays
-        emitted_max = max(emitted_max, emitted)
+        per_channel[chans] = emitted
         scale = n_photons / emitted if emitted else 1.0
-        # photon weights were P/n_photons: rescale when the time budget stopped emission early
+        # photon weights were P/n_photons: each group's tallies are normalised by its own count (a time budget
+        # stops each group's emission on its own)
         fp, fse = batch_stats(walk.face * scale)
         vp, vse = batch_stats(walk.face_vert * scale)
         tt, tse = batch_stats(walk.tot * scale)
@@ -356,7 +358,8 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     check_exitance(radiance, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
     return MCResult(material=material, face_power=face_p, face_power_stderr=face_se, vertex_power=vert_p,
                     radiance=radiance, radiance_stderr=radiance_se, totals=totals, lost=frac[4],
-                    incident_power=tot[5], entering_power=tot[6], photons=emitted_max, events=events,
+                    incident_power=tot[5], entering_power=tot[6], photons=int(per_channel.min()),
+                    photons_per_channel=per_channel, events=events,
                     boundary_events=boundary, seconds=seconds, n_batches=n_batches, boundary_tests=rays,
                     cpu_seconds=cpu_seconds,
                     beam_exits=exits if keep_beam_exits else [], beam_entry=beam_entry,

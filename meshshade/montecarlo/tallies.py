@@ -128,6 +128,7 @@ def summary_dict(result: MCResult) -> dict:
         out[key] = float(val[0]) if grey else [float(x) for x in val]
     out.update(lost=float(result.lost[0]) if grey else [float(x) for x in result.lost],
                photons=int(result.photons), events=int(result.events),
+               photons_per_channel=_per_channel(result),
                boundary_events=int(result.boundary_events), boundary_tests=int(result.boundary_tests),
                seconds=float(result.seconds), cpu_seconds=float(result.cpu_seconds),
                events_per_second=float(result.events_per_second), n_batches=int(result.n_batches),
@@ -135,10 +136,19 @@ def summary_dict(result: MCResult) -> dict:
     return out
 
 
+def _per_channel(result: MCResult) -> list[int]:
+    """Photons emitted for each channel (r, g, b); every channel's tallies are normalised by its own count."""
+    per = result.photons_per_channel
+    return [int(result.photons)] * 3 if per is None else [int(x) for x in per]
+
+
 def describe_mc(result: MCResult) -> str:
-    """One line for the terminal: photons, events, rate and the channel-r totals with their standard errors."""
+    """One line for the terminal: photons (per channel where a time budget made them differ), events, rate and the
+    channel-r totals with their standard errors."""
     t = result.totals
     f = lambda k: f"{t[k][0]:.5f}±{t[k + '_stderr'][0]:.5f}"  # noqa: E731
-    return (f"mc: {result.photons} photons, {result.events} scattering events in {result.seconds:.2f} s "
+    per = _per_channel(result)
+    photons = f"{per[0]}" if len(set(per)) == 1 else "/".join(map(str, per)) + " (r/g/b)"
+    return (f"mc: {photons} photons, {result.events} scattering events in {result.seconds:.2f} s "
             f"({result.events_per_second:.3g}/s); R_spec {f('specular_reflectance')}, "
             f"R_diffuse {f('diffuse_reflectance')}, T {f('transmittance')}, A {f('absorbed')} (channel r)")

@@ -17,7 +17,9 @@ def write_mc(result: MCResult, mesh, out, *, npz=None, summary=None) -> None:
     props = {f"radiance_{c}": M[:, i] for i, c in enumerate("rgb")}
     props.update({f"stderr_{c}": S[:, i] for i, c in enumerate("rgb")})
     comments = ["meshshade model mc", f"meshshade material {result.material.describe()}",
-                f"meshshade photons {result.photons} seed-reproducible",
+                f"meshshade photons {result.photons} seed-reproducible"
+                + ("" if result.photons_per_channel is None or len(set(result.photons_per_channel.tolist())) == 1
+                   else " per channel " + "/".join(str(int(x)) for x in result.photons_per_channel)),
                 "meshshade radiance_r/g/b: linear radiant exitance in W/mm^2; stderr_r/g/b its standard error"]
     io.write_mesh_ply(out, mesh, props, tonemap(M, operator="drago"), comments=comments)
     if npz:
