@@ -172,7 +172,8 @@ class Spot:
         width = (1.0 - c) * self.blend   # 0 also for a blend so small that the product underflows: a hard edge
         if not width > 0.0:
             return np.where(x >= c, 1.0, 0.0)
-        t = np.clip((x - c) / width, 0.0, 1.0)
+        with np.errstate(over="ignore"):   # a width near the underflow: x - c over it saturates, as it should
+            t = np.clip((x - c) / width, 0.0, 1.0)
         return t * t * (3.0 - 2.0 * t)
 
     def towards(self, delta):

@@ -52,6 +52,7 @@ from meshshade.montecarlo.sampling import ROULETTE_BOOST as K_BOOST, ROULETTE_TH
 from meshshade.raycast.embree_direct import TFAR_MARGIN_REL
 from meshshade.raycast.scene import OFFSET_ABS, OFFSET_REL
 
+#: photons per entry chunk: the unit in which a run is split across Dask workers (``chunks=``)
 ENTRY_CHUNK = 1 << 14
 MAX_STEPS = 64
 MAX_STEPS_GROWTH = 1024

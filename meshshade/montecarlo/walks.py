@@ -3,9 +3,10 @@ entry chunks (:func:`walk_group`) and its per-batch tallies (:class:`GroupTally`
 
 :func:`meshshade.montecarlo.simulation.simulate` walks every group over all its photons in this process;
 :mod:`meshshade.montecarlo.distributed` walks ranges of entry chunks on Dask workers and adds the tallies. Photon
-``i`` of group ``k`` draws every random number from a stream keyed by (seed, k, i) and its entry from entry chunk
-``i // ENTRY_CHUNK`` (:mod:`meshshade.montecarlo.engine`), so a range walked anywhere gives the photons the whole run
-would give them.
+``i`` of group ``k`` draws its entry and every random number of its walk from streams keyed by (seed, k, i)
+(:mod:`meshshade.montecarlo.emission`, :mod:`meshshade.montecarlo.engine`), so a range of entry chunks
+(``ENTRY_CHUNK`` photons each, the unit of the split) walked anywhere gives the photons the whole run would give
+them.
 """
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Tetrahedral meshes built by construction: graded boxes (slabs, blocks), for the volume transport's checks.
+"""Tetrahedral meshes for the volume transport: of a closed surface mesh (:func:`surface_tetrahedra`, its vertices
+kept as nodes), and by construction, graded boxes and balls for the checks against exact solutions.
 
 A box is cut into hexahedral cells along given node coordinates per axis and every cell into six tetrahedra
 around its main diagonal (Kuhn's subdivision: neighbouring cells share their face diagonals, so the mesh is
@@ -7,11 +8,17 @@ fast (near sources and the lit surface) and coarse where it does not.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
+import igl
 import numpy as np
+from scipy.spatial import Delaunay
 
 from meshshade.errors import MeshshadeError
+from meshshade.volume.fem import boundary_faces
 
-__all__ = ["box_tetrahedra", "ball_tetrahedra", "graded_axis", "graded_box"]
+__all__ = ["SurfaceTetrahedra", "surface_tetrahedra", "box_tetrahedra", "ball_tetrahedra", "graded_axis",
+           "graded_box"]
 
 # Kuhn's six tetrahedra of the unit cube: vertex (i, j, k) has index i + 2 j + 4 k; each path 0 -> 7 along the
 # axes in one order is a tetrahedron
@@ -81,3 +88,102 @@ def ball_tetrahedra(radius, n):
     flip = det < 0
     tets[flip] = tets[flip][:, [0, 2, 1, 3]]
     return nodes, tets
+
+
+#: the inner layer's depth below each surface vertex, in units of the vertex's mean edge length
+LAYER_DEPTH = 0.6
+#: jitter of the interior points (fraction of their spacing): no five cospherical points, so no flat tetrahedra
+JITTER = 0.05
+#: a lattice of spacing s fills the band [BAND_LO s, BAND_HI s) of depths below the surface (the finest starts
+#: at FINE_START x the surface spacing, the coarsest has no upper bound)
+BAND_LO, BAND_HI, FINE_START = 1.5, 3.0, 1.2
+
+
+class SurfaceTetrahedra(NamedTuple):
+    """A tetrahedral mesh of a closed surface whose first ``n_surface`` nodes are the surface's own vertices.
+
+    nodes (N, 3) mm; tets (T, 4); n_surface: the surface vertices (read the solution there, no interpolation);
+    surface_spacing: median edge length of the surface (mm); faces_recovered: the fraction of the input triangles
+    that are boundary faces of the tetrahedral mesh. The rest are retriangulated between the same surface
+    vertices: a planar quad whose corners lie on a circle may take its other diagonal (about half of a torus's
+    grid), a flat tetrahedron between four coplanar surface vertices was dropped, or the surface is undersampled
+    against its thickness there.
+    """
+
+    nodes: np.ndarray
+    tets: np.ndarray
+    n_surface: int
+    surface_spacing: float
+    faces_recovered: float
+
+
+def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0):
+    """Tetrahedralise the inside of a closed, outward-oriented triangle mesh, keeping its vertices as nodes.
+
+    The points: the surface vertices (exactly), an inner layer ``LAYER_DEPTH`` x the local edge length below
+    each vertex (along the vertex normal; dropped where the body is thinner than that), and body-centred cubic
+    lattices whose spacing doubles from 2x the surface's median edge length up to ``h_max`` (default: the largest
+    extent / 12), each in a band of depth below the surface (``BAND_LO``, ``BAND_HI``; inside by igl's fast winding number,
+depth by its point-to-mesh distance).
+    Their Delaunay tetrahedralisation (scipy, Qhull) is kept where the centroid's winding number is above 1/2
+    (igl's fast winding number), and zero-volume tetrahedra spanned by four coplanar surface vertices are
+    dropped (the boundary then takes the quad's other diagonal: same plane, same area). Interior points are
+    jittered by ``JITTER`` of their spacing (deterministic, ``seed``) so that no other flat tetrahedron forms.
+
+    Permissive (scipy's Qhull, libigl): the default install needs no mesher of its own. Raises MeshshadeError if
+    a flat tetrahedron remains off the surface or a surface vertex is left outside every tetrahedron.
+    """
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    F = np.ascontiguousarray(faces, dtype=np.int64)
+    n = V.shape[0]
+    edges = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    length = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
+    h_s = float(np.median(length))
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    h_max = float(h_max) if h_max is not None else float(np.max(hi - lo)) / 12.0
+    count = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
+    vlen = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / count
+    rng = np.random.default_rng(seed)
+    layer = V - igl.per_vertex_normals(V, F) * (LAYER_DEPTH * vlen)[:, None]
+    layer += rng.uniform(-JITTER, JITTER, layer.shape) * vlen[:, None]
+    spacings = [2.0 * h_s]
+    while spacings[-1] < h_max:
+        spacings.append(2.0 * spacings[-1])
+    lattices = []
+    for s in spacings:
+        axes = [np.arange(lo[a] + 0.5 * s, hi[a], s) for a in range(3)]
+        G = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        G = np.concatenate([G, G + 0.5 * s])
+        lattices.append(G + rng.uniform(-JITTER * s, JITTER * s, G.shape))
+    candidates = np.concatenate(lattices + [layer])
+    depth = np.full(candidates.shape[0], -1.0)       # depth below the surface; -1 outside
+    inside = igl.fast_winding_number(V, F, candidates) > 0.5
+    depth[inside] = np.sqrt(igl.point_mesh_squared_distance(candidates[inside], V, F)[0])
+    points, start = [V], 0
+    for k, (G, s) in enumerate(zip(lattices, spacings)):
+        d = depth[start:start + G.shape[0]]
+        start += G.shape[0]
+        band_lo = BAND_LO * s if k else FINE_START * h_s
+        band_hi = BAND_HI * s if k < len(spacings) - 1 else np.inf
+        points.append(G[(d >= band_lo) & (d < band_hi)])
+    points.insert(1, layer[depth[start:] > 0.5 * LAYER_DEPTH * vlen])
+    P = np.concatenate(points)
+    T = Delaunay(P).simplices.astype(np.int64)
+    T = T[igl.fast_winding_number(V, F, P[T].mean(axis=1)) > 0.5]
+    Q = P[T]
+    det = np.linalg.det(Q[:, 1:] - Q[:, :1])
+    flat = np.abs(det) <= 6e-9 * h_s ** 3
+    if np.any(T[flat] >= n):
+        raise MeshshadeError(f"{int(np.sum(np.any(T[flat] >= n, axis=1)))} flat tetrahedra off the surface")
+    T = T[~flat]
+    neg = det[~flat] < 0
+    T[neg] = T[neg][:, [0, 2, 1, 3]]
+    used = np.zeros(P.shape[0], dtype=bool)
+    used[T.ravel()] = True
+    if not used[:n].all():
+        raise MeshshadeError(f"{int(np.sum(~used[:n]))} surface vertices are in no tetrahedron (is the surface "
+                             "closed, and sampled finely against its thinnest part?)")
+    surface = {tuple(f) for f in np.sort(F, axis=1).tolist()}
+    bound = {tuple(f) for f in np.sort(boundary_faces(T), axis=1).tolist()}
+    return SurfaceTetrahedra(P, T, n, h_s, len(surface & bound) / max(len(surface), 1))
+
