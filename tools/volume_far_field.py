@@ -75,7 +75,8 @@ def volume_exitance(mesh, material, light, n_points=4):
 def errors(M, ref, lit):
     peak = ref.max(axis=0)
     out = {}
-    for label, sel in (("unlit_above_1e-2_peak", ~lit[:, None] & (ref > 1e-2 * peak)), ("lit", lit[:, None] & (ref > 0))):
+    unlit = ~lit[:, None] & (ref > 1e-2 * peak)
+    for label, sel in (("unlit_above_1e-2_peak", unlit), ("lit", lit[:, None] & (ref > 0))):
         out[label] = [round(float(np.mean(np.abs(M[sel[:, c], c] / ref[sel[:, c], c] - 1.0))), 4) for c in range(3)]
         out[label + "_count"] = [int(sel[:, c].sum()) for c in range(3)]
     return out
