@@ -114,6 +114,25 @@ def _raise_interrupted(signum, frame):
     raise Interrupted(signum)
 
 
+def _report_interrupted(exc) -> int:
+    name = signal.Signals(exc.signum).name
+    print(f"meshshade: interrupted by {name}; no partial output was left", file=sys.stderr)
+    return 128 + exc.signum
+
+
+def _interrupt_in_chain(exc):
+    """The :class:`Interrupted` or KeyboardInterrupt behind ``exc`` (its causes and contexts), or None: a signal
+    whose handler ran inside a C function that called back into Python (numba unpickling a cached kernel) comes
+    out of that function as a SystemError caused by it."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, (Interrupted, KeyboardInterrupt)):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 @contextlib.contextmanager
 def _stop_signals_interrupt():
     """While a command runs, SIGTERM and SIGHUP raise :class:`Interrupted` as Ctrl-C raises KeyboardInterrupt
@@ -197,9 +216,15 @@ def main(argv=None) -> int:
             print(f"meshshade: error: {exc}", file=sys.stderr)
             return 2
         except Interrupted as exc:
-            name = signal.Signals(exc.signum).name
-            print(f"meshshade: interrupted by {name}; no partial output was left", file=sys.stderr)
-            return 128 + exc.signum
+            return _report_interrupted(exc)
+        except SystemError as exc:   # a signal raised inside a C call back into Python (numba loading a kernel)
+            cause = _interrupt_in_chain(exc)
+            if cause is None:
+                raise
+            if isinstance(cause, Interrupted):
+                return _report_interrupted(cause)
+            print("meshshade: interrupted; no partial output was left", file=sys.stderr)
+            return 130
         except KeyboardInterrupt:
             print("meshshade: interrupted; no partial output was left", file=sys.stderr)
             return 130

@@ -242,7 +242,9 @@ class BudgetClock:
         return time.perf_counter() - self.t0
 
     def cut_off(self):
-        return self.budget is not None and self.elapsed() >= self.budget * (1.0 + HARD_OVERSHOOT)
+        """Past the hard bound, once the first round is done (so that a walk started late, or whose first round
+        carried a compile, still returns photons rather than none)."""
+        return self.budget is not None and self.rounds > 0 and self.elapsed() >= self.budget * (1.0 + HARD_OVERSHOOT)
 
     def end_round(self, seconds, done):
         self.rounds += 1

@@ -142,6 +142,9 @@ MAX_PHOTONS = 1 << 62
 MAX_EVENTS_PER_SECOND_PER_CORE = 2.5e7
 #: runs estimated (at that optimistic rate) above this are refused unless a time budget bounds them: 1 day
 MAX_RUN_SECONDS = 86400.0
+#: with a time budget, each channel group gets at least this fraction of its equal share of the budget (a group
+#: that overran its share cannot leave the next ones nothing: the run then overruns instead, by at most this)
+MIN_GROUP_SHARE = 0.5
 #: most batches (per-batch tallies hold n_batches x faces floats) and photons walked together (~200 bytes each)
 MAX_BATCHES = 256
 MAX_POOL = 1 << 22
@@ -228,7 +231,9 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         number of threads and photon i's path does not depend on ``pool``
     time_budget : float seconds or None, counted from the call: emission stops when the photons in flight are
         predicted to finish within the budget; photons still in flight at 1.25 x the budget are cut off and
-        their weight is reported as ``lost`` (see :mod:`meshshade.montecarlo.engine` for the bound; the baseline
+        their weight is reported as ``lost``. The channel groups walk one after the other, each on what is left
+        shared by those still to come, but at least ``MIN_GROUP_SHARE`` of an equal share, and every group walks
+        at least its first round of photons (see :mod:`meshshade.montecarlo.engine` for the bound; the baseline
         wavefront, ``fast_interior=False``, finishes all photons in flight)
     n_batches : batches for the standard errors (>= 2)
     pool : photon slots advanced together (default 2**18 for the pooled engine, 2**16 for the baseline)
@@ -296,8 +301,9 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
             tallies = []
             for gi in range(len(groups)):
                 budget = None
-                if time_budget is not None:  # what is left, shared by the remaining groups
-                    budget = max(time_budget - (time.perf_counter() - t_start), 0.0) / (len(groups) - gi)
+                if time_budget is not None:  # what is left, shared by the remaining groups, never below a floor
+                    left = max(time_budget - (time.perf_counter() - t_start), 0.0) / (len(groups) - gi)
+                    budget = max(left, MIN_GROUP_SHARE * time_budget / len(groups))
                 tallies.append(walk_group(setup, gi, n_photons, seed=seed, n_batches=n_batches, pool=pool,
                                           keep_beam=keep_beam_exits, time_budget=budget, progress=bar,
                                           rng=np.random.default_rng(children[gi])))

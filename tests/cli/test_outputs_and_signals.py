@@ -226,6 +226,40 @@ def test_signal_inside_a_writer_leaves_no_temporary_file(sphere, cli, monkeypatc
     assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # main() put the previous handlers back
 
 
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_inside_a_numba_cache_load_is_still_an_interrupt(sphere, cli, monkeypatch, sig):
+    """A signal whose handler runs while numba unpickles a cached kernel (a C call back into Python) leaves that
+    call as a SystemError caused by the interrupt (seen when SIGTERM landed 1 s into a bake): still one line and
+    exit 128 + signal, nothing written. In-process, the bake raising what numba raised there."""
+    import meshshade.cli.bake as cli_bake
+    from meshshade.cli.main import Interrupted
+
+    def numba_load_interrupted(*args, **kwargs):
+        try:
+            if sig == signal.SIGINT:
+                raise KeyboardInterrupt
+            raise Interrupted(sig)
+        except BaseException as exc:
+            raise SystemError("<function _numba_unpickle> returned a result with an exception set") from exc
+
+    monkeypatch.setattr(cli_bake, "bake", numba_load_interrupted)
+    tmp = sphere.parent
+    before = cli.snapshot(tmp)
+    rc, _, err = cli.run(_bake(sphere, tmp / "o.ply"))
+    cli.assert_clean_failure(rc, err, before, tmp, "interrupted", code=128 + sig)
+
+
+def test_a_system_error_without_a_signal_is_not_an_interrupt(sphere, cli, monkeypatch):
+    import meshshade.cli.bake as cli_bake
+
+    def broken(*args, **kwargs):
+        raise SystemError("a real bug")
+
+    monkeypatch.setattr(cli_bake, "bake", broken)
+    with pytest.raises(SystemError, match="a real bug"):
+        cli.run(_bake(sphere, sphere.parent / "o.ply"))
+
+
 # --------------------------------------------------------------------------------------------- standard output
 def test_stdout_on_a_full_device_is_one_line(tmp_path, cli):
     with open("/dev/full", "w") as full:
