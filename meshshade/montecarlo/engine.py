@@ -147,7 +147,7 @@ class PoolWalk:
         clock = BudgetClock(time_budget)
         next_pid = first
         max_live = P if time_budget is None else min(P, BUDGET_START_LIVE)
-        live = 0
+        live = entered = 0   # photons in flight; photons that entered with power (shadowed ones finish at once)
         while True:
             if clock.cut_off():
                 K.cut_off(st.status, st.w, st.batch, self.tot)
@@ -163,8 +163,10 @@ class PoolWalk:
                 free = np.flatnonzero(st.status[:max_live] == K.FREE)[:max(0, min(max_live - live, last - next_pid))]
                 if free.size == 0:
                     break
-                live += self.emitter.emit_into(st, free, next_pid, self._ebase, self._base, n_photons, self.B,
-                                               self.tot, OFFSET_REL, OFFSET_ABS)
+                k = self.emitter.emit_into(st, free, next_pid, self._ebase, self._base, n_photons, self.B, self.tot,
+                                           OFFSET_REL, OFFSET_ABS)
+                live += k
+                entered += k
                 next_pid += free.size
                 if progress is not None:
                     progress.update(int(free.size))
@@ -179,7 +181,7 @@ class PoolWalk:
             t_round = time.perf_counter()
             self._round(st.view(max_live), steps)
             live = int(np.count_nonzero(st.status[:max_live]))
-            clock.end_round(time.perf_counter() - t_round, next_pid - first - live)
+            clock.end_round(time.perf_counter() - t_round, entered - live)
         self.emitted = next_pid - first
         return self.emitted
 
@@ -226,7 +228,8 @@ class BudgetClock:
     """When a time-budget walk stops emitting, and when it cuts off (module docstring); no budget: never.
 
     ``decide(emitted, live, max_live)`` before each refill, ``end_round(seconds, done)`` after each round (done:
-    photons finished so far); ``stopped`` once emission has ended, ``cut_off()`` true past the hard bound.
+    walked photons finished so far, shadowed entries not counted: they cost no walk); ``stopped`` once emission has
+    ended, ``cut_off()`` true past the hard bound.
     """
 
     def __init__(self, budget):
