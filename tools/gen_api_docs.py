@@ -29,7 +29,7 @@ PAGES = {
     "output": ("meshshade.output", ["bake_file", "render", "tonemap", "compare", "report"]),
     "montecarlo": ("meshshade.montecarlo", ["simulation", "engine", "emitter", "emission", "sampling", "direct_walk",
                                             "kernels", "shapes", "interior", "tallies", "wavefront_oracle"]),
-    "volume": ("meshshade.volume", ["fem", "tetmesh", "sources", "operator"]),
+    "volume": ("meshshade.volume", ["fem", "tetmesh", "sources", "locate", "operator"]),
     "bench": ("meshshade.bench", ["scenes", "plan", "runner", "references", "report"]),
     "batch": ("meshshade.batch", ["runner", "jobs", "cluster"]),
     "blender": ("meshshade.blender", ["convert", "job", "addon"]),

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError
+from meshshade.volume.locate import tet_neighbours, walk_locate
 
 __all__ = ["tet_geometry", "boundary_faces", "assemble_diffusion", "locate_points", "point_source_vector",
            "exitance_from_fluence"]
@@ -91,13 +92,17 @@ def assemble_diffusion(nodes, tets, faces, *, D, sigma_a, A, geometry=None):
     return (K + Kb).tocsr()
 
 
-def locate_points(nodes, tets, points, *, tree=None):
+def locate_points(nodes, tets, points, *, tree=None, neighbours=None, walk=True):
     """(tet (k,) int64, barycentric (k, 4) float64) of the tetrahedron holding each point.
 
-    The tetrahedra with the nearest centroids are tried (a ``cKDTree`` of the centroids, built here or passed as
-    ``tree``): :data:`LOCATE_CANDIDATES` first, four times as many for the points not yet found, and so on; a point
-    inside none of them (outside the mesh) takes the candidate it is least outside of, its barycentrics clipped to
-    the tetrahedron.
+    ``walk`` (default): the compiled neighbour walk of :mod:`meshshade.volume.locate` from the tetrahedron with
+    the nearest centroid (a ``cKDTree`` of the centroids, and the face neighbours, built here or passed as
+    ``tree`` and ``neighbours``); a point outside the mesh is clamped into the boundary tetrahedron through which
+    the walk left (its barycentrics clipped). Points the walk cannot settle, and every point with ``walk=False``
+    (the walk's test oracle), go to the candidate search: the tetrahedra with the nearest centroids,
+    :data:`LOCATE_CANDIDATES` first, four times as many for the points not yet found, and so on; a point inside
+    none of them takes the candidate it is least outside of, clipped likewise. Callers that must not move
+    outside points (sources of light that has left the body) drop them first.
     """
     points = np.atleast_2d(np.asarray(points, dtype=np.float64))
     if tree is None:
@@ -105,7 +110,18 @@ def locate_points(nodes, tets, points, *, tree=None):
     n = points.shape[0]
     tet = np.zeros(n, dtype=np.int64)
     bary = np.zeros((n, 4))
-    todo = np.arange(n)
+    if walk and n:
+        nb = tet_neighbours(tets) if neighbours is None else neighbours
+        start = tree.query(points, k=1)[1].astype(np.int64)
+        status = walk_locate(np.ascontiguousarray(nodes, dtype=np.float64),
+                             np.ascontiguousarray(tets, dtype=np.int64), nb, np.ascontiguousarray(points), start, tet,
+                             bary)
+        settled = status >= 0   # found, or outside: clamped into the boundary tetrahedron the walk left by
+        bary[settled] = np.clip(bary[settled], 0.0, None)
+        bary[settled] /= bary[settled].sum(axis=1, keepdims=True)
+        todo = np.flatnonzero(~settled)
+    else:
+        todo = np.arange(n)
     k = LOCATE_CANDIDATES
     while todo.size:
         k = min(k, tets.shape[0])

@@ -124,10 +124,11 @@ def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0):
     each vertex (along the vertex normal; dropped where the body is thinner than that), and body-centred cubic
     lattices whose spacing doubles from 2x the surface's median edge length up to ``h_max`` (default: the largest
     extent / 12), each in a band of depth below the surface (``BAND_LO``, ``BAND_HI``; inside by igl's fast
-    winding number, depth by its point-to-mesh distance). Their Delaunay tetrahedralisation (scipy, Qhull) is kept where the centroid's winding number is above 1/2
-    (igl's fast winding number), and zero-volume tetrahedra spanned by four coplanar surface vertices are
-    dropped (the boundary then takes the quad's other diagonal: same plane, same area). Interior points are
-    jittered by ``JITTER`` of their spacing (deterministic, ``seed``) so that no other flat tetrahedron forms.
+    winding number, depth by its point-to-mesh distance). Their Delaunay tetrahedralisation (scipy, Qhull) is
+    kept where the centroid's winding number is above 1/2, and zero-volume tetrahedra spanned by four coplanar
+    surface vertices are dropped (the boundary then takes the quad's other diagonal: same plane, same area).
+    Interior points are jittered by ``JITTER`` of their spacing (deterministic, ``seed``) so that no other flat
+    tetrahedron forms.
 
     Permissive (scipy's Qhull, libigl): the default install needs no mesher of its own. Raises MeshshadeError if
     a flat tetrahedron remains off the surface or a surface vertex is left outside every tetrahedron.

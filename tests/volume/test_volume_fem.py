@@ -170,3 +170,52 @@ def test_ball_converges_to_the_robin_sphere_series_at_second_order():
     order = [math.log2(errors[i] / errors[i + 1]) for i in range(2)]
     assert min(order) > 1.8, (errors, order)
     assert errors[-1] < 0.006, errors
+
+
+def test_walk_locates_as_the_candidate_search():
+    """The compiled neighbour walk against the candidate search (its oracle) on a graded box and on the mesh of a
+    surface: for points inside, the same point rebuilt from either answer and the same tetrahedron except for
+    points on a shared face; points outside clamped onto the mesh (barycentrics >= 0, the point moved no farther
+    than its distance to the mesh plus the size of the tetrahedron it lands in)."""
+    import igl
+
+    from meshshade.geometry.procedural import icosphere
+    from meshshade.volume import surface_tetrahedra
+    rng = np.random.default_rng(7)
+    nodes, tets = _box()
+    V, F = icosphere(5.0, 3)
+    tm = surface_tetrahedra(V, F)
+    box_pts = rng.uniform([-3.2, -3.2, -2.1], [3.2, 3.2, 0.1], size=(3000, 3))
+    ball_pts = rng.uniform(-5.2, 5.2, size=(3000, 3))
+    cases = [(nodes, tets, box_pts, np.all((np.abs(box_pts[:, :2]) < 3.0), axis=1) & (box_pts[:, 2] > -2.0)
+              & (box_pts[:, 2] < 0.0)),
+             (tm.nodes, tm.tets, ball_pts, igl.fast_winding_number(V, F, ball_pts) > 0.5)]
+    for nd, tt, pts, inside in cases:
+        assert 0.05 < np.mean(~inside) < 0.95
+        t1, b1 = locate_points(nd, tt, pts)
+        t2, b2 = locate_points(nd, tt, pts, walk=False)
+        assert np.all(b1 >= 0) and np.allclose(b1.sum(axis=1), 1.0)
+        p1 = np.einsum("ij,ijk->ik", b1, nd[tt[t1]])
+        p2 = np.einsum("ij,ijk->ik", b2, nd[tt[t2]])
+        np.testing.assert_allclose(p1[inside], pts[inside], atol=1e-9)
+        np.testing.assert_allclose(p2[inside], pts[inside], atol=1e-9)
+        on_face = np.min(b2, axis=1) < 1e-9
+        assert np.all((t1 == t2)[inside] | on_face[inside])
+        size = np.linalg.norm(np.ptp(nd[tt[t1]], axis=1), axis=1)
+        away = np.sqrt(igl.point_mesh_squared_distance(pts, nd, boundary_faces(tt, nd))[0])
+        assert np.all(np.linalg.norm(p1 - pts, axis=1)[~inside] <= (away + size)[~inside])
+
+
+def test_the_walk_itself_finds_the_inside_points():
+    """The walk, without the search behind it, settles every point inside the box, at the right place."""
+    from scipy.spatial import cKDTree
+
+    from meshshade.volume.locate import tet_neighbours, walk_locate
+    nodes, tets = _box()
+    pts = np.random.default_rng(8).uniform([-2.9, -2.9, -1.9], [2.9, 2.9, -0.05], size=(3000, 3))
+    start = cKDTree(nodes[tets].mean(axis=1)).query(pts, k=1)[1].astype(np.int64)
+    tet, bary = np.zeros(3000, dtype=np.int64), np.zeros((3000, 4))
+    status = walk_locate(nodes, tets, tet_neighbours(tets), pts, start, tet, bary)
+    assert np.all(status == 1)
+    np.testing.assert_allclose(np.einsum("ij,ijk->ik", bary, nodes[tets[tet]]), pts, atol=1e-12)
+    assert np.all(bary >= -1e-12)
