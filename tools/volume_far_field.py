@@ -31,8 +31,8 @@ from meshshade.light.samples import entry_samples
 from meshshade.materials import material_from_options
 from meshshade.montecarlo import simulate
 from meshshade.raycast import make_scene
-from meshshade.volume import (DiffusionOperator, line_sources, locate_points, point_source_vector,
-                              refracted_directions, surface_tetrahedra)
+from meshshade.kernels.fresnel import refract_in
+from meshshade.volume import DiffusionOperator, line_sources, locate_points, point_source_vector, surface_tetrahedra
 
 
 def scene(name):
@@ -52,7 +52,7 @@ def volume_exitance(mesh, material, light, n_points=4):
     t0 = time.perf_counter()
     es = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, [light],
                        make_scene(mesh.vertices, mesh.faces), material.eta)
-    w = refracted_directions(es.directions, es.normals, material.eta)
+    w = refract_in(es.directions, es.normals, material.eta)
     t["entries"] = time.perf_counter() - t0
     out = np.zeros((mesh.n_vertices, 3))
     t["operators"] = t["sources"] = t["solves"] = 0.0

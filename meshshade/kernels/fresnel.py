@@ -85,3 +85,13 @@ def fresnel_transmittance_entry(cos_i, eta):
     ndarray of float64 in [0, 1], broadcast shape; 0 at grazing incidence (cos_i = 0) unless eta = 1.
     """
     return (1.0 - fresnel_reflectance(cos_i, 1.0, eta))[()]
+
+
+def refract_in(d, n, eta: float) -> np.ndarray:
+    """Refract unit directions ``d`` (n, 3) arriving from outside (index 1) through outward unit normals ``n`` (n, 3)
+    into ``eta`` (Snell): the Monte Carlo entry and the volume transport's line sources."""
+    cos_i = np.clip(-np.einsum("ij,ij->i", d, n), 0.0, 1.0)
+    sin2_t = (1.0 - cos_i ** 2) / eta ** 2
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, None))
+    out = d / eta + (cos_i / eta - cos_t)[:, None] * n
+    return out / np.linalg.norm(out, axis=1, keepdims=True)

@@ -1,8 +1,8 @@
 """The fused walk kernel of the pooled engine's ``direct`` mode: Embree's ``rtcIntersect1`` from numba threads.
 
 One ``prange`` kernel over the live slots walks every live photon for up to ``max_steps`` events: free paths
-certified by the safe-distance grid (:mod:`meshshade.montecarlo.interior`) need no ray, the others are traced from the photon's own
-thread through :func:`meshshade.raycast.embree_direct.trace` (no GIL) and resolved in float64 by
+certified by the safe-distance grid (:mod:`meshshade.montecarlo.interior`) need no ray, the others are traced from
+the photon's own thread through :func:`meshshade.raycast.embree_direct.trace` (no GIL) and resolved in float64 by
 :func:`meshshade.montecarlo.kernels.surface_s`. Physics and random streams are those of
 :mod:`meshshade.montecarlo.kernels`, so a photon walks the same path as in the ``batched`` mode.
 """
@@ -19,8 +19,8 @@ __all__ = ["walk_parallel"]
 
 
 def _walk(idx, status, pos, d, w, w0, pend, key, ctr, absorbed, lost, exit_face, exit_bary, exit_w, safe, geo,
-          planes, pidx, v0, e1, e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh, boost,
-          max_steps, intersect, scene):
+          planes, pidx, v0, e1, e2, normals, center, scale, off_rel, off_abs, margin, sigma_t, albedo, g, eta, thresh,
+          boost, max_steps, intersect, scene):
     """Every live photon (the slots ``idx``) walks up to ``max_steps`` events (scattering or surface) or until it
     dies.
 

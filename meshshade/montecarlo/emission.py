@@ -77,13 +77,6 @@ def spot_falloff(cos_theta, c, width):
     return t * t * (3.0 - 2.0 * t)
 
 
-@njit(inline="always", **_OPTS)
-def _offset(px, py, pz, center, scale, off_rel, off_abs):
-    """The scene's ray offset at p (``offset_epsilon``), mm."""
-    rc = math.sqrt((px - center[0]) ** 2 + (py - center[1]) ** 2 + (pz - center[2]) ** 2)
-    return off_rel * (scale + rc) + off_abs * math.sqrt(px * px + py * py + pz * pz)
-
-
 def _sample(pid0, k, base, w_photon, light_cdf, kinds, params, rows, cdfs, wfaces, V, F, N, A, center, scale,
             off_rel, off_abs, light, face, bary, weight, query, ray_o, ray_d, ray_t):
     """Step 1 for photons pid0 .. pid0 + k - 1 (outputs indexed by j = pid - pid0); see the module docstring."""
@@ -141,7 +134,7 @@ def _sample(pid0, k, base, w_photon, light_cdf, kinds, params, rows, cdfs, wface
                 cos = max(0.0, -(N[f, 0] * dx + N[f, 1] * dy + N[f, 2] * dz))
                 # importance weight: true irradiance at the point over the face-centroid value used for sampling
                 w *= emit * cos / (t * t) * A[f] / wfaces[row, f]
-            eps = _offset(px, py, pz, center, scale, off_rel, off_abs)
+            eps = K.ray_offset(px, py, pz, center, scale, off_rel, off_abs)
             query[j] = SHADOW
             ray_o[j, 0], ray_o[j, 1], ray_o[j, 2] = px + eps * N[f, 0], py + eps * N[f, 1], pz + eps * N[f, 2]
             ray_d[j, 0], ray_d[j, 1], ray_d[j, 2] = -dx, -dy, -dz
@@ -183,8 +176,8 @@ cast_direct = njit(parallel=True, nogil=True, **_OPTS)(_cast)
 
 
 def _enter(pid0, k, slots, query, hit, light, face, bary, weight, ray_o, ray_d, kinds, params, beam_entry, V, F,
-           N, center, scale, off_rel, off_abs, eta, walk_base, n_batches, status, pos, d, w, w0, pend, key, ctr,
-           batch, slot_light, pid, inc, spec, w_in):
+           N, v0, e1, e2, center, scale, off_rel, off_abs, eta, walk_base, n_batches, status, pos, d, w, w0, pend, key,
+           ctr, batch, slot_light, pid, inc, spec, w_in):
     """Step 3: entry ``j`` (photon pid0 + j) goes into pool slot ``slots[j]`` (ALIVE when it carries power);
     ``inc``, ``spec``, ``w_in`` (k,) receive its incident, specular and entering power."""
     for j in prange(k):
@@ -202,21 +195,8 @@ def _enter(pid0, k, slots, query, hit, light, face, bary, weight, ray_o, ray_d, 
                 wj = 0.0
                 f = 0
             else:   # float64 barycentrics of the hit on face f (Moller-Trumbore, clipped onto the face)
-                i0 = F[f, 0]
-                a0, a1, a2 = V[F[f, 1], 0] - V[i0, 0], V[F[f, 1], 1] - V[i0, 1], V[F[f, 1], 2] - V[i0, 2]
-                c0, c1, c2 = V[F[f, 2], 0] - V[i0, 0], V[F[f, 2], 1] - V[i0, 1], V[F[f, 2], 2] - V[i0, 2]
-                px, py, pz = dy * c2 - dz * c1, dz * c0 - dx * c2, dx * c1 - dy * c0
-                inv = 1.0 / (a0 * px + a1 * py + a2 * pz)
-                sx, sy, sz = ray_o[j, 0] - V[i0, 0], ray_o[j, 1] - V[i0, 1], ray_o[j, 2] - V[i0, 2]
-                qx, qy, qz = sy * a2 - sz * a1, sz * a0 - sx * a2, sx * a1 - sy * a0
-                uu = (sx * px + sy * py + sz * pz) * inv
-                vv = (dx * qx + dy * qy + dz * qz) * inv
-                if not (math.isfinite(uu) and math.isfinite(vv)):
-                    uu, vv = 0.0, 0.0
-                uu, vv = max(uu, 0.0), max(vv, 0.0)
-                if uu + vv > 1.0:
-                    s = uu + vv
-                    uu, vv = uu / s, vv / s
+                _t, uu, vv = K.face_ray(f, ray_o[j, 0], ray_o[j, 1], ray_o[j, 2], dx, dy, dz, v0, e1, e2)
+                uu, vv = K.clip_onto_face(uu, vv)
                 b0, b1, b2 = 1.0 - uu - vv, uu, vv
         i = slots[j]
         pid_j = pid0 + j
@@ -239,7 +219,7 @@ def _enter(pid0, k, slots, query, hit, light, face, bary, weight, ray_o, ray_d, 
                 ox, oy, oz = -ray_d[j, 0], -ray_d[j, 1], -ray_d[j, 2]
             cos_i = min(1.0, max(0.0, -(ox * nx + oy * ny + oz * nz)))
             fr = fresnel_in(cos_i, eta)
-            eps = _offset(x, y, z, center, scale, off_rel, off_abs)
+            eps = K.ray_offset(x, y, z, center, scale, off_rel, off_abs)
             x, y, z = x - eps * nx, y - eps * ny, z - eps * nz
             cos_t = math.sqrt(max(0.0, 1.0 - (1.0 - cos_i * cos_i) / (eta * eta)))
             cf = cos_i / eta - cos_t
@@ -338,6 +318,7 @@ class EmitterKernel:
         self.F = np.ascontiguousarray(em.F, dtype=np.int64)
         self.N = np.ascontiguousarray(em.N, dtype=np.float64)
         self.A = np.ascontiguousarray(em.A, dtype=np.float64)
+        self.v0, self.e1, self.e2, _ = K.face_records(self.V, self.F, self.N)
         sc = em.scene
         self.center = np.ascontiguousarray(sc.center, dtype=np.float64)
         self.scale = float(sc.scale)
@@ -383,8 +364,8 @@ class EmitterKernel:
         self._cast(b)
         enter_slots(pid0, k, slots, b["query"], b["hit"], b["light"], b["face"], b["bary"], b["weight"],
                     b["ray_o"], b["ray_d"], self.kinds, self.params, self.beam_entry, self.V, self.F, self.N,
-                    self.center, self.scale, off_rel, off_abs, self.em.eta, walk_base, n_batches, st.status,
-                    st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.batch, st.light, st.pid, b["inc"],
-                    b["spec"], b["w_in"])
+                    self.v0, self.e1, self.e2, self.center, self.scale, off_rel, off_abs, self.em.eta, walk_base,
+                    n_batches, st.status, st.pos, st.d, st.w, st.w0, st.pend, st.key, st.ctr, st.batch, st.light,
+                    st.pid, b["inc"], b["spec"], b["w_in"])
         book_entries(pid0, k, n_batches, b["inc"], b["spec"], b["w_in"], tot)
         return int(np.count_nonzero(b["w_in"]))

@@ -111,11 +111,7 @@ class PoolWalk:
         self.rays = 0
         self.beam_light = next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), None)
         self.exits = {"face": [], "bary": [], "weight": [], "batch": []}
-        tri = V[F]
-        # one 96-byte record per face (v0, e1, e2, normal): a boundary test touches 1-2 cache lines, not 4
-        packed = np.ascontiguousarray(np.concatenate([tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0],
-                                                      np.asarray(normals, dtype=np.float64)], axis=1))
-        self._v0, self._e1, self._e2, self._N = (packed[:, 3 * j:3 * j + 3] for j in range(4))
+        self._v0, self._e1, self._e2, self._N = K.face_records(V, F, normals)
         self._F = np.ascontiguousarray(F, dtype=np.int64)
         self._facing = np.ascontiguousarray(emitter.facing)
         self._base = np.uint64(K.stream_base(np.uint64(self.seed & 0xFFFFFFFFFFFFFFFF), self.group))

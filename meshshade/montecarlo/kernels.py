@@ -186,6 +186,56 @@ def scatter_s(x, y, z, dx, dy, dz, wi, s, k, c, thr, albedo, g, boost):
 
 
 @njit(inline="always", **_OPTS)
+def ray_offset(px, py, pz, center, scale, off_rel, off_abs):
+    """The scene's ray offset at p in mm, as :meth:`meshshade.raycast.scene._SceneBase.offset_epsilon`:
+    off_rel (scale + |p - center|) + off_abs |p|."""
+    rc = math.sqrt((px - center[0]) ** 2 + (py - center[1]) ** 2 + (pz - center[2]) ** 2)
+    return off_rel * (scale + rc) + off_abs * math.sqrt(px * px + py * py + pz * pz)
+
+
+@njit(inline="always", **_OPTS)
+def face_ray(f, x, y, z, dx, dy, dz, v0, e1, e2):
+    """(t, u, v): the float64 Moller-Trumbore distance and barycentrics of the ray from (x, y, z) along (dx, dy, dz)
+    on face f (v0, e1, e2: its first vertex and edges); a grazing ray (no finite solution) takes the first vertex
+    (u = v = 0) at the distance of its projection on the ray."""
+    a0, a1, a2 = e1[f, 0], e1[f, 1], e1[f, 2]
+    b0, b1, b2 = e2[f, 0], e2[f, 1], e2[f, 2]
+    px, py, pz = dy * b2 - dz * b1, dz * b0 - dx * b2, dx * b1 - dy * b0
+    det = a0 * px + a1 * py + a2 * pz
+    sx, sy, sz = x - v0[f, 0], y - v0[f, 1], z - v0[f, 2]
+    qx, qy, qz = sy * a2 - sz * a1, sz * a0 - sx * a2, sx * a1 - sy * a0
+    inv = 1.0 / det
+    u = (sx * px + sy * py + sz * pz) * inv
+    v = (dx * qx + dy * qy + dz * qz) * inv
+    t = (b0 * qx + b1 * qy + b2 * qz) * inv
+    if not (math.isfinite(u) and math.isfinite(v) and math.isfinite(t)):  # grazing: nearest vertex
+        u, v = 0.0, 0.0
+        t = -(sx * dx + sy * dy + sz * dz)
+    return t, u, v
+
+
+@njit(inline="always", **_OPTS)
+def clip_onto_face(u, v):
+    """Barycentrics (u, v) moved onto the triangle: negatives to 0, a sum above 1 scaled back to 1."""
+    u = max(u, 0.0)
+    v = max(v, 0.0)
+    if u + v > 1.0:
+        tot = u + v
+        u /= tot
+        v /= tot
+    return u, v
+
+
+def face_records(V, F, normals):
+    """(v0, e1, e2, normals) (m, 3) each: views of one 96-byte record per face (a boundary test touches 1-2 cache
+    lines, not 4), as :func:`face_ray` and :func:`surface_s` read them."""
+    tri = V[F]
+    packed = np.ascontiguousarray(np.concatenate([tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0],
+                                                  np.asarray(normals, dtype=np.float64)], axis=1))
+    return tuple(packed[:, 3 * j:3 * j + 3] for j in range(4))
+
+
+@njit(inline="always", **_OPTS)
 def surface_s(f, x, y, z, dx, dy, dz, s, k, c, v0, e1, e2, normals, center, scale, off_rel, off_abs, eta):
     """Outcome of a boundary test whose Embree hit within tfar = free path + margin is face f (-1: none).
 
@@ -200,35 +250,16 @@ def surface_s(f, x, y, z, dx, dy, dz, s, k, c, v0, e1, e2, normals, center, scal
     cos_i = dx * nxf + dy * nyf + dz * nzf
     if not cos_i > 0.0:  # a ray from inside must hit the back of a face
         return LEAK, x, y, z, dx, dy, dz, c, 0.0, 0.0
-    a0, a1, a2 = e1[f, 0], e1[f, 1], e1[f, 2]
-    b0, b1, b2 = e2[f, 0], e2[f, 1], e2[f, 2]
-    px, py, pz = dy * b2 - dz * b1, dz * b0 - dx * b2, dx * b1 - dy * b0
-    det = a0 * px + a1 * py + a2 * pz
-    sx, sy, sz = x - v0[f, 0], y - v0[f, 1], z - v0[f, 2]
-    qx, qy, qz = sy * a2 - sz * a1, sz * a0 - sx * a2, sx * a1 - sy * a0
-    inv = 1.0 / det
-    u = (sx * px + sy * py + sz * pz) * inv
-    v = (dx * qx + dy * qy + dz * qz) * inv
-    t = (b0 * qx + b1 * qy + b2 * qz) * inv
-    if not (math.isfinite(u) and math.isfinite(v) and math.isfinite(t)):  # grazing: nearest vertex
-        u, v = 0.0, 0.0
-        t = -(sx * dx + sy * dy + sz * dz)
+    t, u, v = face_ray(f, x, y, z, dx, dy, dz, v0, e1, e2)
     if s < max(t, 0.0):
         return SCATTER, x, y, z, dx, dy, dz, c, 0.0, 0.0
-    u = max(u, 0.0)
-    v = max(v, 0.0)
-    if u + v > 1.0:
-        tot = u + v
-        u /= tot
-        v /= tot
-    hx = v0[f, 0] + u * a0 + v * b0
-    hy = v0[f, 1] + u * a1 + v * b1
-    hz = v0[f, 2] + u * a2 + v * b2
+    u, v = clip_onto_face(u, v)
+    hx = v0[f, 0] + u * e1[f, 0] + v * e2[f, 0]
+    hy = v0[f, 1] + u * e1[f, 1] + v * e2[f, 1]
+    hz = v0[f, 2] + u * e1[f, 2] + v * e2[f, 2]
     uu, c = _uniform(k, c)
     if uu < fresnel_out(cos_i, eta):
-        rc = math.sqrt((hx - center[0]) ** 2 + (hy - center[1]) ** 2 + (hz - center[2]) ** 2)
-        eps = (off_rel * (scale + rc) + off_abs * math.sqrt(hx * hx + hy * hy + hz * hz)) / math.sqrt(
-            nxf * nxf + nyf * nyf + nzf * nzf)
+        eps = ray_offset(hx, hy, hz, center, scale, off_rel, off_abs) / math.sqrt(nxf * nxf + nyf * nyf + nzf * nzf)
         return (REFLECT, hx - eps * nxf, hy - eps * nyf, hz - eps * nzf, dx - 2.0 * cos_i * nxf,
                 dy - 2.0 * cos_i * nyf, dz - 2.0 * cos_i * nzf, c, u, v)
     return EXIT, hx, hy, hz, dx, dy, dz, c, u, v

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshshade.kernels.fresnel import refract_in  # noqa: F401 - part of the walk's sampling API
+
 __all__ = ["ROULETTE_THRESHOLD", "ROULETTE_BOOST", "sample_hg_cos", "scatter_directions", "refract_in"]
 
 #: Russian roulette starts below this fraction of the photon's initial weight
@@ -42,13 +44,4 @@ def scatter_directions(d, g: float, rng) -> np.ndarray:
     phi = 2.0 * np.pi * rng.random(n)
     t, b = _orthonormal_basis(d)
     out = (sin_t * np.cos(phi))[:, None] * t + (sin_t * np.sin(phi))[:, None] * b + cos_t[:, None] * d
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
-
-
-def refract_in(d, n, eta: float) -> np.ndarray:
-    """Refract unit directions ``d`` arriving from outside (index 1) through outward unit normals ``n`` into eta."""
-    cos_i = np.clip(-np.einsum("ij,ij->i", d, n), 0.0, 1.0)
-    sin2_t = (1.0 - cos_i ** 2) / eta ** 2
-    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, None))
-    out = d / eta + (cos_i / eta - cos_t)[:, None] * n
     return out / np.linalg.norm(out, axis=1, keepdims=True)

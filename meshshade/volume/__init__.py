@@ -11,9 +11,9 @@ source sets). Not yet called by the bake (docs/physics.md §15 says what remains
 from meshshade.volume.fem import (assemble_diffusion, boundary_faces, exitance_from_fluence, locate_points,
                                   point_source_vector, tet_geometry)
 from meshshade.volume.operator import DiffusionOperator
-from meshshade.volume.sources import line_sources, refracted_directions
+from meshshade.volume.sources import line_sources
 from meshshade.volume.tetmesh import SurfaceTetrahedra, graded_box, surface_tetrahedra
 
 __all__ = ["assemble_diffusion", "boundary_faces", "exitance_from_fluence", "locate_points", "point_source_vector",
-           "tet_geometry", "DiffusionOperator", "line_sources", "refracted_directions", "SurfaceTetrahedra",
+           "tet_geometry", "DiffusionOperator", "line_sources", "SurfaceTetrahedra",
            "graded_box", "surface_tetrahedra"]

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError
-from meshshade.volume.locate import tet_neighbours, walk_locate
+from meshshade.volume.locate import FACE_NODES, tet_neighbours, walk_locate
 
 __all__ = ["tet_geometry", "boundary_faces", "assemble_diffusion", "locate_points", "point_source_vector",
            "exitance_from_fluence"]
@@ -47,8 +47,7 @@ def tet_geometry(nodes, tets):
 
 def boundary_faces(tets, nodes=None):
     """(F, 3) int64 faces that belong to one tetrahedron only; with ``nodes``, oriented outward."""
-    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-    faces = tets[:, local].reshape(-1, 3)             # outward for a positively oriented tetrahedron
+    faces = tets[:, FACE_NODES].reshape(-1, 3)        # outward for a positively oriented tetrahedron
     opposite = tets.reshape(-1)                      # face f of tetrahedron t (row 4t + f) lies opposite node f
     key = np.sort(faces, axis=1)
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)

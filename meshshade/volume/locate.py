@@ -11,20 +11,20 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["tet_neighbours", "walk_locate", "INSIDE_TOL", "MAX_STEPS"]
+__all__ = ["FACE_NODES", "tet_neighbours", "walk_locate", "INSIDE_TOL", "MAX_STEPS"]
 
 #: a barycentric coordinate above -INSIDE_TOL counts as inside
 INSIDE_TOL = 1e-12
 #: most tetrahedra a walk visits
 MAX_STEPS = 1000
-# the face opposite node f of a tetrahedron (outward for a positively oriented one)
-_LOCAL = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+#: the face opposite node f of a tetrahedron, outward for a positively oriented one (row f)
+FACE_NODES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
 
 def tet_neighbours(tets):
     """(T, 4) int64: the tetrahedron across the face opposite each node (-1 on the boundary)."""
     T = tets.shape[0]
-    key = np.sort(tets[:, _LOCAL].reshape(-1, 3), axis=1)
+    key = np.sort(tets[:, FACE_NODES].reshape(-1, 3), axis=1)
     order = np.lexsort(key.T[::-1])
     sk = key[order]
     same = np.all(sk[1:] == sk[:-1], axis=1)

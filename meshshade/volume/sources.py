@@ -5,6 +5,7 @@ along w with density sigma_s' P exp(-sigma_t' t) (W/mm): in all alpha' P, at mea
 similarity-reduced medium, as the dipole's source at z_r = 1/sigma_t'). The line source is replaced by an
 n-point Gauss-Laguerre rule: points t_j = x_j / sigma_t' carrying alpha' P w_j, exact for the power and for
 every polynomial moment of t up to degree 2n - 1. A single point at 1/sigma_t' (n = 1) is the classic dipole's.
+The refracted directions come from :func:`meshshade.kernels.fresnel.refract_in`.
 """
 from __future__ import annotations
 
@@ -13,18 +14,7 @@ from numpy.polynomial.laguerre import laggauss
 
 from meshshade.errors import MeshshadeError
 
-__all__ = ["refracted_directions", "line_sources"]
-
-
-def refracted_directions(directions, normals, eta):
-    """Unit directions (k, 3) inside the medium of light travelling along ``directions`` (k, 3) onto a surface of
-    outward unit ``normals`` (k, 3), from index 1 into ``eta`` (Snell)."""
-    d = np.asarray(directions, dtype=np.float64)
-    n = np.asarray(normals, dtype=np.float64)
-    cos_i = np.clip(-np.einsum("ij,ij->i", d, n), 0.0, 1.0)
-    cos_t = np.sqrt(np.clip(1.0 - (1.0 - cos_i ** 2) / eta ** 2, 0.0, None))
-    out = d / eta + (cos_i / eta - cos_t)[:, None] * n
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+__all__ = ["line_sources"]
 
 
 def line_sources(positions, refracted, power, *, sigma_t_prime, albedo_prime, n_points=4):

@@ -25,6 +25,14 @@ __all__ = ["SurfaceTetrahedra", "surface_tetrahedra", "box_tetrahedra", "ball_te
 _KUHN = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])
 
 
+def _oriented(nodes, tets):
+    """``tets`` with nodes 1 and 2 swapped where the tetrahedron is negatively oriented (in place; returned)."""
+    P = nodes[tets]
+    flip = np.linalg.det(P[:, 1:] - P[:, :1]) < 0
+    tets[flip] = tets[flip][:, [0, 2, 1, 3]]
+    return tets
+
+
 def box_tetrahedra(xs, ys, zs):
     """(nodes (N, 3), tets (6 (nx-1)(ny-1)(nz-1), 4), positively oriented) of the box with node coordinates
     ``xs``, ``ys``, ``zs`` (each strictly increasing, mm)."""
@@ -38,11 +46,7 @@ def box_tetrahedra(xs, ys, zs):
     corner = [idx[i:nx - 1 + i, j:ny - 1 + j, k:nz - 1 + k].ravel() for k in (0, 1) for j in (0, 1) for i in (0, 1)]
     corners = np.stack(corner, axis=1)               # (cells, 8), local index i + 2 j + 4 k
     tets = corners[:, _KUHN].reshape(-1, 4)
-    P = nodes[tets]
-    det = np.linalg.det(P[:, 1:] - P[:, :1])
-    flip = det < 0
-    tets[flip] = tets[flip][:, [0, 2, 1, 3]]
-    return nodes, tets
+    return nodes, _oriented(nodes, tets)
 
 
 def graded_axis(lo, hi, focus, h_min, ratio, h_max=np.inf):
@@ -83,11 +87,7 @@ def ball_tetrahedra(radius, n):
     rinf = np.abs(nodes).max(axis=1)
     scale = np.divide(rinf, r2, out=np.ones_like(r2), where=r2 > 0)
     nodes = radius * nodes * scale[:, None]
-    P = nodes[tets]
-    det = np.linalg.det(P[:, 1:] - P[:, :1])
-    flip = det < 0
-    tets[flip] = tets[flip][:, [0, 2, 1, 3]]
-    return nodes, tets
+    return nodes, _oriented(nodes, tets)
 
 
 #: the inner layer's depth below each surface vertex, in units of the vertex's mean edge length
@@ -175,9 +175,7 @@ def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0):
     flat = np.abs(det) <= 6e-9 * h_s ** 3
     if np.any(T[flat] >= n):
         raise MeshshadeError(f"{int(np.sum(np.any(T[flat] >= n, axis=1)))} flat tetrahedra off the surface")
-    T = T[~flat]
-    neg = det[~flat] < 0
-    T[neg] = T[neg][:, [0, 2, 1, 3]]
+    T = _oriented(P, T[~flat])
     used = np.zeros(P.shape[0], dtype=bool)
     used[T.ravel()] = True
     if not used[:n].all():

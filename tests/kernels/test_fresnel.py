@@ -128,3 +128,24 @@ def test_fresnel_reflectance_broadcasts_and_scalars():
     assert np.ndim(fresnel_reflectance(0.5, 1.0, 1.3)) == 0
     assert fresnel_reflectance(np.ones((2, 3)), 1.0, np.array([1.1, 1.2, 1.3])).shape == (2, 3)
     assert np.isnan(fresnel_reflectance(np.nan, 1.0, 1.3))
+
+
+def test_refract_in_obeys_snell():
+    """Snell's law, not a formula copy: unit length, pointing into the medium, tangential part divided by eta
+    (n_1 sin_i = eta sin_t), and normal incidence unchanged."""
+    from meshshade.kernels.fresnel import refract_in
+
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(500, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    d = rng.normal(size=(500, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = np.where((np.einsum("ij,ij->i", d, n) < 0)[:, None], d, -d)          # arriving from outside
+    for eta in (1.0, 1.33, 2.5):
+        t = refract_in(d, n, eta)
+        np.testing.assert_allclose(np.linalg.norm(t, axis=1), 1.0, rtol=1e-13)
+        assert np.all(np.einsum("ij,ij->i", t, n) < 0)
+        tan_d = d - np.einsum("ij,ij->i", d, n)[:, None] * n
+        tan_t = t - np.einsum("ij,ij->i", t, n)[:, None] * n
+        np.testing.assert_allclose(tan_t, tan_d / eta, atol=1e-13)
+    np.testing.assert_allclose(refract_in(-n, n, 1.4), -n, atol=1e-15)
