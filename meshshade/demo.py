@@ -11,8 +11,9 @@
    dipole vs exact vs curved.
 3. **A real-looking mesh** (``pebble/``): the procedural pebble of ``assets/`` (at subdivision 4, 2,562 vertices,
    so the demo stays under a minute; ``assets/pebble.ply`` is the same shape at level 5) in marble under a
-   directional light, curved vs dipole, with every ``compare`` output. The bake uses the ``arc`` geodesics
-   (curvature-corrected chords, 1e-4 on smooth meshes like this one; 2.6 s per bake instead of 20 s exact).
+   directional light, the default model (diffusion inside the pebble's volume with the analytic near field,
+   docs/physics.md §15) vs the planar dipole, with every ``compare`` output. The dipole's bake uses the ``arc``
+   geodesics (curvature-corrected chords, 1e-4 on smooth meshes like this one).
 """
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.output import compare, render, report
+from meshshade.transport.models import DEFAULT_MODEL
 
 
 def figure1_radiance(material: Material, *, R0_mm=10.0, width=384, spp=4, seed=0, half_width_mm=None):
@@ -97,25 +99,25 @@ def run_demo(out_dir="meshshade-demo", *, small=False, log=print) -> dict:
                                      models=["dipole", "exact", "curved"], shapes=shapes)
     files["profiles.png"] = io.write_figure(out / "profiles.png", report.profile_figure(rows, material=mat,
                                                                                           shapes=shapes))
-    # (3) a real-looking mesh, curved vs dipole
+    # (3) a real-looking mesh, the default model (diffusion in its volume) vs the planar dipole
     V, F = procedural.pebble(subdivisions=3 if small else 4)
     mesh = Mesh.from_arrays(V, F, source="procedural.pebble")
     mat = Material.preset("marble")
     lights = [DirectionalLight((-1.0, -0.3, -0.35))]  # from the right, grazing: light bleeds past the terminator
-    models = ("curved", "dipole")
+    models = (DEFAULT_MODEL, "dipole")
     cam = render.auto_camera(mesh, (0.0, 0.0, -1.0))
     size = 96 if small else 384
     cmp = compare.run_comparison(mesh, mat, lights, models, camera=cam, width=size, height=size,
                                  spp=2 if small else 4, geodesic="arc")
     io.output_dir(out / "pebble")
     meta = {"material": mat.describe(), "lights": "directional -1,-0.3,-0.35 (1 W/mm^2)",
-            "units": "W/(mm^2 sr) per W/mm^2", "model": "left curved, right dipole"}
+            "units": "W/(mm^2 sr) per W/mm^2", "model": f"left {DEFAULT_MODEL}, right dipole"}
     for p in compare.save_comparison(cmp, out / "pebble", models=models, metadata=meta, background=(0, 0, 0)):
         files[f"pebble/{Path(p).name}"] = p
     elapsed = time.perf_counter() - t_start
     for k, p in files.items():
         log(f"wrote {p}")
     st = cmp["stats"]
-    log(f"pebble: curved vs dipole, max |rel diff| {st['max_rel_diff']:.3g}, p95 {st['p95_rel_diff']:.3g} "
+    log(f"pebble: {DEFAULT_MODEL} vs dipole, max |rel diff| {st['max_rel_diff']:.3g}, p95 {st['p95_rel_diff']:.3g} "
         f"over vertices; demo took {elapsed:.1f} s")
     return files

@@ -25,7 +25,7 @@ from meshshade import io
 from meshshade.errors import MeshshadeError
 from meshshade.materials import PRESETS
 from meshshade.output.tonemap import tonemap_linear
-from meshshade.transport.models import MODELS
+from meshshade.transport.models import DEFAULT_MODEL, MODELS
 
 #: the float colour attribute holding the linear exitance (W/mm², per vertex, alpha 1)
 RADIANCE_ATTRIBUTE = "meshshade_radiance"
@@ -42,13 +42,15 @@ LOG_NAME = "meshshade-blender.log"
 #: seconds between two looks at a running bake
 POLL_SECONDS = 0.2
 
-_MODEL_ITEMS = [("auto", "auto", "meshshade chooses per entry sample: planar dipole, curvature kernel, exact sphere or "
-                 "fitted model where each is needed (recommended)")] + [
+_MODEL_ITEMS = [("volume", "volume", "diffusion inside the object's volume with the analytic near field on top "
+                   "(recommended; a mesh that is not closed uses auto)"),
+                ("auto", "auto", "surface kernels: meshshade chooses per entry sample the planar dipole, curvature "
+                 "kernel, exact sphere or fitted model where each is needed")] + [
     (m, m, {"dipole": "planar dipole (Jensen et al. 2001): flat half-space everywhere",
             "curved": "first-order correction in the principal curvatures k1, k2",
             "exact-sphere": "exact diffusion solution of the sphere of the local mean curvature",
             "fitted": "curvature model fitted to Monte Carlo beyond first order"}.get(m, m))
-    for m in MODELS if m != "auto"]
+    for m in MODELS if m not in ("auto", "volume")]
 _PRESET_ITEMS = [("CUSTOM", "Custom coefficients", "sigma_s' and sigma_a in 1/mm")] + [
     (name, name, f"{source}: sigma_s' {', '.join(f'{x:g}' for x in s)} /mm, sigma_a "
                  f"{', '.join(f'{x:g}' for x in a)} /mm, eta {eta:g}")
@@ -68,7 +70,7 @@ class _BakeProperties:
                                  description="absorption coefficient per channel, in 1/mm")
     eta: FloatProperty(name="Index of refraction", default=1.3, min=1.0, max=2.5, precision=3,
                        description="relative index of refraction of the medium")
-    model: EnumProperty(name="Model", items=_MODEL_ITEMS, default="auto", description="transport model")
+    model: EnumProperty(name="Model", items=_MODEL_ITEMS, default=DEFAULT_MODEL, description="transport model")
     cutoff_tol: FloatProperty(name="Cutoff tolerance", default=1e-4, min=1e-12, max=0.5, precision=6,
                               description="neighbourhood radius: reflectance beyond it below this fraction "
                                           "(smaller: more accurate, slower)")
@@ -77,7 +79,8 @@ class _BakeProperties:
                                   ("arc", "arc", "curvature-corrected chords: about 5x faster, 1-11 % low on "
                                                  "bumpy scans")])
     transport: EnumProperty(name="Transport", default="auto",
-                            items=[("auto", "auto", "hierarchical where its distance check passes, else direct"),
+                            items=[("auto", "auto", "surface models: hierarchical where its distance check "
+                                                    "passes, else direct (the volume model has its own)"),
                                    ("hierarchical", "hierarchical", "near field + clusters (near-linear cost)"),
                                    ("direct", "direct", "every pair within the cutoff (reference)")])
     make_material: BoolProperty(name="Assign display material", default=False,

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from meshshade import io
+from meshshade.transport.models import DEFAULT_MODEL
 from meshshade.errors import MeshshadeError
 from meshshade.light.sources import BeamLight, DirectionalLight, PointLight
 
@@ -76,7 +77,7 @@ class BakeSettings:
     sigma_s_prime: tuple = (1.0, 1.0, 1.0)
     sigma_a: tuple = (0.01, 0.01, 0.01)
     eta: float = 1.3
-    model: str = "auto"
+    model: str = DEFAULT_MODEL
     cutoff_tol: float = 1e-4
     geodesic: str = "exact"
     transport: str = "auto"

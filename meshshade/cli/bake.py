@@ -7,7 +7,7 @@ import argparse
 from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args, add_mesh_args,
                                    add_model_arg, add_near_field_arg, add_transport_arg, lights_from_args,
                                    mesh_and_material, number)
-from meshshade.io import check_output_path
+from meshshade.io import AssetCache, check_output_path
 from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, write_bake
 from meshshade.transport import bake, describe_result
 from meshshade.transport.baking import check_bake_options
@@ -41,12 +41,13 @@ def run_bake(args) -> int:
     if args.npz:
         check_output_path(args.npz, [args.mesh, args.out], suffixes=(".npz",), option="--npz")
     check_bake_options(args.model, args.cutoff_tol, args.curvature_radius, args.geodesic, args.far_field,
-                       transport=args.transport)
+                       transport=args.transport, near_field=args.near_field)
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
     result = bake(mesh, material, lights, model=args.model, cutoff_tol=args.cutoff_tol,
                   curvature_radius_mm=args.curvature_radius, progress=not args.quiet, geodesic=args.geodesic,
-                  far_field=args.far_field, transport=args.transport, near_field=args.near_field)
+                  far_field=args.far_field, transport=args.transport, near_field=args.near_field,
+                  volume_cache=AssetCache("volume"))
     write_bake(result, mesh, args.out, npz=args.npz, lights=lights)
     if not args.quiet:
         print(describe_result(result))

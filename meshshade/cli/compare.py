@@ -7,30 +7,32 @@ import argparse
 import json
 
 from meshshade.cli.options import add_image_args, image_scene_from_args, integer, number
-from meshshade.io import output_dir
+from meshshade.io import AssetCache, output_dir
 from meshshade.output.compare import check_floor, check_models, run_comparison, save_comparison
 from meshshade.output.render import check_image_size
 from meshshade.output.tonemap import check_tonemap_options
 from meshshade.transport import MODELS
+from meshshade.transport.models import DEFAULT_MODEL
 
 HELP = "two models, same camera and lights: split image, relative-difference heat map, stats.json"
 
 
 def add_compare_args(p: argparse.ArgumentParser) -> None:
     add_image_args(p)
-    p.add_argument("--models", default="curved,dipole",
-                   help=f"two models A,B among {', '.join((*MODELS, 'mc'))} (default curved,dipole)")
-    p.add_argument("--near-field", default="point", metavar="NF[,NF]",
-                   help="what enters the medium, for both models or per model A,B: point (each model's point source "
-                        "at z_r; default) or beam (single scattering plus the fitted beam sources, docs/physics.md "
-                        "§13); e.g. --models curved,curved --near-field point,beam")
+    p.add_argument("--models", default=f"{DEFAULT_MODEL},dipole",
+                   help=f"two models A,B among {', '.join((*MODELS, 'mc'))} (default {DEFAULT_MODEL},dipole)")
+    p.add_argument("--near-field", default=None, metavar="NF[,NF]",
+                   help="what enters the medium, for both models or per model A,B (default: beam for volume, point "
+                        "for the others): point (each surface model's point source at z_r) or beam (single "
+                        "scattering plus the fitted beam sources, docs/physics.md §13); e.g. --models "
+                        "curved,curved --near-field point,beam")
     p.add_argument("--floor", type=number, default=1e-3, help="relative radiance floor for the ratios")
     p.add_argument("--photons", type=integer(16), default=100_000, help="photons when one model is mc (default 1e5)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
 
 
 def run_compare(args) -> int:
-    near = tuple(x.strip() for x in args.near_field.split(",") if x.strip())
+    near = tuple(x.strip() for x in args.near_field.split(",") if x.strip()) if args.near_field else (None,)
     models = check_models(tuple(m.strip() for m in args.models.split(",") if m.strip()),
                           near_field=near[0] if len(near) == 1 else near)
     check_floor(args.floor)
@@ -42,7 +44,8 @@ def run_compare(args) -> int:
                          height=args.height, spp=args.spp, per_pixel=args.per_pixel, cutoff_tol=args.cutoff_tol,
                          floor=args.floor, mc_photons=args.photons, geodesic=args.geodesic,
                          far_field=args.far_field, transport=args.transport,
-                         progress=False if args.quiet else "compare", near_field=near[0] if len(near) == 1 else near)
+                         progress=False if args.quiet else "compare", near_field=near[0] if len(near) == 1 else near,
+                         volume_cache=AssetCache("volume"))
     for p in save_comparison(cmp, out, models=cmp["labels"], metadata=scene.metadata, operator=args.tonemap,
                              bias=args.bias, background=scene.background):
         if not args.quiet:

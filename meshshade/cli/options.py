@@ -18,6 +18,7 @@ from meshshade.light import parse_light_spec
 from meshshade.materials import JENSEN_2001_PRESETS, Material, material_from_options
 from meshshade.output.render import Camera, parse_camera
 from meshshade.transport import MODELS, describe_scale
+from meshshade.transport.models import DEFAULT_MODEL
 from meshshade.units import mm_per_unit
 
 LIGHT_HELP = ("light SPEC (repeatable), positions in the mesh's units: beam:ox,oy,oz:dx,dy,dz[:power W[:radius]] | "
@@ -136,14 +137,18 @@ def lights_from_args(args, mesh: Mesh | None = None) -> list:
 
 # --- transport -----------------------------------------------------------------------------------------
 def add_model_arg(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--model", default="curved", choices=list(MODELS),
-                   help="transport kernel (default curved); auto picks per entry sample the cheapest kernel and "
-                        "geodesic method the scene calls for and reports its choices")
+    p.add_argument("--model", default=DEFAULT_MODEL, choices=list(MODELS),
+                   help=f"transport model (default {DEFAULT_MODEL}): volume, diffusion inside the object's volume "
+                        "with the analytic near field on top (a mesh that is not closed falls back to auto, "
+                        "saying so); dipole, curved, exact-sphere, fitted, surface kernels over geodesic "
+                        "neighbourhoods; auto picks per entry sample the cheapest surface kernel and geodesic "
+                        "method the scene calls for and reports its choices")
 
 
-def add_near_field_arg(p: argparse.ArgumentParser, default: str = "point") -> None:
+def add_near_field_arg(p: argparse.ArgumentParser, default: str | None = None) -> None:
     p.add_argument("--near-field", default=default, choices=["point", "beam"],
-                   help=f"what enters the medium (default {default}): point, each model's point source at depth z_r; "
+                   help=f"what enters the medium (default {default or 'beam for volume, point for the others'}): "
+                        "point, each surface model's point source at depth z_r; "
                         "beam, exact single scattering plus diffusion sources along the beam fitted to exact "
                         "transport, composed with the model's geometry (docs/physics.md §13)")
 
@@ -163,8 +168,9 @@ def add_far_field_arg(p: argparse.ArgumentParser) -> None:
 
 def add_transport_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--transport", default="auto", choices=["auto", "hierarchical", "direct"],
-                   help="how directional/point-light samples are summed: hierarchical (near field plus clusters; "
-                        "near-linear in the vertex count), direct (every pair, the reference) or auto (default: "
+                   help="surface models: how directional/point-light samples are summed: hierarchical (near "
+                        "field plus clusters; near-linear in the vertex count), direct (every pair, the reference) "
+                        "or auto (default: "
                         "hierarchical where its distance check passes on the mesh, else direct)")
 
 

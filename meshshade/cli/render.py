@@ -15,7 +15,8 @@ from pathlib import Path
 from meshshade.cli.options import (add_image_args, add_model_arg, add_near_field_arg, background_from_args, image_scene_from_args,
                                    material_given)
 from meshshade.errors import MaterialError, MeshshadeError, MeshValidationError, OutputError
-from meshshade.io import check_output_path, read_baked_ply, write_exr, write_png
+from meshshade.io import AssetCache, check_output_path, read_baked_ply, write_exr, write_png
+from meshshade.transport.models import DEFAULT_MODEL
 from meshshade.kernels.optics import check_eta
 from meshshade.output.render import (PixelGather, check_image_size, display_rgba, image_rgba, parse_camera,
                                      render_radiance)
@@ -64,12 +65,13 @@ def run_render(args) -> int:
     baked = read_baked_ply(args.mesh, units=args.units)  # None unless the input is a bake's PLY
     if baked is not None:
         return _render_baked(args, baked, exr, png)
-    check_bake_options(args.model, args.cutoff_tol, None, args.geodesic, args.far_field, transport=args.transport)
+    check_bake_options(args.model, args.cutoff_tol, None, args.geodesic, args.far_field, transport=args.transport,
+                       near_field=args.near_field)
     scene = image_scene_from_args(args)
     mesh, material = scene.mesh, scene.material
     res = bake(mesh, material, scene.lights, model=args.model, cutoff_tol=args.cutoff_tol, geodesic=args.geodesic,
                far_field=args.far_field, transport=args.transport, progress=False if args.quiet else "render",
-               near_field=args.near_field)
+               near_field=args.near_field, volume_cache=AssetCache("volume"))
     gather = PixelGather(mesh, res) if args.per_pixel else None
     rgb, alpha = render_radiance(mesh, res.radiance, scene.camera, args.width, args.height, args.spp,
                                  eta=material.eta, exitance_at=gather)
@@ -86,7 +88,7 @@ def run_render(args) -> int:
 def _ignored_options(args, info) -> list[str]:
     """The options that do not apply to a bake's PLY and were given anyway (or differ from their defaults)."""
     given = [("--material/--sigma-s-prime/--sigma-a", material_given(args)), ("--eta", args.eta is not None),
-             ("--light", bool(args.light)), ("--model", args.model != "curved"),
+             ("--light", bool(args.light)), ("--model", args.model != DEFAULT_MODEL),
              ("--geodesic", args.geodesic != "exact"), ("--far-field", args.far_field is not None),
              ("--transport", args.transport != "auto"),
              ("--cutoff-tol", args.cutoff_tol != 1e-4),

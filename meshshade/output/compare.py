@@ -23,7 +23,7 @@ from meshshade.output import render
 from meshshade.output.tonemap import luminance
 from meshshade.raycast import make_scene
 from meshshade.transport.baking import bake, check_bake_options
-from meshshade.transport.models import MODELS
+from meshshade.transport.models import DEFAULT_MODEL, MODELS
 from meshshade.transport.near_field import NEAR_FIELDS, check_near_field
 
 #: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
@@ -45,21 +45,25 @@ def check_floor(floor) -> float:
     return x
 
 
-def near_field_pair(near_field) -> tuple:
-    """``near_field`` ("point", "beam", or one per model A, B) as a checked pair; MeshshadeError otherwise."""
-    pair = (near_field, near_field) if isinstance(near_field, str) else tuple(near_field)
+def near_field_pair(near_field, models=None) -> tuple:
+    """``near_field`` ("point", "beam", None, or one per model A, B) as a checked pair; MeshshadeError otherwise.
+    None: each model's default (the beam for ``volume``, the point source for the others)."""
+    pair = (near_field, near_field) if near_field is None or isinstance(near_field, str) else tuple(near_field)
     if len(pair) != 2:
         raise ParameterError(f"near field: give one value or two (A,B) among {', '.join(NEAR_FIELDS)}, got "
                              f"{near_field!r}")
-    return tuple(check_near_field(x) for x in pair)
+    models = tuple(models) if models is not None and len(models) == 2 else (None, None)
+    return tuple(check_near_field(x if x is not None else ("beam" if m == "volume" else "point"))
+                 for x, m in zip(pair, models))
 
 
-def compare_labels(models, near_field="point") -> tuple:
-    """The names of the two sides: the model, with ``+beam`` where its near field is the beam."""
-    return tuple(m + ("+beam" if nf == "beam" and m != "mc" else "") for m, nf in zip(models, near_field_pair(near_field)))
+def compare_labels(models, near_field=None) -> tuple:
+    """The names of the two sides: the model, with ``+beam`` where a surface model's near field is the beam."""
+    return tuple(m + ("+beam" if nf == "beam" and m not in ("mc", "volume") else "")
+                 for m, nf in zip(models, near_field_pair(near_field, models)))
 
 
-def check_models(models, near_field="point") -> tuple:
+def check_models(models, near_field=None) -> tuple:
     """Exactly two model names among ``COMPARE_MODELS``, different unless their near fields differ
     (``near_field``: one value or one per model); MeshshadeError otherwise."""
     if isinstance(models, str) or not all(isinstance(m, str) for m in models):
@@ -150,10 +154,10 @@ def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
     return fig
 
 
-def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camera=None, width=256, height=256,
+def run_comparison(mesh, material, lights, models=(DEFAULT_MODEL, "dipole"), *, camera=None, width=256, height=256,
                    spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
                    seed: int = 0, geodesic: str = "exact", far_field: str | None = None, transport: str = "auto",
-                   progress: bool | str = False, near_field="point") -> dict:
+                   progress: bool | str = False, near_field=None, volume_cache=None) -> dict:
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
     ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
@@ -167,11 +171,13 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
     :func:`~meshshade.output.render.check_image_size`; with ``mc``, ``mc_photons`` and ``seed`` as
     :func:`~meshshade.montecarlo.simulation.check_mc_options`; ``camera`` a Camera or None; the lights.
     ``progress`` (False, True or a task name, default "compare") is passed to each bake and Monte Carlo run.
-    ``near_field``: "point" or "beam" for both models, or one per model (:func:`~meshshade.transport.baking.bake`);
-    ``labels`` in the result name the sides (``curved+beam``).
+    ``near_field``: "point" or "beam" for both models, or one per model, or None for each model's default
+    (:func:`~meshshade.transport.baking.bake`);
+    ``labels`` in the result name the sides (``curved+beam``). ``volume_cache``: as
+    :func:`~meshshade.transport.baking.bake`'s.
     """
-    near = near_field_pair(near_field)
-    models = check_models(models, near)
+    models = check_models(models, near_field)
+    near = near_field_pair(near_field, models)
     labels = compare_labels(models, near)
     floor = check_floor(floor)
     if not isinstance(mesh, Mesh):
@@ -198,7 +204,7 @@ def run_comparison(mesh, material, lights, models=("curved", "dipole"), *, camer
             res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
         else:
             res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field,
-                       transport=transport, progress=task, near_field=nf)
+                       transport=transport, progress=task, near_field=nf, volume_cache=volume_cache)
             ex = render.PixelGather(mesh, res) if per_pixel else None
         images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
                                              exitance_at=ex, scene=scene))

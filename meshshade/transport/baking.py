@@ -22,6 +22,7 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial import QhullError
 
 from meshshade import memo
 from meshshade.errors import MaterialError, MeshshadeError, ParameterError
@@ -39,10 +40,11 @@ from meshshade.transport.farfield import far_field_exitance, far_field_exitance_
 from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
                                               vertex_drift, vertex_power)
 from meshshade.transport.gather import PairStream, Stopwatch, chunk_size, cutoff_radii, gather
-from meshshade.transport.models import MODELS
+from meshshade.transport.models import DEFAULT_MODEL, MODELS
 from meshshade.transport.near_field import check_near_field, drift_angles, near_field_factors, refracted_drift
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, source_frames, source_patch_radius
 from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, clusters_pay, neighbourhood_solver
+from meshshade.volume.transport import VolumeTransport
 
 log = logging.getLogger("meshshade")
 
@@ -63,6 +65,8 @@ class BakeResult:
     cutoff_mm : (3,) — neighbourhood radius per channel
     timings : dict stage -> seconds; stats : dict of counts (pairs, skipped work, fallbacks, auto decisions)
     plan : meshshade.transport.auto.AutoPlan or None — the per-sample decisions of ``model="auto"``
+    volume : meshshade.volume.transport.VolumeTransport or None — the volume transport of ``model="volume"``
+             (reuse it for further lights: ``bake(..., volume=result.volume)``; per-pixel renders use its near field)
     """
 
     radiance: np.ndarray
@@ -78,6 +82,7 @@ class BakeResult:
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
     plan: object = None
+    volume: object = None
 
     def __repr__(self) -> str:
         n = self.radiance.shape[0]
@@ -104,15 +109,27 @@ def describe_scale(mesh, material: Material) -> str:
             f"paths r/g/b; mean edge {mesh.mean_edge_length:.4g} mm); material {material.describe()}")
 
 
-def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol: float = 1e-4,
+def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff_tol: float = 1e-4,
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool | str = False,
          rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
          far_field: str | None = None, far_tol: float = 0.1, far_rel_tol: float = 1e-2,
-         far_geodesic: str = "cluster", transport="auto", near_field: str = "point") -> BakeResult:
+         far_geodesic: str = "cluster", transport="auto", near_field: str | None = None,
+         volume=None, volume_cache=None) -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
 
     Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
     (directional, W/mm^2) or intensity (point, W/sr). Stages are timed in ``result.timings``.
+
+    ``model="volume"`` (the default): diffusion inside the object's own volume, solved on a tetrahedral mesh
+    that keeps the surface's vertices, from sources along the refracted light, with the analytic near field
+    (the beam's near-field model less the Robin half-space's response to the same sources) on top
+    (:class:`meshshade.volume.transport.VolumeTransport`, docs/physics.md §15). It always carries the beam
+    near field. ``volume``: a VolumeTransport built for this mesh and material (reused across lights);
+    ``volume_cache``: where the tetrahedral mesh is looked up and kept between runs
+    (:class:`meshshade.io.AssetCache`; the CLI, batches and the add-on pass one). On a mesh that is not closed,
+    or that cannot be tetrahedralised, the bake uses ``model="auto"`` with the beam near field and says why in
+    ``stats["transport"]``. The options below (geodesics, far field, transport, cutoff) are the surface
+    models'.
 
     ``geodesic``: "exact" (polyhedral window propagation, the reference; default) or "arc" (curvature-corrected
     chords over an edge-path search: 1e-4 on smooth meshes such as spheres and tori and about 5x faster, but
@@ -157,12 +174,25 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     if not isinstance(material, Material):
         raise MaterialError(f"bake needs a Material, got {type(material).__name__}")
     far_field_given = far_field is not None
+    check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol, far_tol=far_tol,
+                       far_rel_tol=far_rel_tol, far_geodesic=far_geodesic, backend=backend,
+                       auto_options=auto_options, transport=transport, near_field=near_field)
+    near_field = check_near_field("beam" if near_field is None and model == "volume" else near_field or "point")
+    if volume is not None and (model != "volume" or not isinstance(volume, VolumeTransport) or volume.mesh is not mesh
+                               or volume.material.describe() != material.describe()):
+        raise ParameterError("the VolumeTransport passed as volume was built for another mesh or material (or the "
+                             "model is not volume)")
+    lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
+    clock = Stopwatch()
+    volume_why = None
+    if model == "volume":
+        vt, volume_why = _volume_transport(mesh, material, volume, volume_cache, clock)
+        if vt is None:
+            log.warning("meshshade: %s; using the surface transport (model auto, beam near field)", volume_why)
+            model = "auto"
     far_field = check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol,
                                    far_tol=far_tol, far_rel_tol=far_rel_tol, far_geodesic=far_geodesic,
                                    backend=backend, auto_options=auto_options, transport=transport)
-    near_field = check_near_field(near_field)
-    lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
-    clock = Stopwatch()
     # inside memo.reuse() (a batch worker) the mesh's curvature and scene are kept for the next job on this mesh
     curv = memo.cached("curvature", (id(mesh), curvature_radius_mm),
                        lambda: principal_curvatures(mesh.vertices, mesh.faces, radius_mm=curvature_radius_mm),
@@ -173,6 +203,8 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     samples = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, lights, scene=scene,
                             eta=material.eta)
     clock.lap("rays")
+    if model == "volume":
+        return _volume_bake(vt, mesh, material, lights, samples, curv, clock)
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
     direct_options = far_field_given or far_geodesic != "cluster"
     core, why, built = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
@@ -219,6 +251,8 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
             if plan is not None and bplan is not None:
                 plan = merge_plans(plan, bplan, point)
     stats.update(kstats)
+    if volume_why:
+        stats["transport"] += f" [volume transport not used: {volume_why}]"
     stats["near_field"] = near_field
     if near_field == "beam" and near_field_factors(material).clamped:
         stats["near_field_clamped"] = True   # a channel outside the fitted domain: its nearest node is used
@@ -227,6 +261,44 @@ def bake(mesh, material: Material, lights, *, model: str = "curved", cutoff_tol:
     check_exitance(M, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
     return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, beam_distance, cut, model, material,
                       clock.timings, stats, plan)
+
+
+def _volume_transport(mesh, material, volume, cache, clock):
+    """``(VolumeTransport or None, why not)``: the one passed in, the one kept for this mesh and material inside
+    :func:`meshshade.memo.reuse`, or a new one (its stages charged to ``clock``); None where the mesh encloses no
+    volume (not closed) or cannot be tetrahedralised."""
+    if volume is not None:
+        return volume, None
+    d = mesh.defects
+    if not d.is_closed:
+        return None, (f"the mesh is not closed ({d.n_boundary_edges} boundary and {d.n_nonmanifold_edges} "
+                      "non-manifold edges): it encloses no volume")
+    built = []
+
+    def build():
+        built.append(True)
+        try:
+            return VolumeTransport.build(mesh, material, cache=cache), None
+        except (MeshshadeError, QhullError) as e:
+            return None, f"the volume could not be tetrahedralised ({str(e).splitlines()[0] if str(e) else e!r})"
+
+    vt, why = memo.cached("volume", (id(mesh), material.describe()), build, pins=(mesh,))
+    if vt is not None and built:
+        clock.charge(vt.timings)
+    return vt, why
+
+
+def _volume_bake(vt, mesh, material, lights, samples, curv, clock) -> BakeResult:
+    """The bake's result by the volume transport (``model="volume"``)."""
+    M, vstats = vt.exitance(samples)
+    clock.charge(vstats.pop("timings"))
+    stats = {"entry_samples": len(samples), "cutoff_mm": vt.correction.radius_mm.tolist(), **samples.stats,
+             **vt.stats, **vstats, "transport": "volume", "near_field": "beam"}
+    stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
+    stats["entering_power"] = float(samples.power.sum())
+    check_exitance(M, lights)
+    return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, None, vt.correction.radius_mm.copy(),
+                      "volume", material, clock.timings, stats, None, vt)
 
 
 def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field, far_tol, far_rel_tol, far_geodesic,
@@ -355,21 +427,31 @@ def _real(value) -> float:
 RTOL_RANGE = (1e-15, 0.1)
 
 
-def check_bake_options(model="curved", cutoff_tol=1e-4, curvature_radius_mm=None, geodesic="exact",
+def check_bake_options(model=DEFAULT_MODEL, cutoff_tol=1e-4, curvature_radius_mm=None, geodesic="exact",
                        far_field=None, *, rtol=1e-10, far_tol=0.1, far_rel_tol=1e-2, far_geodesic="cluster",
-                       backend="embree", auto_options=None, transport="auto") -> str:
+                       backend="embree", auto_options=None, transport="auto", near_field=None) -> str:
     """Reject bad options of :func:`bake` (MeshshadeError, one line naming the option, its value and what is
     allowed) before any work; returns the far-field method with its default resolved. Also used by
     :func:`meshshade.output.compare.run_comparison` to check everything up front."""
     if model not in MODELS:
         raise MeshshadeError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+    if model == "volume":   # options of the surface models that the volume model cannot honour
+        if near_field is not None and near_field != "beam":
+            raise ParameterError("the volume model carries the beam near field; near field 'point' applies to the "
+                                 "surface models (dipole, curved, exact-sphere, fitted, auto)")
+        if not (isinstance(transport, str) and transport == "auto"):
+            raise ParameterError(f"transport {transport if isinstance(transport, str) else 'SurfaceTransport'!r} "
+                                 "applies to the surface models; the volume model has its own")
+        if far_field is not None:
+            raise ParameterError("the far-field option applies to the surface models; the volume model solves the "
+                                 "far field inside the volume")
     if not 0.0 < _real(cutoff_tol) < 1.0:
         raise MeshshadeError(f"cutoff tolerance (cutoff_tol) must lie in (0, 1), got {cutoff_tol!r}")
     if curvature_radius_mm is not None and not 0.0 < _real(curvature_radius_mm) < math.inf:
         raise MeshshadeError(f"curvature radius must be a positive finite number of mm, got {curvature_radius_mm!r}")
     if geodesic not in GEODESIC_METHODS:
         raise MeshshadeError(f"unknown geodesic method {geodesic!r}; choose exact or arc")
-    far_field = far_field or ("clustered" if model == "auto" else "off")
+    far_field = far_field or ("clustered" if model in ("auto", "volume") else "off")
     if far_field not in FAR_FIELD_METHODS:
         raise MeshshadeError(f"unknown far-field method {far_field!r}; choose off, clustered or direct")
     if not RTOL_RANGE[0] <= _real(rtol) <= RTOL_RANGE[1]:
@@ -513,6 +595,11 @@ def describe_result(result: BakeResult) -> str:
     s = result.stats
     t = ", ".join(f"{k} {v:.3g} s" for k, v in result.timings.items())
     ex = s["exitant_power"]
+    if s.get("transport") == "volume":
+        return (f"volume: {s['entry_samples']} entry samples; diffusion in {s['volume_tetrahedra']} tetrahedra "
+                f"({s['volume_nodes']} nodes{', cached' if s.get('volume_tetrahedra_cached') else ''}), "
+                f"near field within {max(s['cutoff_mm']):.3g} mm ({s['near_field_pairs']} pairs); entering "
+                f"{s['entering_power']:.4g} W, exitant {ex[0]:.4g}/{ex[1]:.4g}/{ex[2]:.4g} W (r/g/b); {t}")
     far = (f" (area lights: geodesic near field within {max(s['near_mm']):.3g} mm, {s['far_field']} far field "
            f"beyond)" if "near_mm" in s else "")
     if s.get("geodesic_pairs_computed", s.get("pairs_found")) != s.get("pairs_found"):

@@ -21,7 +21,8 @@ from scipy.spatial import cKDTree
 from meshshade.errors import MeshshadeError
 from meshshade.volume.locate import FACE_NODES, tet_neighbours, walk_locate
 
-__all__ = ["tet_geometry", "boundary_faces", "assemble_diffusion", "locate_points", "point_source_vector",
+__all__ = ["tet_geometry", "boundary_faces", "assemble_diffusion", "assemble_channels", "locate_points",
+           "point_source_vector",
            "exitance_from_fluence"]
 
 #: tetrahedra tried per point by :func:`locate_points` (nearest centroids)
@@ -49,8 +50,13 @@ def boundary_faces(tets, nodes=None):
     """(F, 3) int64 faces that belong to one tetrahedron only; with ``nodes``, oriented outward."""
     faces = tets[:, FACE_NODES].reshape(-1, 3)        # outward for a positively oriented tetrahedron
     opposite = tets.reshape(-1)                      # face f of tetrahedron t (row 4t + f) lies opposite node f
-    key = np.sort(faces, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    key = np.sort(faces, axis=1).astype(np.int64)
+    n = int(key.max()) + 1 if key.size else 1
+    if n ** 3 < 2 ** 62:    # one integer per face: a sort of int64 instead of np.unique(axis=0)'s rows
+        code = (key[:, 0] * n + key[:, 1]) * n + key[:, 2]
+        _, inverse, counts = np.unique(code, return_inverse=True, return_counts=True)
+    else:
+        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     once = counts[inverse.reshape(-1)] == 1
     out = faces[once]
     if nodes is not None:   # orient against the opposite node of the owning tetrahedron
@@ -67,28 +73,46 @@ def _triangle_areas(nodes, faces):
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
 
 
-def assemble_diffusion(nodes, tets, faces, *, D, sigma_a, A, geometry=None):
+def assemble_diffusion(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lumped=False):
     """K = D S + sigma_a M + B/(2A) (eq. (90)) as a CSR matrix (N, N), float64.
 
     nodes : (N, 3) mm; tets : (T, 4); faces : (F, 3) boundary faces (:func:`boundary_faces`); D : diffusion
-    constant 1/(3 sigma_t') in mm; sigma_a : 1/mm; A : boundary mismatch (docs/physics.md §2) of the material;
-    geometry : :func:`tet_geometry`'s result, if already computed.
+    constant in mm; sigma_a : 1/mm; A : boundary mismatch (docs/physics.md §2) of the material;
+    geometry : :func:`tet_geometry`'s result, if already computed. ``lumped``: the mass matrices M and B diagonal
+    (each element's mass shared equally by its nodes): the same second order at the nodes, and no negative
+    fluence from the mass terms' coupling where the solution falls steeply (a sun's terminator in the blue).
     """
-    if not (D > 0.0 and sigma_a >= 0.0 and A >= 1.0):
+    indptr, indices, data = assemble_channels(nodes, tets, faces, D=[D], sigma_a=[sigma_a], A=[A],
+                                              geometry=geometry, lumped=lumped)
+    N = nodes.shape[0]
+    return sp.csr_matrix((data[:, 0], indices, indptr), shape=(N, N))
+
+
+def assemble_channels(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lumped=False):
+    """Eq. (90)'s matrices of k channels (``D``, ``sigma_a``, ``A`` sequences of k) on one CSR structure:
+    (indptr (N+1,), indices (nnz,), data (nnz, k)), rows sorted, duplicates summed (see
+    :func:`assemble_diffusion`)."""
+    D, sigma_a, A = (np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (D, sigma_a, A))
+    if not (np.all(D > 0.0) and np.all(sigma_a >= 0.0) and np.all(A >= 1.0)):
         raise MeshshadeError(f"diffusion needs D > 0, sigma_a >= 0 and A >= 1, got D={D}, sigma_a={sigma_a}, A={A}")
     N = nodes.shape[0]
     vol, grad = geometry if geometry is not None else tet_geometry(nodes, tets)
-    # element matrices (T, 4, 4): stiffness vol grad_i . grad_j, mass vol (1 + delta_ij) / 20
-    Ke = D * vol[:, None, None] * np.einsum("tik,tjk->tij", grad, grad)
-    Ke += (sigma_a * vol / 20.0)[:, None, None] * (np.ones((4, 4)) + np.eye(4))
-    rows = np.repeat(tets, 4, axis=1).reshape(-1)
-    cols = np.tile(tets, (1, 4)).reshape(-1)
-    K = sp.coo_matrix((Ke.reshape(-1), (rows, cols)), shape=(N, N))
+    # element matrices (T, 4, 4): stiffness vol grad_i . grad_j, mass vol (1 + delta_ij) / 20 (lumped: vol/4)
+    Se = (vol[:, None, None] * np.einsum("tik,tjk->tij", grad, grad)).reshape(-1)
+    Me = (vol / 20.0)[:, None, None] * (5.0 * np.eye(4) if lumped else np.ones((4, 4)) + np.eye(4))
     area = _triangle_areas(nodes, faces)
-    Be = (area / (12.0 * 2.0 * A))[:, None, None] * (np.ones((3, 3)) + np.eye(3))
-    Kb = sp.coo_matrix((Be.reshape(-1), (np.repeat(faces, 3, axis=1).reshape(-1), np.tile(faces, (1, 3)).reshape(-1))),
-                       shape=(N, N))
-    return (K + Kb).tocsr()
+    Be = (area / 12.0)[:, None, None] * (4.0 * np.eye(3) if lumped else np.ones((3, 3)) + np.eye(3))
+    rows = np.concatenate([np.repeat(tets, 4, axis=1).reshape(-1), np.repeat(faces, 3, axis=1).reshape(-1)])
+    cols = np.concatenate([np.tile(tets, (1, 4)).reshape(-1), np.tile(faces, (1, 3)).reshape(-1)])
+    key = rows.astype(np.int64) * N + cols
+    uniq, inv = np.unique(key, return_inverse=True)
+    nt = Se.size
+    s_sum = np.bincount(inv[:nt], weights=Se, minlength=uniq.size)
+    m_sum = np.bincount(inv[:nt], weights=Me.reshape(-1), minlength=uniq.size)
+    b_sum = np.bincount(inv[nt:], weights=Be.reshape(-1), minlength=uniq.size)
+    data = s_sum[:, None] * D[None, :] + m_sum[:, None] * sigma_a[None, :] + b_sum[:, None] / (2.0 * A[None, :])
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(uniq // N, minlength=N))]).astype(np.int64)
+    return indptr, (uniq % N).astype(np.int64), data
 
 
 def locate_points(nodes, tets, points, *, tree=None, neighbours=None, walk=True):

@@ -117,7 +117,7 @@ class SurfaceTetrahedra(NamedTuple):
     faces_recovered: float
 
 
-def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0):
+def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0, normal_spacing=None, layered_depth=0.0):
     """Tetrahedralise the inside of a closed, outward-oriented triangle mesh, keeping its vertices as nodes.
 
     The points: the surface vertices (exactly), an inner layer ``LAYER_DEPTH`` x the local edge length below
@@ -144,8 +144,18 @@ def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0):
     count = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
     vlen = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / count
     rng = np.random.default_rng(seed)
-    layer = V - igl.per_vertex_normals(V, F) * (LAYER_DEPTH * vlen)[:, None]
-    layer += rng.uniform(-JITTER, JITTER, layer.shape) * vlen[:, None]
+    normals = igl.per_vertex_normals(V, F)
+    if not np.all(vlen > 0):
+        raise MeshshadeError(f"{int(np.sum(vlen <= 0))} surface vertices are used by no edge of positive length "
+                             "(unreferenced or collapsed): tetrahedralise the vertices the faces use")
+    step = LAYER_DEPTH * vlen if normal_spacing is None else np.minimum(LAYER_DEPTH * vlen, float(normal_spacing))
+    n_layers = max(1, int(np.ceil(float(layered_depth) / float(step.min())))) if layered_depth > 0 else 1
+    k = np.arange(1, n_layers + 1)
+    layer_depth = k[:, None] * step[None, :]                            # (layers, n)
+    live = (k[:, None] == 1) | (layer_depth <= max(float(layered_depth), 0.0))
+    layer = (V[None] - normals[None] * layer_depth[..., None])[live]
+    layer += rng.uniform(-JITTER, JITTER, layer.shape) * np.broadcast_to(step[None, :], live.shape)[live][:, None]
+    layer_depth = layer_depth[live]
     spacings = [2.0 * h_s]
     while spacings[-1] < h_max:
         spacings.append(2.0 * spacings[-1])
@@ -163,10 +173,10 @@ def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0):
     for k, (G, s) in enumerate(zip(lattices, spacings)):
         d = depth[start:start + G.shape[0]]
         start += G.shape[0]
-        band_lo = BAND_LO * s if k else FINE_START * h_s
+        band_lo = BAND_LO * s if k else max(FINE_START * h_s, float(layered_depth))
         band_hi = BAND_HI * s if k < len(spacings) - 1 else np.inf
         points.append(G[(d >= band_lo) & (d < band_hi)])
-    points.insert(1, layer[depth[start:] > 0.5 * LAYER_DEPTH * vlen])
+    points.insert(1, layer[depth[start:] > 0.5 * layer_depth])
     P = np.concatenate(points)
     T = Delaunay(P).simplices.astype(np.int64)
     T = T[igl.fast_winding_number(V, F, P[T].mean(axis=1)) > 0.5]

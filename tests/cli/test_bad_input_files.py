@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from meshshade.transport.models import DEFAULT_MODEL
 from meshshade.geometry.procedural import icosphere
 from meshshade.io import read_baked_ply, read_exr, write_ply
 
@@ -245,7 +246,7 @@ def test_render_of_a_baked_ply_equals_the_render_of_the_same_bake(tmp_path, cli,
     b, _ = read_exr(tmp_path / "direct.exr")
     assert a[..., 3].any()
     np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6 * np.abs(b[..., :3]).max())  # radiance stored as float32
-    assert meta["model"].startswith("curved") and "skin1" in meta["material"]
+    assert meta["model"].startswith(DEFAULT_MODEL) and "skin1" in meta["material"]
 
 
 def test_render_of_a_baked_ply_says_which_options_it_ignores(tmp_path, cli, baked):

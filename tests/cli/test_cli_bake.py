@@ -50,13 +50,18 @@ def test_bake_cli_units_metres_matches_mm(tmp_path):
     write_ply(mm, V, F)
     write_ply(m, V / 1000.0, F)
     a, b = tmp_path / "a.npz", tmp_path / "b.npz"
-    assert main(["bake", str(mm), "--material", "marble", "--light", "beam:0,0,40:0,0,-1", "--out",
-                 str(tmp_path / "a.ply"), "--npz", str(a), "-q"]) == 0
-    assert main(["bake", str(m), "--units", "m", "--material", "marble", "--light", "beam:0,0,0.04:0,0,-1",
-                 "--out", str(tmp_path / "b.ply"), "--npz", str(b), "-q"]) == 0
-    # the input PLYs store float32 positions, so the two files differ by float32 rounding (~1e-7 relative) of
-    # the coordinates; the in-memory float64 version of this test (test_transport) holds to 1e-9
-    np.testing.assert_allclose(np.load(a)["radiance"], np.load(b)["radiance"], rtol=2e-5, atol=1e-15)
+    for model in ("curved", "volume"):
+        assert main(["bake", str(mm), "--material", "marble", "--light", "beam:0,0,40:0,0,-1", "--out",
+                     str(tmp_path / "a.ply"), "--npz", str(a), "-q", "--model", model]) == 0
+        assert main(["bake", str(m), "--units", "m", "--material", "marble", "--light", "beam:0,0,0.04:0,0,-1",
+                     "--out", str(tmp_path / "b.ply"), "--npz", str(b), "-q", "--model", model]) == 0
+        ra, rb = np.load(a)["radiance"], np.load(b)["radiance"]
+        # the input PLYs store float32 positions, so the two files differ by float32 rounding (~1e-7 relative) of
+        # the coordinates; the in-memory float64 version of this test (test_transport) holds to 1e-9. The volume
+        # model's tetrahedral mesh (a Delaunay tetrahedralisation) may break near-ties differently for coordinates
+        # that differ in the last bits: measured within 2e-7 of the peak, 1.5e-4 relative at 1e-3 of the peak
+        tol = dict(rtol=2e-5, atol=1e-15) if model == "curved" else dict(rtol=2e-5, atol=1e-6 * ra.max())
+        np.testing.assert_allclose(ra, rb, **tol)
 
 
 @pytest.mark.parametrize("extra,needle", [

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from meshshade.transport.models import DEFAULT_MODEL
 from meshshade import Material, io
 from meshshade.output import render
 from meshshade.cli.main import main
@@ -90,7 +91,7 @@ def test_cli_render(tmp_path):
                "--background", "0.1,0.1,0.1", "--tonemap", "exposure"])
     assert rc == 0
     img, meta = io.read_exr(tmp_path / "img.exr")
-    assert img.shape == (30, 40, 4) and meta["model"] == "curved" and "skin1" in meta["material"]
+    assert img.shape == (30, 40, 4) and meta["model"] == DEFAULT_MODEL and "skin1" in meta["material"]
     png, _ = io.read_exr(tmp_path / "img.png")
     assert png.shape == (30, 40, 4) and np.all(png[..., 3] == 1)
     assert main(["render", str(tmp_path / "s.ply"), "--material", "skin1", "--light", "directional:0,0,-1",

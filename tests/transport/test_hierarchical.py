@@ -198,8 +198,8 @@ def test_cli_transport_option(tmp_path, capsys):
     write_ply(mesh, V, F)
     out = {}
     for t in ("direct", "hierarchical"):
-        rc = main(["bake", str(mesh), "--material", "skin1", "--light", "directional:0,0,-1", "--transport", t,
-                   "--out", str(tmp_path / f"{t}.ply"), "--npz", str(tmp_path / f"{t}.npz")])
+        rc = main(["bake", str(mesh), "--material", "skin1", "--light", "directional:0,0,-1", "--model", "curved",
+                   "--transport", t, "--out", str(tmp_path / f"{t}.ply"), "--npz", str(tmp_path / f"{t}.npz")])
         assert rc == 0
         out[t] = np.load(tmp_path / f"{t}.npz")["radiance"]
     capsys.readouterr()
@@ -207,6 +207,11 @@ def test_cli_transport_option(tmp_path, capsys):
     rc = main(["bake", str(mesh), "--material", "skin1", "--light", "directional:0,0,-1", "--transport", "fast",
                "--out", str(tmp_path / "x.ply")])
     assert rc == 2 and "--transport" in capsys.readouterr().err
+    # the volume model (the default) has its own transport: asking for a surface one is a clear error
+    rc = main(["bake", str(mesh), "--material", "skin1", "--light", "directional:0,0,-1", "--transport", "direct",
+               "--out", str(tmp_path / "x.ply")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "surface models" in err and len(err.strip().splitlines()) == 1
 
 
 def test_the_far_field_verification_sees_the_arc_errors_of_a_lit_configuration(sphere3):
