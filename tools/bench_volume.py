@@ -11,8 +11,8 @@ Rows (JSON, one object per line on stdout):
 * ``scaling``: the head (200 mm, skin1, the sun) loop-subdivided ``--levels`` times: the default bake's wall time
   from scratch and its peak resident memory (each size in a fresh process), and the fitted cost exponent.
 
-Scenes (the sun along (0.3, -0.4, -0.866) unless said): sphere20 (a 20 mm icosphere of level 5, skin1, the sun
-from above), spot50 (spot.obj at 50 mm, skin1), head200 (the head scan at 200 mm, skin1), blub80 (blub.obj at
+Scenes (the sun along (0.3, -0.4, -0.866) unless said): sphere20 (an icosphere of radius 20 mm, level 5, 10k
+vertices, skin1, the sun from above), spot50 (spot.obj at 50 mm, skin1), head200 (the head scan at 200 mm, skin1), blub80 (blub.obj at
 80 mm, marble). The meshes other than the sphere come from ../shared/meshes (skipped with a note without it).
 
     python tools/bench_volume.py [--scenes sphere20,spot50] [--reference-photons 2e7] [--scaling --levels 2]
@@ -54,7 +54,7 @@ def _scaled(name, size_mm):
 def scene(name):
     """(mesh, material, light) of a scene, or None when its mesh is not at hand."""
     if name == "sphere20":
-        return Mesh.from_arrays(*icosphere(10.0, 5)), Material.preset("skin1"), DirectionalLight((0, 0, -1), 1.0)
+        return Mesh.from_arrays(*icosphere(20.0, 5)), Material.preset("skin1"), DirectionalLight((0, 0, -1), 1.0)
     files = {"spot50": ("spot.obj", 50.0, "skin1"), "head200": ("lee_perry_smith_head.obj", 200.0, "skin1"),
              "blub80": ("blub.obj", 80.0, "marble")}
     if name not in files:
@@ -97,7 +97,9 @@ def accuracy(name, args):
                        make_scene(mesh.vertices, mesh.faces), mat.eta)
     lit = np.zeros(mesh.n_vertices, dtype=bool)
     lit[es.vertex[(es.vertex >= 0) & (es.power > 0)]] = True
-    bake(Mesh.from_arrays(*icosphere(5.0, 1)), mat, [light])         # compile outside the timings
+    small = Mesh.from_arrays(*icosphere(5.0, 1))                    # compile both outside the timings
+    bake(small, mat, [light])
+    simulate(small, mat, [light], photons=4096, seed=1, beam_distances=False)
     with tempfile.TemporaryDirectory() as tmp:
         os.environ["MESHSHADE_ASSET_CACHE"] = tmp
         t = time.perf_counter()

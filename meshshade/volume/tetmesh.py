@@ -117,7 +117,8 @@ class SurfaceTetrahedra(NamedTuple):
     faces_recovered: float
 
 
-def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0, normal_spacing=None, layered_depth=0.0):
+def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0, normal_spacing=None, layered_depth=0.0,
+                       interior_spacing=None, interior_reach=0.0):
     """Tetrahedralise the inside of a closed, outward-oriented triangle mesh, keeping its vertices as nodes.
 
     The points: the surface vertices (exactly), an inner layer ``LAYER_DEPTH`` x the local edge length below
@@ -156,7 +157,8 @@ def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0, normal_spacing=No
     layer = (V[None] - normals[None] * layer_depth[..., None])[live]
     layer += rng.uniform(-JITTER, JITTER, layer.shape) * np.broadcast_to(step[None, :], live.shape)[live][:, None]
     layer_depth = layer_depth[live]
-    spacings = [2.0 * h_s]
+    cap = np.inf if interior_spacing is None else float(interior_spacing)
+    spacings = [min(2.0 * h_s, cap)]
     while spacings[-1] < h_max:
         spacings.append(2.0 * spacings[-1])
     lattices = []
@@ -175,6 +177,10 @@ def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0, normal_spacing=No
         start += G.shape[0]
         band_lo = BAND_LO * s if k else max(FINE_START * h_s, float(layered_depth))
         band_hi = BAND_HI * s if k < len(spacings) - 1 else np.inf
+        if s <= cap and (k == len(spacings) - 1 or spacings[k + 1] > cap):
+            band_hi = max(band_hi, float(interior_reach))     # no coarser than the cap within the reach
+        elif s > cap:
+            band_lo = max(band_lo, float(interior_reach))
         points.append(G[(d >= band_lo) & (d < band_hi)])
     points.insert(1, layer[depth[start:] > 0.5 * layer_depth])
     P = np.concatenate(points)

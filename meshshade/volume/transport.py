@@ -40,20 +40,24 @@ MESHER_VERSION = "surface_tetrahedra/1"
 
 
 #: the grading from the material: layers every NORMAL_SPACING x the shortest material length (1/sigma_t' or
-#: 1/sigma_tr of any channel) below the surface, down to LAYERED_DEPTH x that length
-NORMAL_SPACING, LAYERED_DEPTH = 0.45, 2.0
+#: 1/sigma_tr of any channel) below the surface, down to LAYERED_DEPTH x that length; inside, lattices no coarser
+#: than INTERIOR_SPACING x the longest diffusion length (1/sigma_tr of the channel that reaches farthest) within
+#: INTERIOR_REACH x that length of the surface (light that crosses the body travels there), coarser beyond
+NORMAL_SPACING, LAYERED_DEPTH, INTERIOR_SPACING, INTERIOR_REACH = 0.45, 2.0, 0.5, 2.0
 
 
-def grading(material) -> tuple[float, float]:
-    """(normal spacing mm, layered depth mm) of the tetrahedral mesh for ``material`` (:data:`NORMAL_SPACING`)."""
-    length = float(min(np.min(1.0 / np.asarray(material.sigma_t_prime)), np.min(1.0 / np.asarray(material.sigma_tr))))
-    return NORMAL_SPACING * length, LAYERED_DEPTH * length
+def grading(material) -> tuple[float, float, float, float]:
+    """(normal spacing, layered depth, interior spacing, interior reach), mm, of the tetrahedral mesh for
+    ``material`` (:data:`NORMAL_SPACING`)."""
+    short = float(min(np.min(1.0 / np.asarray(material.sigma_t_prime)), np.min(1.0 / np.asarray(material.sigma_tr))))
+    long = float(np.max(1.0 / np.asarray(material.sigma_tr)))
+    return NORMAL_SPACING * short, LAYERED_DEPTH * short, INTERIOR_SPACING * long, INTERIOR_REACH * long
 
 
 def tetra_key(mesh, spacing) -> str:
     """Hex digest naming the tetrahedral mesh of ``mesh`` in an asset cache: its vertices (mm) and faces, the
     grading ``spacing`` (:func:`grading`) and the mesher's version."""
-    h = hashlib.sha256(f"{MESHER_VERSION} {spacing[0]!r} {spacing[1]!r}".encode())
+    h = hashlib.sha256(f"{MESHER_VERSION} {' '.join(repr(float(x)) for x in spacing)}".encode())
     for a in (np.ascontiguousarray(mesh.vertices, dtype=np.float64), np.ascontiguousarray(mesh.faces, dtype=np.int64)):
         h.update(str(a.shape).encode())
         h.update(a.tobytes())
@@ -107,7 +111,8 @@ class VolumeTransport:
             used = np.unique(mesh.faces)
             faces = np.searchsorted(used, mesh.faces)
             tetra = surface_tetrahedra(mesh.vertices[used], faces, normal_spacing=spacing[0],
-                                       layered_depth=spacing[1])
+                                       layered_depth=spacing[1], interior_spacing=spacing[2],
+                                       interior_reach=spacing[3])
             if cache is not None:
                 cache.write(tetra_key(mesh, spacing), nodes=tetra.nodes, tets=tetra.tets, n_surface=tetra.n_surface,
                             surface_spacing=tetra.surface_spacing, faces_recovered=tetra.faces_recovered)
