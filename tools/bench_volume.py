@@ -151,7 +151,9 @@ def scaling(args):
     for level in range(args.levels + 1):
         out = subprocess.run([sys.executable, __file__, "--one-size", str(level)], capture_output=True, text=True)
         if out.returncode:
-            sizes.append({"level": level, "failed": out.stderr.strip().splitlines()[-1:]})
+            lines = [x for x in out.stderr.strip().splitlines() if "Error" in x or "error" in x]
+            sizes.append({"level": level, "failed": f"exit {out.returncode}: "
+                          + (lines[-1] if lines else "no error message (killed?)")})
             continue
         sizes.append({"level": level, **json.loads(out.stdout.strip().splitlines()[-1])})
     ok = [s for s in sizes if "seconds" in s]
