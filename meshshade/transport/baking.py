@@ -44,7 +44,7 @@ from meshshade.transport.models import DEFAULT_MODEL, MODELS
 from meshshade.transport.near_field import check_near_field, drift_angles, near_field_factors, refracted_drift
 from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, source_frames, source_patch_radius
 from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, clusters_pay, neighbourhood_solver
-from meshshade.volume.transport import VolumeTransport
+from meshshade.volume.transport import NORMAL_SPACING, VolumeTransport, grading
 
 log = logging.getLogger("meshshade")
 
@@ -188,7 +188,7 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     if model == "volume":
         vt, volume_why = _volume_transport(mesh, material, volume, volume_cache, clock)
         if vt is None:
-            log.warning("meshshade: %s; using the surface transport (model auto, beam near field)", volume_why)
+            log.warning("%s; using the surface transport (model auto, beam near field)", volume_why)
             model = "auto"
     far_field = check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol,
                                    far_tol=far_tol, far_rel_tol=far_rel_tol, far_geodesic=far_geodesic,
@@ -263,6 +263,11 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
                       clock.timings, stats, plan)
 
 
+#: the volume transport's layers below the surface are at most this many times thinner than the surface's edges
+#: (thinner ones form slivers, and the light of such a material stays within a vertex's patch anyway)
+MAX_LAYER_ASPECT = 25.0
+
+
 def _volume_transport(mesh, material, volume, cache, clock):
     """``(VolumeTransport or None, why not)``: the one passed in, the one kept for this mesh and material inside
     :func:`meshshade.memo.reuse`, or a new one (its stages charged to ``clock``); None where the mesh encloses no
@@ -273,6 +278,11 @@ def _volume_transport(mesh, material, volume, cache, clock):
     if not d.is_closed:
         return None, (f"the mesh is not closed ({d.n_boundary_edges} boundary and {d.n_nonmanifold_edges} "
                       "non-manifold edges): it encloses no volume")
+    step, edge = grading(material)[0], float(mesh.mean_edge_length)
+    if step * MAX_LAYER_ASPECT < edge:
+        return None, (f"the material's shortest length ({step / NORMAL_SPACING:.3g} mm) is far below the mesh's edge "
+                      f"length ({edge:.3g} mm): its light stays within a vertex's patch, where the surface kernels "
+                      "are as exact")
     built = []
 
     def build():

@@ -92,6 +92,8 @@ def ball_tetrahedra(radius, n):
 
 #: the inner layer's depth below each surface vertex, in units of the vertex's mean edge length
 LAYER_DEPTH = 0.6
+#: the most lattice candidates :func:`surface_tetrahedra` generates (over the bounding box, before the bands)
+MAX_LATTICE_POINTS = 4e7
 #: jitter of the interior points (fraction of their spacing): no five cospherical points, so no flat tetrahedra
 JITTER = 0.05
 #: a lattice of spacing s fills the band [BAND_LO s, BAND_HI s) of depths below the surface (the finest starts
@@ -157,10 +159,16 @@ def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0, normal_spacing=No
     layer = (V[None] - normals[None] * layer_depth[..., None])[live]
     layer += rng.uniform(-JITTER, JITTER, layer.shape) * np.broadcast_to(step[None, :], live.shape)[live][:, None]
     layer_depth = layer_depth[live]
-    cap = np.inf if interior_spacing is None else float(interior_spacing)
-    spacings = [min(2.0 * h_s, cap)]
+    # no interior lattice finer than the surface's own resolution: a material whose diffusion length is far below
+    # the edge length (sigma_a >> sigma_s') gains nothing from it
+    cap = np.inf if interior_spacing is None else max(float(interior_spacing), 2.0 * h_s)
+    spacings = [2.0 * h_s]
     while spacings[-1] < h_max:
         spacings.append(2.0 * spacings[-1])
+    count = sum(2.0 * float(np.prod(np.floor((hi - lo) / s) + 1.0)) for s in spacings)
+    if count > MAX_LATTICE_POINTS:
+        raise MeshshadeError(f"the tetrahedral mesh would need {count:.3g} lattice candidates (surface spacing "
+                             f"{h_s:.3g} mm over a {np.max(hi - lo):.4g} mm box); at most {MAX_LATTICE_POINTS:.3g}")
     lattices = []
     for s in spacings:
         axes = [np.arange(lo[a] + 0.5 * s, hi[a], s) for a in range(3)]

@@ -172,3 +172,13 @@ def test_per_pixel_near_field_equals_the_bake_at_vertices(ball):
     at_entry = gather(entry[None], np.array([f0]), res.samples.bary[:1])
     interpolated = res.samples.bary[0] @ res.radiance[F[f0]]
     assert np.all(at_entry > 1.02 * interpolated)      # the beam's peak, which interpolation flattens
+
+
+def test_a_material_far_below_the_mesh_resolution_uses_the_surface_models(ball):
+    """sigma_a = 50 /mm (diffusion length 0.011 mm against 1.5 mm edges): layers that thin would be slivers, and
+    the light stays within a vertex's patch: the bake says so and uses auto; the result is finite and positive."""
+    with pytest.warns(Warning, match="albedo"):     # diffusion's validity, said when the material is made
+        mat = Material([1.0, 1.0, 1.0], [50.0, 50.0, 50.0])
+    res = bake(ball, mat, [BeamLight((0.0, 0.0, 30.0), (0.0, 0.0, -1.0))])
+    assert res.model == "auto" and "far below the mesh's edge length" in res.stats["transport"]
+    assert np.all(np.isfinite(res.radiance)) and res.radiance.max() > 0
