@@ -16,6 +16,9 @@ others at ``bake``'s defaults; rows ``knob="default"`` are the baseline):
   reference MC run with another seed);
 * ``near_field``: the other near field of ``bake`` (docs/physics.md §13; "beam" when the baseline is "point"), on
   the scenes with a Monte Carlo reference only (the exact references are diffusion's own point source).
+
+The ``volume`` model always carries the beam near field and has no series, cutoff or geodesics: it gets the
+``default``, ``resolution`` and ``render`` rows only.
 """
 from __future__ import annotations
 
@@ -135,6 +138,14 @@ def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchCo
         L = cfg.levels.get(n, sc.level)
         base = {"rtol": d["rtol"], "cutoff_tol": d["cutoff_tol"], "geodesic": sc.geodesic, "near_field": near_field}
         for m in models:
+            if m == "volume":   # the beam near field always; rtol, cutoff and geodesics are the surface models'
+                vb = {**base, "near_field": "beam"}
+                runs.append(Run(sc, m, "default", "", L, dict(vb)))
+                runs += [Run(sc, m, "resolution", str(v), v, dict(vb)) for v in cfg.resolution.get(n, ()) if v != L]
+                if n in cfg.render_scenes and sc.reference == "exact" and sc.light == "beam":
+                    runs += [Run(sc, m, "render", mode, L, {**vb, "render": mode, "width": cfg.render_width})
+                             for mode in ("per-vertex", "per-pixel")]
+                continue
             runs.append(Run(sc, m, "default", "", L, dict(base)))
             if sc.reference == "mc":
                 runs.append(Run(sc, m, "near_field", other_near, L, {**base, "near_field": other_near}))

@@ -81,9 +81,14 @@ def test_bench_plan_iterates_over_transport_models():
     full = bench.bench_plan()
     nf = [r for r in full if r.knob == "near_field"]
     mc_scenes = {r.scene.name for r in full if r.scene.reference == "mc"}
-    assert {(r.scene.name, r.model) for r in nf} == {(n, m) for n in mc_scenes for m in MODELS}
+    surface = [m for m in MODELS if m != "volume"]     # the volume model has the beam near field only
+    assert {(r.scene.name, r.model) for r in nf} == {(n, m) for n in mc_scenes for m in surface}
     assert all(r.value == "beam" and r.settings["near_field"] == "beam" for r in nf)
-    assert all(r.settings["near_field"] == "point" for r in full if r.knob not in ("near_field", "photons"))
+    assert all(r.settings["near_field"] == "point" for r in full
+               if r.knob not in ("near_field", "photons") and r.model != "volume")
+    volume = [r for r in full if r.model == "volume"]
+    assert volume and all(r.settings["near_field"] == "beam" for r in volume)
+    assert {r.knob for r in volume} <= {"default", "resolution", "render"}
 
 
 def test_bench_tiny_rows_finite_with_required_columns(tiny_result):
