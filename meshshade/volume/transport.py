@@ -26,6 +26,7 @@ from scipy.spatial import cKDTree
 from meshshade.errors import MeshshadeError
 from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.kernels.fresnel import refract_in
+from meshshade.progress import kernel_interrupts
 from meshshade.volume.fem import locate_points, point_source_vector
 from meshshade.volume.locate import tet_neighbours
 from meshshade.volume.near_field import NearFieldCorrection
@@ -153,14 +154,16 @@ class VolumeTransport:
         timings["volume sources"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         op = self.operator
-        M[self.surface_vertices] = op.solve(loads)[:tm.n_surface] / (2.0 * op.A[None, :])
+        with kernel_interrupts():   # a Ctrl-C inside the compiled parallel loops is a KeyboardInterrupt
+            M[self.surface_vertices] = op.solve(loads)[:tm.n_surface] / (2.0 * op.A[None, :])
         timings["volume solve"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         point = samples.vertex < 0
         src_radius = np.where(point, 0.0, np.sqrt(mesh.vertex_areas[np.maximum(samples.vertex, 0)] / math.pi))
-        dM, pairs = self.correction.exitance(samples.positions, samples.normals, samples.power, cos_t, src_radius,
-                                             mesh.vertices, mesh.vertex_normals,
-                                             np.sqrt(mesh.vertex_areas / math.pi))
+        with kernel_interrupts():
+            dM, pairs = self.correction.exitance(samples.positions, samples.normals, samples.power, cos_t,
+                                                 src_radius, mesh.vertices, mesh.vertex_normals,
+                                                 np.sqrt(mesh.vertex_areas / math.pi))
         M += dM
         timings["near field"] = time.perf_counter() - t0
         if not np.all(np.isfinite(M)):
