@@ -1,5 +1,6 @@
-"""File input and output: the only module that touches the file system (but for numba's cache folders,
-which ``meshshade.compiled_cache`` places before numba is imported).
+"""File input and output: the only module that touches the file system (but for the caches: numba's folders,
+which ``meshshade.compiled_cache`` places before numba is imported, and the assets' derived data,
+``meshshade.asset_cache``).
 
 Reading meshes
 --------------
@@ -60,13 +61,11 @@ import stat
 import sys
 import tempfile
 import warnings
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from meshshade import memo
-from meshshade.compiled_cache import user_cache_root
 from meshshade.errors import MeshshadeError, MeshValidationError, OutputError
 from meshshade.geometry.mesh import Mesh, MeshDefectWarning
 from meshshade.units import mm_per_unit
@@ -1503,70 +1502,3 @@ def write_obj(path, vertices, faces, *, comment: str | None = None) -> Path:
             np.savetxt(fh, V, fmt="v %.17g %.17g %.17g")
             np.savetxt(fh, F + 1, fmt="f %d %d %d")
     return path
-
-
-# ------------------------------------------------------------------------------------------------ asset cache
-#: what the asset cache keeps per kind (least recently used beyond it are removed)
-ASSET_CACHE_KEEP = 16
-
-
-def asset_cache_dir(kind: str) -> Path:
-    """``<user cache>/meshshade/<kind>``: derived data of assets (the volume transport's tetrahedral meshes), kept
-    across runs; ``MESHSHADE_ASSET_CACHE`` names another folder, or turns the cache off when set to ``off``."""
-    root = os.environ.get("MESHSHADE_ASSET_CACHE")
-    return (Path(root) if root else user_cache_root().parent) / kind
-
-
-def read_asset_cache(kind: str, key: str) -> dict | None:
-    """The arrays stored under ``key`` (a hex digest of the asset and settings), or None: absent, unreadable or
-    the cache off. A cache: any failure is a miss, never an error."""
-    if os.environ.get("MESHSHADE_ASSET_CACHE", "").lower() == "off":
-        return None
-    path = asset_cache_dir(kind) / f"{key}.npz"
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            out = {k: data[k] for k in data.files}
-        os.utime(path)   # recently used
-        return out
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
-        return None
-
-
-def write_asset_cache(kind: str, key: str, **arrays) -> bool:
-    """Store ``arrays`` under ``key`` atomically (uncompressed ``.npz``) and keep the :data:`ASSET_CACHE_KEEP`
-    most recently used entries of ``kind``; False when the cache is off or cannot be written (never an error)."""
-    if os.environ.get("MESHSHADE_ASSET_CACHE", "").lower() == "off":
-        return False
-    folder = asset_cache_dir(kind)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        tmp = folder / f".{key}.{secrets.token_hex(4)}.tmp.npz"
-        try:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **arrays)
-            with _signals_deferred():
-                os.replace(tmp, folder / f"{key}.npz")
-        finally:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-        entries = sorted(folder.glob("*.npz"), key=lambda p: p.stat().st_mtime, reverse=True)
-        for old in entries[ASSET_CACHE_KEEP:]:
-            with contextlib.suppress(OSError):
-                old.unlink()
-        return True
-    except OSError:
-        return False
-
-
-class AssetCache:
-    """The asset cache of one ``kind`` as an object the pipeline's stages can be handed (they do no I/O
-    themselves): ``read(key)`` -> dict of arrays or None, ``write(key, **arrays)`` -> bool."""
-
-    def __init__(self, kind: str):
-        self.kind = kind
-
-    def read(self, key: str) -> dict | None:
-        return read_asset_cache(self.kind, key)
-
-    def write(self, key: str, **arrays) -> bool:
-        return write_asset_cache(self.kind, key, **arrays)

@@ -29,7 +29,7 @@ PACKAGE = "meshshade"
 
 KERNEL_ALLOWED_ROOTS = {"numpy", "scipy", "numba", "math", "__future__", "typing", "dataclasses", "functools"}
 #: (module, function qualname) allowed to touch files; None: the whole module
-FILE_IO_ALLOWED = {("meshshade.io", None), ("meshshade.compiled_cache", None)}
+FILE_IO_ALLOWED = {("meshshade.io", None), ("meshshade.compiled_cache", None), ("meshshade.asset_cache", None)}
 #: method names that create, open, write, move or delete files on whatever object they are called
 FILE_METHODS = {"open", "write_text", "write_bytes", "mkdir", "touch", "unlink", "savefig", "tofile", "imsave"}
 #: Path.rename(target) / Path.replace(target): one positional argument (str.replace needs two)

@@ -33,7 +33,8 @@ import numpy as np
 
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
-from meshshade.io import AssetCache, read_mesh_arrays
+from meshshade.asset_cache import AssetCache
+from meshshade.io import read_mesh_arrays
 from meshshade.light import DirectionalLight
 from meshshade.light.samples import entry_samples
 from meshshade.materials import Material

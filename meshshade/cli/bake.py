@@ -7,7 +7,8 @@ import argparse
 from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args, add_mesh_args,
                                    add_model_arg, add_near_field_arg, add_transport_arg, lights_from_args,
                                    mesh_and_material, number)
-from meshshade.io import AssetCache, check_output_path
+from meshshade.asset_cache import AssetCache
+from meshshade.io import check_output_path
 from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, write_bake
 from meshshade.transport import bake, describe_result
 from meshshade.transport.baking import check_bake_options

@@ -7,7 +7,8 @@ import argparse
 import json
 
 from meshshade.cli.options import add_image_args, image_scene_from_args, integer, number
-from meshshade.io import AssetCache, output_dir
+from meshshade.asset_cache import AssetCache
+from meshshade.io import output_dir
 from meshshade.output.compare import check_floor, check_models, run_comparison, save_comparison
 from meshshade.output.render import check_image_size
 from meshshade.output.tonemap import check_tonemap_options

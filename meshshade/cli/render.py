@@ -15,7 +15,8 @@ from pathlib import Path
 from meshshade.cli.options import (add_image_args, add_model_arg, add_near_field_arg, background_from_args, image_scene_from_args,
                                    material_given)
 from meshshade.errors import MaterialError, MeshshadeError, MeshValidationError, OutputError
-from meshshade.io import AssetCache, check_output_path, read_baked_ply, write_exr, write_png
+from meshshade.asset_cache import AssetCache
+from meshshade.io import check_output_path, read_baked_ply, write_exr, write_png
 from meshshade.transport.models import DEFAULT_MODEL
 from meshshade.kernels.optics import check_eta
 from meshshade.output.render import (PixelGather, check_image_size, display_rgba, image_rgba, parse_camera,

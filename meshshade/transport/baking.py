@@ -126,7 +126,7 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     (:class:`meshshade.volume.transport.VolumeTransport`, docs/physics.md §15). It always carries the beam
     near field. ``volume``: a VolumeTransport built for this mesh and material (reused across lights);
     ``volume_cache``: where the tetrahedral mesh is looked up and kept between runs
-    (:class:`meshshade.io.AssetCache`; the CLI, batches and the add-on pass one). On a mesh that is not closed,
+    (:class:`meshshade.asset_cache.AssetCache`; the CLI, batches and the add-on pass one). On a mesh that is not closed,
     or that cannot be tetrahedralised, the bake uses ``model="auto"`` with the beam near field and says why in
     ``stats["transport"]``. The options below (geodesics, far field, transport, cutoff) are the surface
     models'.

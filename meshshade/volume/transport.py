@@ -2,7 +2,7 @@
 
 :class:`VolumeTransport` is a stage of its own, built once per mesh and material and reused for every light: the
 tetrahedral mesh of the surface (its vertices kept as nodes), the assembled operator of each channel with its
-multigrid hierarchy, the point-location structures and the near-field correction's tables. :meth:`exitance` takes
+solver, the point-location structures and the near-field correction's tables. :meth:`exitance` takes
 the bake's entry samples (where light enters, with shadows and Fresnel already applied) and returns the exitance at
 the mesh's vertices:
 
@@ -95,27 +95,28 @@ class VolumeTransport:
     def build(cls, mesh, material, *, tetra=None, cache=None):
         """Tetrahedralise ``mesh`` (or take ``tetra``, a :class:`~meshshade.volume.tetmesh.SurfaceTetrahedra` of
         it) and assemble one operator per distinct channel. ``cache``: an object with ``read(key)`` and
-        ``write(key, **arrays)`` (:class:`meshshade.io.AssetCache`) where the tetrahedral mesh is looked up and
+        ``write(key, **arrays)`` (:class:`meshshade.asset_cache.AssetCache`) where the tetrahedral mesh is looked up and
         stored under :func:`tetra_key`; ``stats["volume_tetrahedra_cached"]`` says whether it was found there."""
         timings = {}
         t0 = time.perf_counter()
         cached = False
         spacing = grading(material)
+        key = tetra_key(mesh, spacing) if cache is not None else None
+        used = np.unique(mesh.faces)
         if tetra is None and cache is not None:
-            got = cache.read(tetra_key(mesh, spacing))
+            got = cache.read(key)
             if got is not None and {"nodes", "tets", "n_surface", "surface_spacing", "faces_recovered"} <= set(got):
                 tetra = SurfaceTetrahedra(got["nodes"], got["tets"], int(got["n_surface"]),
                                           float(got["surface_spacing"]), float(got["faces_recovered"]))
-                cached = tetra.n_surface == np.unique(mesh.faces).size
+                cached = tetra.n_surface == used.size
                 tetra = tetra if cached else None
         if tetra is None:
-            used = np.unique(mesh.faces)
             faces = np.searchsorted(used, mesh.faces)
             tetra = surface_tetrahedra(mesh.vertices[used], faces, normal_spacing=spacing[0],
                                        layered_depth=spacing[1], interior_spacing=spacing[2],
                                        interior_reach=spacing[3])
             if cache is not None:
-                cache.write(tetra_key(mesh, spacing), nodes=tetra.nodes, tets=tetra.tets, n_surface=tetra.n_surface,
+                cache.write(key, nodes=tetra.nodes, tets=tetra.tets, n_surface=tetra.n_surface,
                             surface_spacing=tetra.surface_spacing, faces_recovered=tetra.faces_recovered)
         timings["tetrahedra"] = time.perf_counter() - t0
         t0 = time.perf_counter()

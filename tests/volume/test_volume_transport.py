@@ -17,7 +17,7 @@ import scipy.sparse.linalg as spla
 from meshshade.errors import MeshshadeError, ParameterError
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import box, icosphere
-from meshshade.io import AssetCache
+from meshshade.asset_cache import AssetCache
 from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.kernels.near_field import incidence_gain, near_field_total
