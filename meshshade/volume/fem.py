@@ -10,10 +10,12 @@ matrix: symmetric positive definite (sigma_a > 0 or a boundary), depending on me
 source of power P at x (eq. (91)) contributes P lambda_i(x) to the nodes i of the tetrahedron holding x (its
 barycentric coordinates lambda). The exitance on the boundary is M = phi / (2A) (eq. (92)).
 
-No Python loop over elements or nodes: every step is a vectorised numpy expression or a sparse-matrix build.
+No Python loop over elements or nodes: the assembly's element loop is compiled (numba), the rest vectorised
+numpy; :func:`tet_geometry` is the vectorised form of the same element geometry (tests compare the two).
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
@@ -68,11 +70,6 @@ def boundary_faces(tets, nodes=None):
     return out
 
 
-def _triangle_areas(nodes, faces):
-    a, b, c = nodes[faces[:, 0]], nodes[faces[:, 1]], nodes[faces[:, 2]]
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-
-
 def assemble_diffusion(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lumped=False):
     """K = D S + sigma_a M + B/(2A) (eq. (90)) as a CSR matrix (N, N), float64.
 
@@ -81,6 +78,7 @@ def assemble_diffusion(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lump
     geometry : :func:`tet_geometry`'s result, if already computed. ``lumped``: the mass matrices M and B diagonal
     (each element's mass shared equally by its nodes): the same second order at the nodes, and no negative
     fluence from the mass terms' coupling where the solution falls steeply (a sun's terminator in the blue).
+    A node of no tetrahedron gets 1 on the diagonal (fluence 0, the matrix stays definite).
     """
     indptr, indices, data = assemble_channels(nodes, tets, faces, D=[D], sigma_a=[sigma_a], A=[A],
                                               geometry=geometry, lumped=lumped)
@@ -90,29 +88,122 @@ def assemble_diffusion(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lump
 
 def assemble_channels(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lumped=False):
     """Eq. (90)'s matrices of k channels (``D``, ``sigma_a``, ``A`` sequences of k) on one CSR structure:
-    (indptr (N+1,), indices (nnz,), data (nnz, k)), rows sorted, duplicates summed (see
-    :func:`assemble_diffusion`)."""
+    (indptr (N+1,), indices (nnz,), data (nnz, k)), rows sorted (see :func:`assemble_diffusion`).
+
+    The pattern comes from the tetrahedra's edges (every node keeps its diagonal); the element matrices are
+    formed and added in place by a compiled loop (:func:`_add_elements`), so memory stays at the matrix's own
+    size. ``geometry`` is accepted for compatibility and not needed.
+    """
     D, sigma_a, A = (np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (D, sigma_a, A))
     if not (np.all(D > 0.0) and np.all(sigma_a >= 0.0) and np.all(A >= 1.0)):
         raise MeshshadeError(f"diffusion needs D > 0, sigma_a >= 0 and A >= 1, got D={D}, sigma_a={sigma_a}, A={A}")
     N = nodes.shape[0]
-    vol, grad = geometry if geometry is not None else tet_geometry(nodes, tets)
-    # element matrices (T, 4, 4): stiffness vol grad_i . grad_j, mass vol (1 + delta_ij) / 20 (lumped: vol/4)
-    Se = (vol[:, None, None] * np.einsum("tik,tjk->tij", grad, grad)).reshape(-1)
-    Me = (vol / 20.0)[:, None, None] * (5.0 * np.eye(4) if lumped else np.ones((4, 4)) + np.eye(4))
-    area = _triangle_areas(nodes, faces)
-    Be = (area / 12.0)[:, None, None] * (4.0 * np.eye(3) if lumped else np.ones((3, 3)) + np.eye(3))
-    rows = np.concatenate([np.repeat(tets, 4, axis=1).reshape(-1), np.repeat(faces, 3, axis=1).reshape(-1)])
-    cols = np.concatenate([np.tile(tets, (1, 4)).reshape(-1), np.tile(faces, (1, 3)).reshape(-1)])
-    key = rows.astype(np.int64) * N + cols
-    uniq, inv = np.unique(key, return_inverse=True)
-    nt = Se.size
-    s_sum = np.bincount(inv[:nt], weights=Se, minlength=uniq.size)
-    m_sum = np.bincount(inv[:nt], weights=Me.reshape(-1), minlength=uniq.size)
-    b_sum = np.bincount(inv[nt:], weights=Be.reshape(-1), minlength=uniq.size)
-    data = s_sum[:, None] * D[None, :] + m_sum[:, None] * sigma_a[None, :] + b_sum[:, None] / (2.0 * A[None, :])
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(uniq // N, minlength=N))]).astype(np.int64)
-    return indptr, (uniq % N).astype(np.int64), data
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    indptr, indices = _pattern(tets, N)
+    parts = np.zeros((3, indices.size))              # stiffness, volume mass, boundary mass
+    status = _add_elements(np.ascontiguousarray(nodes, dtype=np.float64), tets, faces, indptr, indices,
+                           bool(lumped), parts)
+    if status >= 0:
+        raise MeshshadeError(f"degenerate tetrahedron {status} (zero volume)")
+    data = parts[0][:, None] * D[None, :] + parts[1][:, None] * sigma_a[None, :] + parts[2][:, None] / (2.0 * A)
+    isolated = np.ones(N, dtype=bool)            # a node of no element gets 1 on its diagonal
+    isolated[tets.reshape(-1)] = False
+    diag = _diagonal_positions(indptr, indices)
+    data[diag[isolated]] = 1.0
+    return indptr, indices, data
+
+
+def _pattern(tets, N):
+    """(indptr, indices) int64 of the symmetric pattern: each node's diagonal and the tetrahedra's edges."""
+    i = tets[:, [0, 0, 0, 1, 1, 2]].reshape(-1)
+    j = tets[:, [1, 2, 3, 2, 3, 3]].reshape(-1)
+    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    edges = np.unique(lo * N + hi)
+    lo, hi = edges // N, edges % N
+    diag = np.arange(N, dtype=np.int64)
+    key = np.concatenate([lo * N + hi, hi * N + lo, diag * N + diag])
+    key.sort()
+    indptr = np.zeros(N + 1, dtype=np.int64)
+    np.cumsum(np.bincount(key // N, minlength=N), out=indptr[1:])
+    return indptr, key % N
+
+
+@numba.njit(cache=True)
+def _position(indptr, indices, row, col):
+    lo, hi = indptr[row], indptr[row + 1]
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if indices[mid] < col:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@numba.njit(cache=True)
+def _diagonal_positions(indptr, indices):
+    n = indptr.size - 1
+    out = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        out[i] = _position(indptr, indices, i, i)
+    return out
+
+
+@numba.njit(cache=True)
+def _add_elements(nodes, tets, faces, indptr, indices, lumped, parts):
+    """Add every tetrahedron's stiffness vol grad_i . grad_j and mass vol (1 + delta_ij) / 20 (lumped: vol / 4
+    on the diagonal), and every boundary face's mass area (1 + delta_ij) / 12 (lumped: area / 3), into ``parts``
+    (3, nnz) at the pattern's positions. Returns -1, or the first tetrahedron of zero volume."""
+    g = np.empty((4, 3))
+    E = np.empty((3, 3))
+    pos = np.empty((4, 4), dtype=np.int64)
+    for t in range(tets.shape[0]):
+        a = tets[t, 0]
+        for r in range(3):
+            for d in range(3):
+                E[r, d] = nodes[tets[t, r + 1], d] - nodes[a, d]
+        e00, e01, e02, e10, e11, e12 = E[0, 0], E[0, 1], E[0, 2], E[1, 0], E[1, 1], E[1, 2]
+        e20, e21, e22 = E[2, 0], E[2, 1], E[2, 2]
+        # rows of E are the edges; grad lambda_{k+1} is column k of E^-1, i.e. row k of the cofactor matrix / det
+        c00, c01, c02 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
+        c10, c11, c12 = e02 * e21 - e01 * e22, e00 * e22 - e02 * e20, e01 * e20 - e00 * e21
+        c20, c21, c22 = e01 * e12 - e02 * e11, e02 * e10 - e00 * e12, e00 * e11 - e01 * e10
+        det = e00 * c00 + e01 * c01 + e02 * c02
+        vol = abs(det) / 6.0
+        if not vol > 1e-300:
+            return t
+        g[1, 0], g[1, 1], g[1, 2] = c00 / det, c01 / det, c02 / det
+        g[2, 0], g[2, 1], g[2, 2] = c10 / det, c11 / det, c12 / det
+        g[3, 0], g[3, 1], g[3, 2] = c20 / det, c21 / det, c22 / det
+        for d in range(3):
+            g[0, d] = -(g[1, d] + g[2, d] + g[3, d])
+        for i in range(4):
+            for j in range(4):
+                pos[i, j] = _position(indptr, indices, tets[t, i], tets[t, j])
+        for i in range(4):
+            for j in range(4):
+                parts[0, pos[i, j]] += vol * (g[i, 0] * g[j, 0] + g[i, 1] * g[j, 1] + g[i, 2] * g[j, 2])
+                if lumped:
+                    if i == j:
+                        parts[1, pos[i, j]] += 0.25 * vol
+                else:
+                    parts[1, pos[i, j]] += vol * (2.0 if i == j else 1.0) / 20.0
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        u0, u1, u2 = nodes[b, 0] - nodes[a, 0], nodes[b, 1] - nodes[a, 1], nodes[b, 2] - nodes[a, 2]
+        v0, v1, v2 = nodes[c, 0] - nodes[a, 0], nodes[c, 1] - nodes[a, 1], nodes[c, 2] - nodes[a, 2]
+        n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+        area = 0.5 * np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        for i in range(3):
+            for j in range(3):
+                if lumped:
+                    if i == j:
+                        parts[2, _position(indptr, indices, faces[f, i], faces[f, i])] += area / 3.0
+                else:
+                    parts[2, _position(indptr, indices, faces[f, i], faces[f, j])] += \
+                        area * (2.0 if i == j else 1.0) / 12.0
+    return -1
 
 
 def locate_points(nodes, tets, points, *, tree=None, neighbours=None, walk=True):

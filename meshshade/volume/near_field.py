@@ -39,6 +39,8 @@ __all__ = ["NearFieldCorrection", "TAIL_TOL", "PATCH_RADII"]
 TAIL_TOL = 1e-2
 #: pairs closer than this many patch radii take Delta R averaged over the patch's disc
 PATCH_RADII = 4.0
+#: pairs per block of sources in :meth:`NearFieldCorrection.exitance` (on average; about 100 bytes each)
+PAIR_BLOCK = 8_000_000
 _LOG_R = np.linspace(math.log(1e-5), math.log(200.0), 1025)     # optical distances of the tables
 _N_COS = 9
 _TH_NODES, _TH_WEIGHTS = np.polynomial.legendre.leggauss(24)
@@ -124,22 +126,29 @@ class NearFieldCorrection:
         if len(src_pos) == 0:
             return out, 0
         tree_r = cKDTree(rec_pos)
-        tree_s = cKDTree(src_pos)
-        pairs = tree_s.sparse_distance_matrix(tree_r, float(self.radius_mm.max()), output_type="ndarray")
-        i = np.ascontiguousarray(pairs["i"], dtype=np.int64)
-        o = np.ascontiguousarray(pairs["j"], dtype=np.int64)
-        s = np.ascontiguousarray(pairs["v"], dtype=np.float64)
-        vals = _pair_values(i, o, s, np.ascontiguousarray(src_normal, dtype=np.float64),
-                            np.ascontiguousarray(rec_normal, dtype=np.float64),
-                            np.ascontiguousarray(src_power, dtype=np.float64),
-                            np.ascontiguousarray(src_cos_t, dtype=np.float64),
-                            np.ascontiguousarray(src_radius, dtype=np.float64),
-                            np.ascontiguousarray(rec_radius, dtype=np.float64),
-                            self._f, self._cum, self._rest, self._cos, self._n_r, self._log_r0,
-                            _LOG_R[1] - _LOG_R[0], self.radius_mm, _TH_NODES, _TH_WEIGHTS, PATCH_RADII)
-        for c in range(3):
-            out[:, c] = np.bincount(o, weights=vals[:, c], minlength=n)
-        return out, int(i.size)
+        radius = float(self.radius_mm.max())
+        # the pairs in blocks of nearby sources (the source tree's order), each block within PAIR_BLOCK pairs on
+        # average, so that memory stays bounded on dense meshes
+        order = cKDTree(src_pos).indices
+        probe = src_pos[order[np.linspace(0, order.size - 1, min(order.size, 256)).astype(np.int64)]]
+        per_source = max(float(np.mean(tree_r.query_ball_point(probe, radius, return_length=True))), 1.0)
+        blocks = max(1, int(math.ceil(order.size * per_source / PAIR_BLOCK)))
+        arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (src_normal, rec_normal, src_power, src_cos_t,
+                                                                        src_radius, rec_radius)]
+        total = 0
+        for chunk in np.array_split(order, blocks):
+            pairs = cKDTree(src_pos[chunk]).sparse_distance_matrix(tree_r, radius, output_type="ndarray")
+            i = chunk[pairs["i"]].astype(np.int64)
+            o = np.ascontiguousarray(pairs["j"], dtype=np.int64)
+            s = np.ascontiguousarray(pairs["v"], dtype=np.float64)
+            del pairs
+            vals = _pair_values(i, o, s, *arrays, self._f, self._cum, self._rest, self._cos, self._n_r,
+                                self._log_r0, _LOG_R[1] - _LOG_R[0], self.radius_mm, _TH_NODES, _TH_WEIGHTS,
+                                PATCH_RADII)
+            for c in range(3):
+                out[:, c] += np.bincount(o, weights=vals[:, c], minlength=n)
+            total += int(i.size)
+        return out, total
 
 
 @numba.njit(cache=True, inline="always")

@@ -37,22 +37,25 @@ from meshshade.volume.tetmesh import SurfaceTetrahedra, surface_tetrahedra
 __all__ = ["VolumeTransport", "diffusion_constants", "tetra_key"]
 
 #: the tetrahedral mesher's settings as they enter the cache key (bump when surface_tetrahedra changes its output)
-MESHER_VERSION = "surface_tetrahedra/1"
+MESHER_VERSION = "surface_tetrahedra/2"
 
 
 #: the grading from the material: layers every NORMAL_SPACING x the shortest material length (1/sigma_t' or
-#: 1/sigma_tr of any channel) below the surface, down to LAYERED_DEPTH x that length; inside, lattices no coarser
-#: than INTERIOR_SPACING x the longest diffusion length (1/sigma_tr of the channel that reaches farthest) within
-#: INTERIOR_REACH x that length of the surface (light that crosses the body travels there), coarser beyond
-NORMAL_SPACING, LAYERED_DEPTH, INTERIOR_SPACING, INTERIOR_REACH = 0.45, 2.0, 0.5, 2.0
+#: 1/sigma_tr of any channel) below the surface, down to LAYERED_DEPTH x that length, in columns no closer than
+#: COLUMN_SPACING x the layers' spacing (a finer surface keeps all its vertices but not a column under each);
+#: inside, lattices no coarser than INTERIOR_SPACING x the longest diffusion length (1/sigma_tr of the channel that
+#: reaches farthest) within INTERIOR_REACH x that length of the surface (light that crosses the body travels
+#: there), coarser beyond
+NORMAL_SPACING, LAYERED_DEPTH, INTERIOR_SPACING, INTERIOR_REACH, COLUMN_SPACING = 0.45, 2.0, 0.5, 2.0, 1.5
 
 
-def grading(material) -> tuple[float, float, float, float]:
-    """(normal spacing, layered depth, interior spacing, interior reach), mm, of the tetrahedral mesh for
-    ``material`` (:data:`NORMAL_SPACING`)."""
+def grading(material) -> tuple[float, float, float, float, float]:
+    """(normal spacing, layered depth, interior spacing, interior reach, column spacing), mm, of the tetrahedral
+    mesh for ``material`` (:data:`NORMAL_SPACING`)."""
     short = float(min(np.min(1.0 / np.asarray(material.sigma_t_prime)), np.min(1.0 / np.asarray(material.sigma_tr))))
     long = float(np.max(1.0 / np.asarray(material.sigma_tr)))
-    return NORMAL_SPACING * short, LAYERED_DEPTH * short, INTERIOR_SPACING * long, INTERIOR_REACH * long
+    normal = NORMAL_SPACING * short
+    return normal, LAYERED_DEPTH * short, INTERIOR_SPACING * long, INTERIOR_REACH * long, COLUMN_SPACING * normal
 
 
 def tetra_key(mesh, spacing) -> str:
@@ -87,8 +90,16 @@ class VolumeTransport:
             raise MeshshadeError("the tetrahedral mesh was built for another surface")
         self._tree = cKDTree(tetra.nodes[tetra.tets].mean(axis=1))
         self._neighbours = tet_neighbours(tetra.tets)
+        # surface vertices of no tetrahedron (a spike's tip, at most MAX_ORPHANS of them): read by interpolation
+        # in the tetrahedron that holds them, or the nearest one
+        in_tet = np.zeros(tetra.n_surface, dtype=bool)
+        in_tet[tetra.tets[tetra.tets < tetra.n_surface]] = True
+        self._orphans = np.flatnonzero(~in_tet)
+        self._orphan_at = locate_points(tetra.nodes, tetra.tets, tetra.nodes[self._orphans], tree=self._tree,
+                                        neighbours=self._neighbours)
         self.stats = {"volume_nodes": int(tetra.nodes.shape[0]), "volume_tetrahedra": int(tetra.tets.shape[0]),
                       "volume_faces_recovered": round(float(tetra.faces_recovered), 5),
+                      "volume_vertices_interpolated": int(self._orphans.size),
                       "near_field_radius_mm": [round(float(r), 4) for r in correction.radius_mm]}
 
     @classmethod
@@ -114,7 +125,7 @@ class VolumeTransport:
             faces = np.searchsorted(used, mesh.faces)
             tetra = surface_tetrahedra(mesh.vertices[used], faces, normal_spacing=spacing[0],
                                        layered_depth=spacing[1], interior_spacing=spacing[2],
-                                       interior_reach=spacing[3])
+                                       interior_reach=spacing[3], column_spacing=spacing[4])
             if cache is not None:
                 cache.write(key, nodes=tetra.nodes, tets=tetra.tets, n_surface=tetra.n_surface,
                             surface_spacing=tetra.surface_spacing, faces_recovered=tetra.faces_recovered)
@@ -156,7 +167,10 @@ class VolumeTransport:
         t0 = time.perf_counter()
         op = self.operator
         with kernel_interrupts():   # a Ctrl-C inside the compiled parallel loops is a KeyboardInterrupt
-            M[self.surface_vertices] = op.solve(loads)[:tm.n_surface] / (2.0 * op.A[None, :])
+            phi = op.solve(loads)
+        tet, bary = self._orphan_at
+        phi[self._orphans] = np.einsum("ij,ijc->ic", bary, phi[tm.tets[tet]])
+        M[self.surface_vertices] = phi[:tm.n_surface] / (2.0 * op.A[None, :])
         timings["volume solve"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         point = samples.vertex < 0

@@ -75,3 +75,22 @@ def test_solve_on_surface_mesh_converges_to_the_ball_series():
         ref = fem_tests.robin_ball_exitance(gamma[keep], radius, radius - depth)
         errors.append(np.mean(np.abs(M[keep] / ref - 1.0)))
     assert errors[1] < 0.025 and errors[0] / errors[1] > 3.0, errors
+
+
+def test_a_finer_surface_adds_its_vertices_and_little_else():
+    """With the material's grading (meshshade.volume.transport.grading), subdividing the surface below the
+    material's lengths adds the new surface vertices, not layers under each of them or finer lattices: the
+    interior nodes stay within 25 % (before, they grew about fourfold per subdivision with the surface)."""
+    from meshshade.materials import Material
+    from meshshade.volume.transport import grading
+
+    mat = Material([0.5, 0.5, 0.5], [0.01, 0.01, 0.01])      # 1/sigma_t' = 1.96 mm: layers 0.88 mm, columns 1.3 mm
+    g = grading(mat)
+    interior = []
+    for level in (4, 5):
+        V, F = icosphere(10.0, level)
+        tm = surface_tetrahedra(V, F, normal_spacing=g[0], layered_depth=g[1], interior_spacing=g[2],
+                                interior_reach=g[3], column_spacing=g[4])
+        interior.append(tm.nodes.shape[0] - tm.n_surface)
+    _check(V, F, tm, 0.4, 2e-3)
+    assert interior[1] < 1.25 * interior[0], interior

@@ -56,6 +56,26 @@ def test_correction_tables_carry_the_model_minus_the_volume_total():
         assert 0 < corr.radius_mm[c] < 20.0
 
 
+def test_near_field_in_blocks_of_sources_equals_one_block(monkeypatch):
+    """The pair sum taken in blocks of nearby sources (bounded memory on dense meshes) is the same sum: against
+    one block holding every pair, to rounding."""
+    import meshshade.volume.near_field as nf
+
+    mesh = Mesh.from_arrays(*icosphere(8.0, 3))
+    rng = np.random.default_rng(3)
+    k = 300
+    src = mesh.vertices[rng.choice(mesh.n_vertices, k, replace=False)]
+    normal = src / np.linalg.norm(src, axis=1, keepdims=True)
+    args = (src, normal, rng.uniform(0.5, 1.0, k), rng.uniform(0.3, 1.0, k), np.full(k, 0.2), mesh.vertices,
+            mesh.vertex_normals, np.sqrt(mesh.vertex_areas / math.pi))
+    corr = NearFieldCorrection(SKIN)
+    whole, pairs = corr.exitance(*args)
+    monkeypatch.setattr(nf, "PAIR_BLOCK", 2000)
+    blocks, pairs_b = corr.exitance(*args)
+    assert pairs_b == pairs and pairs > 10 * 2000
+    np.testing.assert_allclose(blocks, whole, rtol=1e-12, atol=1e-12 * np.abs(whole).max())
+
+
 @pytest.mark.parametrize("k", [1, 3])
 def test_pcg_matches_a_direct_solve(k):
     rng = np.random.default_rng(3)
