@@ -48,21 +48,14 @@ def tet_geometry(nodes, tets):
     return vol, np.concatenate([g0, g123], axis=1)
 
 
-def boundary_faces(tets, nodes=None):
-    """(F, 3) int64 faces that belong to one tetrahedron only; with ``nodes``, oriented outward."""
-    faces = tets[:, FACE_NODES].reshape(-1, 3)        # outward for a positively oriented tetrahedron
-    opposite = tets.reshape(-1)                      # face f of tetrahedron t (row 4t + f) lies opposite node f
-    key = np.sort(faces, axis=1).astype(np.int64)
-    n = int(key.max()) + 1 if key.size else 1
-    if n ** 3 < 2 ** 62:    # one integer per face: a sort of int64 instead of np.unique(axis=0)'s rows
-        code = (key[:, 0] * n + key[:, 1]) * n + key[:, 2]
-        _, inverse, counts = np.unique(code, return_inverse=True, return_counts=True)
-    else:
-        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    once = counts[inverse.reshape(-1)] == 1
-    out = faces[once]
+def boundary_faces(tets, nodes=None, neighbours=None):
+    """(F, 3) int64 faces that belong to one tetrahedron only; with ``nodes``, oriented outward. ``neighbours``:
+    :func:`~meshshade.volume.locate.tet_neighbours` of ``tets``, if already computed."""
+    nb = tet_neighbours(tets) if neighbours is None else neighbours
+    once = nb.reshape(-1) < 0                        # face f of tetrahedron t (row 4t + f) lies opposite node f
+    out = tets[:, FACE_NODES].reshape(-1, 3)[once]  # outward for a positively oriented tetrahedron
     if nodes is not None:   # orient against the opposite node of the owning tetrahedron
-        opp = nodes[opposite[once]]
+        opp = nodes[tets.reshape(-1)[once]]
         a, b, c = nodes[out[:, 0]], nodes[out[:, 1]], nodes[out[:, 2]]
         n = np.cross(b - a, c - a)
         flip = np.einsum("ij,ij->i", n, opp - a) > 0.0
@@ -70,29 +63,29 @@ def boundary_faces(tets, nodes=None):
     return out
 
 
-def assemble_diffusion(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lumped=False):
+def assemble_diffusion(nodes, tets, faces, *, D, sigma_a, A, lumped=False):
     """K = D S + sigma_a M + B/(2A) (eq. (90)) as a CSR matrix (N, N), float64.
 
     nodes : (N, 3) mm; tets : (T, 4); faces : (F, 3) boundary faces (:func:`boundary_faces`); D : diffusion
     constant in mm; sigma_a : 1/mm; A : boundary mismatch (docs/physics.md §2) of the material;
-    geometry : :func:`tet_geometry`'s result, if already computed. ``lumped``: the mass matrices M and B diagonal
+    ``lumped``: the mass matrices M and B diagonal
     (each element's mass shared equally by its nodes): the same second order at the nodes, and no negative
     fluence from the mass terms' coupling where the solution falls steeply (a sun's terminator in the blue).
     A node of no tetrahedron gets 1 on the diagonal (fluence 0, the matrix stays definite).
     """
     indptr, indices, data = assemble_channels(nodes, tets, faces, D=[D], sigma_a=[sigma_a], A=[A],
-                                              geometry=geometry, lumped=lumped)
+                                              lumped=lumped)
     N = nodes.shape[0]
     return sp.csr_matrix((data[:, 0], indices, indptr), shape=(N, N))
 
 
-def assemble_channels(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lumped=False):
+def assemble_channels(nodes, tets, faces, *, D, sigma_a, A, lumped=False):
     """Eq. (90)'s matrices of k channels (``D``, ``sigma_a``, ``A`` sequences of k) on one CSR structure:
     (indptr (N+1,), indices (nnz,), data (nnz, k)), rows sorted (see :func:`assemble_diffusion`).
 
     The pattern comes from the tetrahedra's edges (every node keeps its diagonal); the element matrices are
     formed and added in place by a compiled loop (:func:`_add_elements`), so memory stays at the matrix's own
-    size. ``geometry`` is accepted for compatibility and not needed.
+    size.
     """
     D, sigma_a, A = (np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (D, sigma_a, A))
     if not (np.all(D > 0.0) and np.all(sigma_a >= 0.0) and np.all(A >= 1.0)):
@@ -100,10 +93,10 @@ def assemble_channels(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lumpe
     N = nodes.shape[0]
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    indptr, indices = _pattern(tets, N)
+    indptr, indices, tet_ptr, tet_of = _pattern(tets, N)
     parts = np.zeros((3, indices.size))              # stiffness, volume mass, boundary mass
-    status = _add_elements(np.ascontiguousarray(nodes, dtype=np.float64), tets, faces, indptr, indices,
-                           bool(lumped), parts)
+    status = _add_elements(np.ascontiguousarray(nodes, dtype=np.float64), tets, tet_ptr, tet_of, faces, indptr,
+                           indices, bool(lumped), parts)
     if status >= 0:
         raise MeshshadeError(f"degenerate tetrahedron {status} (zero volume)")
     data = parts[0][:, None] * D[None, :] + parts[1][:, None] * sigma_a[None, :] + parts[2][:, None] / (2.0 * A)
@@ -115,18 +108,68 @@ def assemble_channels(nodes, tets, faces, *, D, sigma_a, A, geometry=None, lumpe
 
 
 def _pattern(tets, N):
-    """(indptr, indices) int64 of the symmetric pattern: each node's diagonal and the tetrahedra's edges."""
-    i = tets[:, [0, 0, 0, 1, 1, 2]].reshape(-1)
-    j = tets[:, [1, 2, 3, 2, 3, 3]].reshape(-1)
-    lo, hi = np.minimum(i, j), np.maximum(i, j)
-    edges = np.unique(lo * N + hi)
-    lo, hi = edges // N, edges % N
-    diag = np.arange(N, dtype=np.int64)
-    key = np.concatenate([lo * N + hi, hi * N + lo, diag * N + diag])
-    key.sort()
+    """(indptr, indices) int64 of the symmetric pattern: each node's diagonal and the tetrahedra's edges, rows
+    sorted; with the node-to-tetrahedra incidence (tet_ptr, tet_of) it was built from."""
+    tet_ptr, tet_of = _incidence(tets, N)
+    counts = np.zeros(N, dtype=np.int64)
+    _row_neighbours(tets, tet_ptr, tet_of, np.zeros(1, dtype=np.int64), counts, True)
     indptr = np.zeros(N + 1, dtype=np.int64)
-    np.cumsum(np.bincount(key // N, minlength=N), out=indptr[1:])
-    return indptr, key % N
+    np.cumsum(counts, out=indptr[1:])
+    indices = np.empty(indptr[-1], dtype=np.int64)
+    _row_neighbours(tets, tet_ptr, tet_of, indptr, indices, False)
+    return indptr, indices, tet_ptr, tet_of
+
+
+@numba.njit(cache=True)
+def _incidence(tets, N):
+    """(tet_ptr (N+1,), tet_of): the tetrahedra of node i are tet_of[tet_ptr[i]:tet_ptr[i+1]] (a counting sort)."""
+    ptr = np.zeros(N + 1, dtype=np.int64)
+    for t in range(tets.shape[0]):
+        for k in range(4):
+            ptr[tets[t, k] + 1] += 1
+    for i in range(N):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    out = np.empty(ptr[-1], dtype=np.int64)
+    for t in range(tets.shape[0]):
+        for k in range(4):
+            out[fill[tets[t, k]]] = t
+            fill[tets[t, k]] += 1
+    return ptr, out
+
+
+@numba.njit(cache=True, parallel=True)
+def _row_neighbours(tets, tet_ptr, tet_of, indptr, out, count_only):
+    """Each node's distinct neighbours through its tetrahedra, itself included: their count in ``out`` (N,)
+    (``count_only``), or the sorted columns in ``out[indptr[i]:indptr[i+1]]``."""
+    N = tet_ptr.size - 1
+    blocks = 64
+    size = (N + blocks - 1) // blocks
+    for b in numba.prange(blocks):
+        row = np.empty(256, dtype=np.int64)
+        for i in range(b * size, min(N, (b + 1) * size)):
+            m = 1
+            row[0] = i                  # the diagonal, even for a node of no tetrahedron
+            for q in range(tet_ptr[i], tet_ptr[i + 1]):
+                t = tet_of[q]
+                for k in range(4):
+                    j = tets[t, k]
+                    seen = False
+                    for r in range(m):
+                        if row[r] == j:
+                            seen = True
+                            break
+                    if not seen:
+                        if m == row.size:
+                            grown = np.empty(2 * row.size, dtype=np.int64)
+                            grown[:m] = row[:m]
+                            row = grown
+                        row[m] = j
+                        m += 1
+            if count_only:
+                out[i] = m
+            else:
+                out[indptr[i]:indptr[i] + m] = np.sort(row[:m])
 
 
 @numba.njit(cache=True)
@@ -150,45 +193,53 @@ def _diagonal_positions(indptr, indices):
     return out
 
 
-@numba.njit(cache=True)
-def _add_elements(nodes, tets, faces, indptr, indices, lumped, parts):
+@numba.njit(cache=True, parallel=True)
+def _add_elements(nodes, tets, tet_ptr, tet_of, faces, indptr, indices, lumped, parts):
     """Add every tetrahedron's stiffness vol grad_i . grad_j and mass vol (1 + delta_ij) / 20 (lumped: vol / 4
-    on the diagonal), and every boundary face's mass area (1 + delta_ij) / 12 (lumped: area / 3), into ``parts``
-    (3, nnz) at the pattern's positions. Returns -1, or the first tetrahedron of zero volume."""
-    g = np.empty((4, 3))
-    E = np.empty((3, 3))
-    pos = np.empty((4, 4), dtype=np.int64)
-    for t in range(tets.shape[0]):
-        a = tets[t, 0]
-        for r in range(3):
-            for d in range(3):
-                E[r, d] = nodes[tets[t, r + 1], d] - nodes[a, d]
-        e00, e01, e02, e10, e11, e12 = E[0, 0], E[0, 1], E[0, 2], E[1, 0], E[1, 1], E[1, 2]
-        e20, e21, e22 = E[2, 0], E[2, 1], E[2, 2]
-        # rows of E are the edges; grad lambda_{k+1} is column k of E^-1, i.e. row k of the cofactor matrix / det
-        c00, c01, c02 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
-        c10, c11, c12 = e02 * e21 - e01 * e22, e00 * e22 - e02 * e20, e01 * e20 - e00 * e21
-        c20, c21, c22 = e01 * e12 - e02 * e11, e02 * e10 - e00 * e12, e00 * e11 - e01 * e10
-        det = e00 * c00 + e01 * c01 + e02 * c02
-        vol = abs(det) / 6.0
-        if not vol > 1e-300:
-            return t
-        g[1, 0], g[1, 1], g[1, 2] = c00 / det, c01 / det, c02 / det
-        g[2, 0], g[2, 1], g[2, 2] = c10 / det, c11 / det, c12 / det
-        g[3, 0], g[3, 1], g[3, 2] = c20 / det, c21 / det, c22 / det
-        for d in range(3):
-            g[0, d] = -(g[1, d] + g[2, d] + g[3, d])
-        for i in range(4):
-            for j in range(4):
-                pos[i, j] = _position(indptr, indices, tets[t, i], tets[t, j])
-        for i in range(4):
-            for j in range(4):
-                parts[0, pos[i, j]] += vol * (g[i, 0] * g[j, 0] + g[i, 1] * g[j, 1] + g[i, 2] * g[j, 2])
-                if lumped:
-                    if i == j:
-                        parts[1, pos[i, j]] += 0.25 * vol
-                else:
-                    parts[1, pos[i, j]] += vol * (2.0 if i == j else 1.0) / 20.0
+    on the diagonal) into ``parts[0]`` and ``parts[1]`` (nnz,) at the pattern's positions, row by row (each node
+    sums over its own tetrahedra: no two threads write one entry), then every boundary face's mass
+    area (1 + delta_ij) / 12 (lumped: area / 3) into ``parts[2]``. Returns -1, or a tetrahedron of zero volume."""
+    N = tet_ptr.size - 1
+    blocks = 64
+    size = (N + blocks - 1) // blocks
+    bad = np.full(blocks, -1, dtype=np.int64)
+    for b in numba.prange(blocks):
+        g = np.empty((4, 3))
+        E = np.empty((3, 3))
+        for node in range(b * size, min(N, (b + 1) * size)):
+            for q in range(tet_ptr[node], tet_ptr[node + 1]):
+                t = tet_of[q]
+                a = tets[t, 0]
+                for r in range(3):
+                    for d in range(3):
+                        E[r, d] = nodes[tets[t, r + 1], d] - nodes[a, d]
+                e00, e01, e02, e10, e11, e12 = E[0, 0], E[0, 1], E[0, 2], E[1, 0], E[1, 1], E[1, 2]
+                e20, e21, e22 = E[2, 0], E[2, 1], E[2, 2]
+                # rows of E are the edges; grad lambda_{k+1} is column k of E^-1: row k of the cofactors / det
+                c00, c01, c02 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
+                c10, c11, c12 = e02 * e21 - e01 * e22, e00 * e22 - e02 * e20, e01 * e20 - e00 * e21
+                c20, c21, c22 = e01 * e12 - e02 * e11, e02 * e10 - e00 * e12, e00 * e11 - e01 * e10
+                det = e00 * c00 + e01 * c01 + e02 * c02
+                vol = abs(det) / 6.0
+                if not vol > 1e-300:
+                    bad[b] = t
+                    continue
+                g[1, 0], g[1, 1], g[1, 2] = c00 / det, c01 / det, c02 / det
+                g[2, 0], g[2, 1], g[2, 2] = c10 / det, c11 / det, c12 / det
+                g[3, 0], g[3, 1], g[3, 2] = c20 / det, c21 / det, c22 / det
+                for d in range(3):
+                    g[0, d] = -(g[1, d] + g[2, d] + g[3, d])
+                i = 0
+                while tets[t, i] != node:
+                    i += 1
+                for j in range(4):
+                    p = _position(indptr, indices, node, tets[t, j])
+                    parts[0, p] += vol * (g[i, 0] * g[j, 0] + g[i, 1] * g[j, 1] + g[i, 2] * g[j, 2])
+                    if lumped:
+                        if i == j:
+                            parts[1, p] += 0.25 * vol
+                    else:
+                        parts[1, p] += vol * (2.0 if i == j else 1.0) / 20.0
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
         u0, u1, u2 = nodes[b, 0] - nodes[a, 0], nodes[b, 1] - nodes[a, 1], nodes[b, 2] - nodes[a, 2]
@@ -203,6 +254,9 @@ def _add_elements(nodes, tets, faces, indptr, indices, lumped, parts):
                 else:
                     parts[2, _position(indptr, indices, faces[f, i], faces[f, j])] += \
                         area * (2.0 if i == j else 1.0) / 12.0
+    for b in range(blocks):
+        if bad[b] >= 0:
+            return bad[b]
     return -1
 
 

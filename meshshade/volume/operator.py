@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshshade.errors import MeshshadeError
-from meshshade.volume.fem import assemble_channels, boundary_faces, tet_geometry
+from meshshade.volume.fem import assemble_channels, boundary_faces
 from meshshade.volume.solve import pcg_jacobi
 
 __all__ = ["DiffusionOperator", "SOLVE_RTOL"]
@@ -29,16 +29,15 @@ class DiffusionOperator:
     ``b`` W, (N,) for one channel or (N, k) for k.
     """
 
-    def __init__(self, nodes, tets, *, D, sigma_a, A, faces=None, lumped=False, geometry=None):
+    def __init__(self, nodes, tets, *, D, sigma_a, A, faces=None, lumped=False):
         self.nodes = np.ascontiguousarray(nodes, dtype=np.float64)
         self.tets = np.ascontiguousarray(tets, dtype=np.int64)
         self.faces = boundary_faces(self.tets, self.nodes) if faces is None else np.asarray(faces, dtype=np.int64)
         self.D, self.sigma_a, self.A = (np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (D, sigma_a, A))
         self.channels = self.D.size
-        self.geometry = tet_geometry(self.nodes, self.tets) if geometry is None else geometry
         self.indptr, self.indices, self.data = assemble_channels(self.nodes, self.tets, self.faces, D=self.D,
                                                                  sigma_a=self.sigma_a, A=self.A,
-                                                                 geometry=self.geometry, lumped=lumped)
+                                                                 lumped=lumped)
         self.iterations = None
 
     def solve(self, b, rtol: float = SOLVE_RTOL):

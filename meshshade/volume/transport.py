@@ -27,7 +27,7 @@ from meshshade.errors import MeshshadeError
 from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.kernels.fresnel import refract_in
 from meshshade.progress import kernel_interrupts
-from meshshade.volume.fem import locate_points, point_source_vector
+from meshshade.volume.fem import boundary_faces, locate_points, point_source_vector
 from meshshade.volume.locate import tet_neighbours
 from meshshade.volume.near_field import NearFieldCorrection
 from meshshade.volume.operator import DiffusionOperator
@@ -78,7 +78,7 @@ def diffusion_constants(material, c: int) -> tuple[float, float, float]:
 class VolumeTransport:
     """The volume transport of one mesh and material (module docstring). Build with :meth:`build`."""
 
-    def __init__(self, mesh, material, tetra, operator, correction, timings):
+    def __init__(self, mesh, material, tetra, operator, correction, timings, neighbours=None):
         self.mesh, self.material, self.tetra = mesh, material, tetra
         self.operator = operator
         self.correction = correction
@@ -89,7 +89,7 @@ class VolumeTransport:
         if self.surface_vertices.size != tetra.n_surface:
             raise MeshshadeError("the tetrahedral mesh was built for another surface")
         self._tree = cKDTree(tetra.nodes[tetra.tets].mean(axis=1))
-        self._neighbours = tet_neighbours(tetra.tets)
+        self._neighbours = tet_neighbours(tetra.tets) if neighbours is None else neighbours
         # surface vertices of no tetrahedron (a spike's tip, at most MAX_ORPHANS of them): read by interpolation
         # in the tetrahedron that holds them, or the nearest one
         in_tet = np.zeros(tetra.n_surface, dtype=bool)
@@ -132,12 +132,14 @@ class VolumeTransport:
         timings["tetrahedra"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         D, sa, A = zip(*(diffusion_constants(material, c) for c in range(3)))
-        operator = DiffusionOperator(tetra.nodes, tetra.tets, D=D, sigma_a=sa, A=A, lumped=True)
+        neighbours = tet_neighbours(tetra.tets)
+        operator = DiffusionOperator(tetra.nodes, tetra.tets, D=D, sigma_a=sa, A=A, lumped=True,
+                                     faces=boundary_faces(tetra.tets, tetra.nodes, neighbours))
         timings["volume operator"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         correction = NearFieldCorrection(material)
         timings["near-field tables"] = time.perf_counter() - t0
-        out = cls(mesh, material, tetra, operator, correction, timings)
+        out = cls(mesh, material, tetra, operator, correction, timings, neighbours=neighbours)
         out.stats["volume_tetrahedra_cached"] = cached
         return out
 
