@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from types import SimpleNamespace
 
@@ -410,7 +411,8 @@ def render_radiance(mesh, vertex_radiance, camera: Camera, width: int = 512, hei
     Returns
     -------
     rgb : (H, W, 3) float64, radiance W/(mm^2 sr), premultiplied by coverage (background 0)
-    alpha : (H, W) float64 coverage in [0, 1]
+    alpha : (H, W) float64 coverage in [0, 1]; a camera that sees none of the mesh gives a warning naming the
+    camera and the mesh's bounds
     """
     width, height, spp = check_image_size(width, height, spp)
     if not isinstance(camera, Camera):
@@ -447,7 +449,16 @@ def render_radiance(mesh, vertex_radiance, camera: Camera, width: int = 512, hei
             flat = np.flatnonzero(h)
             rgb[band].reshape(-1, 3)[flat] += L  # rows of a C-ordered image: views, added in place
             alpha[band].reshape(-1)[flat] += 1.0
+    if not np.any(alpha > 0):
+        lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+        warnings.warn(f"the {camera.kind} camera at {_mm(camera.eye)} looking at {_mm(camera.target)} sees none of "
+                      f"the mesh (bounds {_mm(lo)} to {_mm(hi)} mm): the image is empty (transparent)",
+                      stacklevel=2)
     return rgb / spp, alpha / spp
+
+
+def _mm(v):
+    return "(" + ", ".join(f"{float(x):.4g}" for x in v) + ")"
 
 
 def image_rgba(rgb, alpha) -> np.ndarray:

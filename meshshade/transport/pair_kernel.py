@@ -59,7 +59,9 @@ def source_frames(samples, curv, faces) -> SourceFrames:
         sign = np.sign(np.einsum("ijk,ik->ij", D, D[:, 0]))
         sign[sign == 0] = 1.0
         d1[tri] = np.einsum("ij,ijk->ik", b * sign, D)
-    n = samples.normals / np.linalg.norm(samples.normals, axis=1, keepdims=True)
+    # an unreferenced vertex (no face: zero area, zero normal, no power) gets the frame of +z: any will do
+    length = np.linalg.norm(samples.normals, axis=1, keepdims=True)
+    n = np.where(length > 0, samples.normals / np.where(length > 0, length, 1.0), [[0.0, 0.0, 1.0]])
     d1 = d1 - np.einsum("ij,ij->i", d1, n)[:, None] * n
     norm = np.linalg.norm(d1, axis=1)
     bad = norm < 1e-12

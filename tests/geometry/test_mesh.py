@@ -312,3 +312,21 @@ def test_nonmanifold_vertices_not_reported_for_manifold_cases(sphere):
     for n, faces in ((len(V), F), (len(V), F[upper]), (len(V) + 1, fins), (len(V), degenerate)):
         assert not nonmanifold_vertices(n, faces).any()
     assert _quiet_validate(V, F).n_nonmanifold_vertices == 0
+
+
+@pytest.mark.parametrize("model", ["dipole", "curved"])
+def test_bake_with_an_unreferenced_vertex_raises_no_numpy_warning(sphere, model):
+    """An OBJ with one stray vertex: the bake says so once (MeshDefectWarning) and no raw numpy warning
+    ("invalid value encountered in divide" reached users from the surface models' source frames) follows; the
+    stray vertex gets 0."""
+    from meshshade.light import DirectionalLight
+    from meshshade.materials import Material
+    from meshshade.transport import bake
+
+    V, F = sphere
+    with pytest.warns(MeshDefectWarning):
+        mesh = Mesh(np.vstack([V, [[1e3, 0, 0]]]), F)
+    with warnings.catch_warnings(), np.errstate(invalid="raise", divide="raise"):
+        warnings.simplefilter("error", RuntimeWarning)
+        res = bake(mesh, Material.preset("skin1"), [DirectionalLight((0.0, 0.0, -1.0))], model=model)
+    assert np.all(np.isfinite(res.radiance)) and np.all(res.radiance[-1] == 0.0)

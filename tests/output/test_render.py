@@ -106,3 +106,21 @@ def test_pixel_gather_equals_bake_at_vertices():
     f = np.array([np.flatnonzero((mesh.faces == v).any(1))[0] for v in range(mesh.n_vertices)])
     bary = (mesh.faces[f] == np.arange(mesh.n_vertices)[:, None]).astype(float)
     np.testing.assert_allclose(g(mesh.vertices, f, bary), res.radiance, rtol=1e-9, atol=1e-12 * res.radiance.max())
+
+
+def test_a_camera_that_sees_none_of_the_mesh_says_so(tmp_path, capsys):
+    """A camera looking away from the mesh: the image is empty, and the API warns (the CLI prints one warning
+    line naming the camera and the mesh's bounds, exit 0: the empty image is what was asked for)."""
+    V, F = procedural.icosphere(10.0, 2)
+    mesh = Mesh.from_arrays(V, F)
+    away = render.Camera("perspective", eye=(0.0, 0.0, 100.0), target=(0.0, 0.0, 200.0))
+    with pytest.warns(UserWarning, match="sees none of the mesh"):
+        rgb, alpha = render.render_radiance(mesh, np.ones((mesh.n_vertices, 3)), away, 16, 12, 1)
+    assert not alpha.any() and not rgb.any()
+    io.write_ply(tmp_path / "s.ply", V, F)
+    rc = main(["render", str(tmp_path / "s.ply"), "--material", "skin1", "--light", "directional:0,0,-1",
+               "--width", "16", "--height", "12", "--spp", "1", "--camera", "persp:0,0,100:0,0,200:0,1,0:30",
+               "--out", str(tmp_path / "img"), "-q"])
+    err = capsys.readouterr().err
+    assert rc == 0 and "sees none of the mesh" in err and "bounds" in err
+    assert len([x for x in err.splitlines() if "sees none" in x]) == 1
