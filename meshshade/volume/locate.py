@@ -21,20 +21,23 @@ MAX_STEPS = 1000
 FACE_NODES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
 
+def face_keys(faces, n):
+    """(F,) one sortable key per triangle ``faces`` (F, 3) of nodes below ``n``, the same for any order of its
+    nodes: an int64 code where n^3 fits, else the sorted row as one opaque 24-byte value."""
+    key = np.ascontiguousarray(np.sort(np.asarray(faces, dtype=np.int64), axis=1))
+    if n ** 3 < 2 ** 62:
+        return (key[:, 0] * n + key[:, 1]) * n + key[:, 2]
+    return key.view(np.dtype((np.void, 24))).ravel()
+
+
 def tet_neighbours(tets):
     """(T, 4) int64: the tetrahedron across the face opposite each node (-1 on the boundary)."""
     T = tets.shape[0]
-    key = np.sort(tets[:, FACE_NODES].reshape(-1, 3), axis=1).astype(np.int64)
-    n = int(key.max()) + 1 if key.size else 1
-    if n ** 3 < 2 ** 62:        # one integer per face: one argsort instead of a lexsort of rows
-        code = (key[:, 0] * n + key[:, 1]) * n + key[:, 2]
-        order = np.argsort(code, kind="stable")
-        sc = code[order]
-        same = sc[1:] == sc[:-1]
-    else:
-        order = np.lexsort(key.T[::-1])
-        sk = key[order]
-        same = np.all(sk[1:] == sk[:-1], axis=1)
+    faces = tets[:, FACE_NODES].reshape(-1, 3)
+    code = face_keys(faces, int(faces.max()) + 1 if faces.size else 1)
+    order = np.argsort(code, kind="stable")
+    sc = code[order]
+    same = sc[1:] == sc[:-1]
     a, b = order[:-1][same], order[1:][same]
     nb = np.full(4 * T, -1, dtype=np.int64)
     nb[a], nb[b] = b // 4, a // 4

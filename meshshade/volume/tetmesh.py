@@ -16,6 +16,7 @@ from scipy.spatial import Delaunay
 
 from meshshade.errors import MeshshadeError
 from meshshade.volume.fem import boundary_faces
+from meshshade.volume.locate import face_keys
 
 __all__ = ["SurfaceTetrahedra", "surface_tetrahedra", "box_tetrahedra", "ball_tetrahedra", "graded_axis",
            "graded_box"]
@@ -92,7 +93,7 @@ def ball_tetrahedra(radius, n):
 
 #: the inner layer's depth below each surface vertex, in units of the vertex's mean edge length
 LAYER_DEPTH = 0.6
-#: the most lattice candidates :func:`surface_tetrahedra` generates (over the bounding box, before the bands)
+#: the most lattice candidates :func:`surface_tetrahedra` generates (in the blocks near enough to the surface)
 MAX_LATTICE_POINTS = 4e7
 #: the largest fraction of the surface's vertices that may end up in no tetrahedron (a spike's tip whose every
 #: tetrahedron was outside or flat: the volume transport reads them by interpolation); more is an error
@@ -150,8 +151,8 @@ def _block_marks(V, lo, hi, size):
 
 def _farther_than(samples, lo, hi, distance, points):
     """(k,) bool: ``points`` certainly farther than ``distance`` from every one of ``samples`` (by blocks)."""
-    near = _block_marks(samples, lo, hi, distance)
-    if near is None or not np.isfinite(distance):
+    near = _block_marks(samples, lo, hi, distance) if np.isfinite(distance) else None
+    if near is None:
         return np.zeros(points.shape[0], dtype=bool)
     b = np.clip(np.floor((points - lo) / distance).astype(np.int64), 0, np.array(near.shape) - 1)
     return ~near[b[:, 0], b[:, 1], b[:, 2]]
@@ -198,20 +199,15 @@ def _inside(V, F, P, T, depth):
 
 def _faces_recovered(F, boundary, n):
     """The fraction of the surface triangles ``F`` among the ``boundary`` faces (nodes below ``n`` only)."""
-    def code(x):
-        x = np.ascontiguousarray(np.sort(np.asarray(x, dtype=np.int64), axis=1))
-        if n ** 3 < 2 ** 62:
-            return (x[:, 0] * n + x[:, 1]) * n + x[:, 2]
-        return x.view(np.dtype((np.void, 24))).ravel()     # a row as one opaque key
     boundary = boundary[np.all(boundary < n, axis=1)]
-    return float(np.isin(code(F), code(boundary)).sum()) / max(F.shape[0], 1)
+    return float(np.isin(face_keys(F, n), face_keys(boundary, n)).sum()) / max(F.shape[0], 1)
 
 
 class SurfaceTetrahedra(NamedTuple):
     """A tetrahedral mesh of a closed surface whose first ``n_surface`` nodes are the surface's own vertices.
 
-    nodes (N, 3) mm; tets (T, 4); n_surface: the surface vertices (read the solution there, no interpolation);
-    A few surface vertices (at most ``MAX_ORPHANS`` of them) may be in no tetrahedron: nodes of no element.
+    nodes (N, 3) mm; tets (T, 4); n_surface: the surface vertices (read the solution there, no interpolation,
+    except at the few, at most ``MAX_ORPHANS``, that may be in no tetrahedron: nodes of no element);
     surface_spacing: median edge length of the surface (mm); faces_recovered: the fraction of the input triangles
     that are boundary faces of the tetrahedral mesh. The rest are retriangulated between the same surface
     vertices: a planar quad whose corners lie on a circle may take its other diagonal (about half of a torus's
@@ -304,7 +300,7 @@ def surface_tetrahedra(vertices, faces, *, h_max=None, seed=0, normal_spacing=No
     gap = 2.0 * h_s
     samples = _surface_samples(V, F, gap)
     blocks = [_near_blocks(samples, lo, hi, s, b[1] + gap) for s, b in zip(spacings, bands)]
-    count = sum(2.0 * q ** 3 * (np.prod(np.floor((hi - lo) / s) + 1.0) / q ** 3 if m is None else m.shape[0])
+    count = sum(2.0 * (np.prod(np.floor((hi - lo) / s) + 1.0) if m is None else m.shape[0] * q ** 3)
                 for s, (m, q) in zip(spacings, blocks))
     if count > MAX_LATTICE_POINTS:
         raise MeshshadeError(f"the tetrahedral mesh would need {count:.3g} lattice candidates (surface spacing "

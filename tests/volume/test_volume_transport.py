@@ -202,3 +202,23 @@ def test_a_material_far_below_the_mesh_resolution_uses_the_surface_models(ball):
     res = bake(ball, mat, [BeamLight((0.0, 0.0, 30.0), (0.0, 0.0, -1.0))])
     assert res.model == "auto" and "far below the mesh's edge length" in res.stats["transport"]
     assert np.all(np.isfinite(res.radiance)) and res.radiance.max() > 0
+
+
+def test_a_surface_vertex_in_no_tetrahedron_is_read_by_interpolation():
+    """A surface vertex left in no tetrahedron (a spike's tip the mesher could not keep; here planted by removing
+    the tetrahedra around one vertex of a ball): the operator stays definite (1 on its diagonal), the vertex's
+    exitance is interpolated in the tetrahedron holding it, said in stats, and stays near the full mesh's value
+    there (the dent costs one patch of volume: measured +7.3 / +6.4 / +5.7 %, r/g/b)."""
+    mesh = Mesh.from_arrays(*icosphere(10.0, 3))
+    full = VolumeTransport.build(mesh, SKIN)
+    tm = full.tetra
+    keep = ~np.any(tm.tets == 0, axis=1)
+    dented = VolumeTransport.build(mesh, SKIN, tetra=tm._replace(tets=tm.tets[keep]))
+    assert dented.stats["volume_vertices_interpolated"] == 1 and full.stats["volume_vertices_interpolated"] == 0
+    light = [DirectionalLight((0.3, 0.2, -1.0), 1.0)]
+    a = bake(mesh, SKIN, light, volume=full).radiance
+    b = bake(mesh, SKIN, light, volume=dented).radiance
+    assert np.all(np.isfinite(b)) and np.all(b[0] > 0)
+    np.testing.assert_allclose(b[0], a[0], rtol=0.1)
+    far = np.linalg.norm(mesh.vertices - mesh.vertices[0], axis=1) > 5.0
+    np.testing.assert_allclose(b[far], a[far], rtol=0.02, atol=1e-4 * a.max())
