@@ -4,9 +4,10 @@ Rules (the issue "One package per stage"):
 
 (a) ``meshshade/kernels/`` imports only numpy, scipy, numba, math (and the stdlib __future__, typing,
     dataclasses, functools) and meshshade.errors / meshshade.kernels.*: kernels are pure array functions;
-(b) only ``meshshade/io.py`` (which also creates the output directories, ``io.output_dir``)
-    creates, opens, writes, moves or deletes files, and ``meshshade/compiled_cache.py``, which places numba's
-    on-disk cache before anything imports numba (``meshshade.io`` imports numba);
+(b) only the package ``meshshade/io/`` (``meshshade.io`` and its submodules, which also create the output
+    directories, ``io.output_dir``) creates, opens, writes, moves or deletes files, and
+    ``meshshade/compiled_cache.py``, which places numba's on-disk cache before anything imports numba
+    (``meshshade.io`` imports numba);
 (c) only ``meshshade/raycast/`` imports embreex or loads a native library (Embree) with ctypes;
 (d) no import cycles among meshshade modules (graph of all imports, module- and function-level);
 (e) no function-level imports of meshshade modules (they hide the dependency graph).
@@ -28,7 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "meshshade"
 
 KERNEL_ALLOWED_ROOTS = {"numpy", "scipy", "numba", "math", "__future__", "typing", "dataclasses", "functools"}
-#: (module, function qualname) allowed to touch files; None: the whole module
+#: (module, function qualname) allowed to touch files; None: the whole module, or the whole package (the package
+#: and every module under it: meshshade.io is the package meshshade/io/)
 FILE_IO_ALLOWED = {("meshshade.io", None), ("meshshade.compiled_cache", None), ("meshshade.asset_cache", None)}
 #: method names that create, open, write, move or delete files on whatever object they are called
 FILE_METHODS = {"open", "write_text", "write_bytes", "mkdir", "touch", "unlink", "savefig", "tofile", "imsave"}
@@ -228,10 +230,10 @@ def _file_call(call: ast.Call, aliases: dict[str, str], imagebufs: set[str]) -> 
 
 
 def check_file_io(root: Path, package: str = PACKAGE, allowed=FILE_IO_ALLOWED) -> list[Violation]:
-    """(b) only meshshade.io (and the allow-listed CLI helper) touches files."""
+    """(b) only meshshade.io and its submodules (and the allow-listed CLI helper) touch files."""
     out = []
     for mod in collect_modules(root, package).values():
-        if (mod.name, None) in allowed:
+        if any(f is None and _in(mod.name, m) for m, f in allowed):
             continue
         collector = _CallCollector(mod)
         collector.visit(mod.tree)
@@ -322,7 +324,8 @@ def import_cycles(root: Path, package: str = PACKAGE) -> list[list[str]]:
 
 def stage_graph(root: Path, package: str = PACKAGE) -> dict[str, set[str]]:
     """The import graph collapsed to pipeline stages: ``meshshade.<first component>`` (a subpackage such as
-    ``meshshade.transport``, or a top-level module such as ``meshshade.io``); the root package is its own node."""
+    ``meshshade.transport`` or ``meshshade.io``, or a top-level module such as ``meshshade.units``); the root package
+    is its own node."""
     def stage(name):
         parts = name.split(".")
         return ".".join(parts[:2])
@@ -453,6 +456,22 @@ def test_checker_flags_file_writes_outside_io(fake_root):
     assert len(check_file_io(fake_root, allowed={("meshshade.io", None)})) == 2
 
 
+def test_checker_allows_files_in_every_module_of_the_io_package(tmp_path):
+    """A whole-module entry covers a package and every module under it, and nothing else: ``meshshade.io`` allows
+    ``meshshade/io/__init__.py`` and ``meshshade/io/ply.py``, not ``meshshade/iota.py`` nor ``meshshade/cli/io.py``."""
+    files = {"__init__.py": "", "io/__init__.py": "from meshshade.io.ply import write\n",
+             "io/ply.py": "def write(path):\n    open(path, 'w').close()\n",
+             "io/jobs/__init__.py": "import shutil\n\n\ndef remove(path):\n    shutil.rmtree(path)\n",
+             "iota.py": "def write(path):\n    open(path, 'w').close()  # PLANTED\n",
+             "cli/__init__.py": "", "cli/io.py": "import os\n\n\ndef drop(path):\n    os.unlink(path)  # PLANTED\n"}
+    for rel, text in files.items():
+        (tmp_path / "meshshade" / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / "meshshade" / rel).write_text(text)
+    violations = check_file_io(tmp_path, allowed={("meshshade.io", None)})
+    assert sorted((v.path, v.line) for v in violations) == [("meshshade/cli/io.py", 5), ("meshshade/iota.py", 2)]
+    assert len(check_file_io(tmp_path, allowed=set())) == 4  # the io package's own writes are seen
+
+
 @pytest.mark.parametrize("snippet", [
     "open('f', 'w')", "os.makedirs('d')", "os.replace('a', 'b')", "shutil.copy('a', 'b')",
     "tempfile.mkdtemp()", "np.save('f', x)", "np.savetxt('f', x)", "fig.savefig('f.png')",
@@ -463,8 +482,8 @@ def test_checker_knows_every_way_to_touch_a_file(tmp_path, snippet):
     pkg = tmp_path / "meshshade"
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
-    (pkg / "stage.py").write_text("import os\nimport shutil\nimport tempfile\nfrom os import remove\nfrom pathlib import"
-                                  " Path\n\nimport numpy as np\nimport OpenImageIO as oiio\n\n\n"
+    (pkg / "stage.py").write_text("import os\nimport shutil\nimport tempfile\nfrom os import remove\n"
+                                  "from pathlib import Path\n\nimport numpy as np\nimport OpenImageIO as oiio\n\n\n"
                                   f"def f(x, fig, spec):\n    {snippet}\n")
     assert len(check_file_io(tmp_path)) == 1, snippet
 
@@ -472,7 +491,8 @@ def test_checker_knows_every_way_to_touch_a_file(tmp_path, snippet):
 def test_checker_flags_embreex_outside_raycast(fake_root):
     assert [(v.path, v.line) for v in check_embree_confinement(fake_root)] == [
         ("meshshade/montecarlo/engine.py", _planted_line("montecarlo/engine.py"))]
-    (fake_root / "meshshade" / "light.py").write_text("import ctypes\n\nLIB = ctypes.cdll.LoadLibrary('libembree4.so')\n")
+    (fake_root / "meshshade" / "light.py").write_text(
+        "import ctypes\n\nLIB = ctypes.cdll.LoadLibrary('libembree4.so')\n")
     assert [v.path for v in check_embree_confinement(fake_root)] == ["meshshade/light.py",
                                                                     "meshshade/montecarlo/engine.py"]
 

@@ -13,7 +13,8 @@ import trimesh
 from meshshade.errors import MeshValidationError, OutputError, UnitsError
 from meshshade.geometry import procedural
 from meshshade.geometry.mesh import MeshDefectWarning
-from meshshade.io import atomic_write, check_output_path, load_mesh, read_mesh_arrays, write_figure, write_mesh_ply, write_npz, write_ply, write_text
+from meshshade.io import (atomic_write, check_output_path, load_mesh, read_mesh_arrays, write_figure, write_mesh_ply,
+                          write_npz, write_ply, write_text)
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +123,7 @@ def test_load_mesh_obj_features(tmp_path):
 
 
 def test_load_mesh_obj_fast_and_line_readers_agree(tmp_path, shape):
-    from meshshade.io import _read_obj, _read_obj_lines
+    from meshshade.io.meshes import _read_obj, _read_obj_lines
 
     path = _export(tmp_path, shape, "obj")
     for a, b in zip(_read_obj(path), _read_obj_lines(path)):
@@ -256,7 +257,7 @@ def test_write_ply_interrupted_leaves_no_file(tmp_path, shape, monkeypatch):
             self.fh.write(data[:10])
             raise KeyboardInterrupt  # Ctrl-C in the middle of the body
 
-    monkeypatch.setattr("meshshade.io.open", lambda *a, **k: Interrupting(real_open(*a, **k)), raising=False)
+    monkeypatch.setattr("meshshade.io.ply.open", lambda *a, **k: Interrupting(real_open(*a, **k)), raising=False)
     with pytest.raises(KeyboardInterrupt):
         write_ply(out, *shape)
     assert list(tmp_path.iterdir()) == []
@@ -301,7 +302,7 @@ def test_check_output_path_unwritable_directory(tmp_path):
 
 
 def test_check_output_path_unwritable_directory_reported(tmp_path, monkeypatch):
-    monkeypatch.setattr("meshshade.io.os.access", lambda path, mode: False)  # also runs as root
+    monkeypatch.setattr("meshshade.io.transactions.os.access", lambda path, mode: False)  # also runs as root
     with pytest.raises(OutputError, match="output directory is not writable: "):
         write_ply(tmp_path / "out.ply", np.eye(3), [[0, 1, 2]])
 
@@ -480,7 +481,7 @@ def test_obj_utf8_bom_does_not_hide_the_first_vertex(tmp_path, shape, last_verte
     plain, bom = tmp_path / "plain.obj", tmp_path / "bom.obj"
     plain.write_text(text, encoding="utf-8")
     bom.write_bytes(b"\xef\xbb\xbf" + text.encode())
-    from meshshade.io import _read_obj, _read_obj_lines
+    from meshshade.io.meshes import _read_obj, _read_obj_lines
 
     for reader in (_read_obj, _read_obj_lines, read_mesh_arrays):
         Vb, Fb = reader(bom)

@@ -1,6 +1,6 @@
 """Comparing two models' radiance: statistics, the split image (paper's Figure 1 layout) and a heat map.
 
-Pure functions returning dicts, arrays and matplotlib figures; nothing is written here (io.py does that).
+Pure functions returning dicts, arrays and matplotlib figures; nothing is written here (:mod:`meshshade.io` does that).
 Relative differences are signed, ``(A - B) / B``, on luminance (Rec. 709), and only where B's luminance is
 above ``floor`` times B's maximum (default 1e-3): far below the peak the ratio is noise of no visual weight.
 """

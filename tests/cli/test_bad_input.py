@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from meshshade.cli.main import main
 from meshshade.geometry.procedural import icosphere
 from meshshade.io import write_ply
 
@@ -382,7 +381,7 @@ def test_output_directory_refuses_files(good_mesh, cli):
 
 def test_failed_write_keeps_previous_output(good_mesh, cli, monkeypatch):
     """An exception while the PLY is being written leaves the previous output byte-identical, no temp file."""
-    import meshshade.io as mio
+    import meshshade.io.transactions as mio  # where the outputs are renamed (os.replace)
 
     tmp = good_mesh.parent
     out = tmp / "o.ply"
@@ -427,8 +426,8 @@ def test_sigint_leaves_no_partial_output(tmp_path, cli, level):
                PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen([sys.executable, "-m", "meshshade.cli", "bake", str(mesh), "--material", "marble",
                              "--light", "directional:0.3,-0.5,-1", "--model", "curved", "--transport", "direct",
-                             "--out", str(out), "--npz", str(npz)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-                            cwd=str(tmp_path))
+                             "--out", str(out), "--npz", str(npz)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=env, cwd=str(tmp_path))
     try:
         first = proc.stdout.readline().decode()  # "mesh: ... transport mean free paths ...": the job started
         start, work = _cpu_seconds(proc.pid), (1.0 if level == 5 else 3.0)
@@ -456,7 +455,7 @@ def test_sigint_leaves_no_partial_output(tmp_path, cli, level):
 
 def test_keyboard_interrupt_during_write_removes_temp_file(good_mesh, cli, monkeypatch):
     """KeyboardInterrupt inside the atomic writer (the worst moment): exit 130, no output, no temp file."""
-    import meshshade.io as mio
+    import meshshade.io.transactions as mio  # where the outputs are renamed (os.replace)
 
     tmp = good_mesh.parent
     real_replace = mio.os.replace
@@ -475,7 +474,8 @@ def test_keyboard_interrupt_during_write_removes_temp_file(good_mesh, cli, monke
 
 @pytest.mark.parametrize("command", ["bake", "mc"])
 @pytest.mark.parametrize("spec,needles", [
-    ("directional:0,0,1", ("directional light 0", "reaches no vertex", "faces away", "did you mean directional:0,0,-1")),
+    ("directional:0,0,1", ("directional light 0", "reaches no vertex", "faces away",
+                           "did you mean directional:0,0,-1")),
     ("point:0,0,-5", ("point light 0", "reaches no vertex", "faces away")),
 ])
 def test_light_reaching_no_vertex_is_a_warning(tmp_path, cli, command, spec, needles):

@@ -22,6 +22,9 @@ import numpy as np
 import pytest
 
 import meshshade.io as mio
+import meshshade.io.images as io_images
+import meshshade.io.ply as io_ply
+import meshshade.io.transactions as io_transactions
 from meshshade.errors import OutputError
 from meshshade.geometry.procedural import icosphere
 from meshshade.io import output_transaction, write_npz, write_ply, write_text
@@ -91,12 +94,12 @@ def test_failed_rename_restores_the_outputs_already_replaced(tmp_path, monkeypat
             raise OSError(28, "No space left on device")
         return real_replace(src, dst)
 
-    monkeypatch.setattr(mio.os, "replace", second_fails)
+    monkeypatch.setattr(io_transactions.os, "replace", second_fails)
     with pytest.raises(OutputError, match="b.csv"):
         with output_transaction():
             write_text(a, "new a")
             write_text(b, "new b")
-    monkeypatch.setattr(mio.os, "replace", real_replace)
+    monkeypatch.setattr(io_transactions.os, "replace", real_replace)
     assert a.read_text() == "old a" and b.read_text() == "old b"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.csv"]
 
@@ -120,12 +123,12 @@ def test_failed_run_removes_the_folder_it_created(sphere, cli, command):
                 os.kill(os.getpid(), signal.SIGTERM)
             return real(*args, **kwargs)
 
-        real = mio._write_image
-        mio._write_image = interrupt_second_write
+        real = io_images._write_image
+        io_images._write_image = interrupt_second_write
         try:
             rc, _, err = cli.run(["demo", "--small", "--out", out])
         finally:
-            mio._write_image = real
+            io_images._write_image = real
         cli.assert_clean_failure(rc, err, before, tmp, "SIGTERM", code=143)
     assert not (tmp / "new").exists()
 
@@ -214,12 +217,12 @@ def test_signal_inside_a_writer_leaves_no_temporary_file(sphere, cli, monkeypatc
     tmp = sphere.parent
     (tmp / "o.ply").write_bytes(b"previous result")
 
-    def open_then_signal(file, *args, **kwargs):  # io.write_ply opens the temporary file to fill it
+    def open_then_signal(file, *args, **kwargs):  # io.ply.write_ply opens the temporary file to fill it
         assert Path(file).name.startswith(".o.ply.") and Path(file).exists(), file
         os.kill(os.getpid(), sig)
         return open(file, *args, **kwargs)
 
-    monkeypatch.setattr(mio, "open", open_then_signal, raising=False)
+    monkeypatch.setattr(io_ply, "open", open_then_signal, raising=False)
     before = cli.snapshot(tmp)
     rc, _, err = cli.run(_bake(sphere, tmp / "o.ply"))
     cli.assert_clean_failure(rc, err, before, tmp, "interrupted", code=128 + sig)
