@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["icosahedron", "icosphere", "uv_sphere", "capped_cylinder", "torus", "box", "saddle_patch",
-           "pebble", "apple"]
+           "pebble", "apple", "spherical_uv"]
 
 
 def _check_positive(**kwargs):
@@ -63,6 +63,28 @@ def icosphere(radius: float = 1.0, subdivisions: int = 3):
         V, F = _subdivide(V, F)
         V = V / np.linalg.norm(V, axis=1, keepdims=True)
     return V * float(radius), F
+
+
+def spherical_uv(vertices, faces, centre=(0.0, 0.0, 0.0)):
+    """A procedural UV map of a closed, star-shaped mesh around ``centre``: per-corner (m, 3, 2) longitude-latitude
+    coordinates, u = 1/2 + atan2(y, x) / 2 pi, v = 1/2 + asin(z / |p|) / pi, in [0, 1].
+
+    Faces that straddle the date line (u jumping by more than 1/2 within a face) are shifted to one side and then
+    cut back into [0, 1] by squeezing (u of their corners beyond 1 moved to 1: those few faces lose their texels
+    beyond the seam, which the neighbours across it do not need); a corner at a pole takes the mean u of the
+    face's other corners. Deterministic.
+    """
+    P = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)] - np.asarray(centre, dtype=np.float64)
+    r = np.linalg.norm(P, axis=2)
+    u = 0.5 + np.arctan2(P[..., 1], P[..., 0]) / (2.0 * np.pi)
+    v = 0.5 + np.arcsin(np.clip(P[..., 2] / np.where(r > 0, r, 1.0), -1.0, 1.0)) / np.pi
+    pole = np.hypot(P[..., 0], P[..., 1]) <= 1e-12 * np.maximum(r, 1e-300)
+    seam = (np.where(pole, -np.inf, u).max(axis=1) - np.where(pole, np.inf, u).min(axis=1)) > 0.5
+    u = np.where(seam[:, None] & (u < 0.5), u + 1.0, u)
+    if pole.any():
+        others = np.where(pole, 0.0, u).sum(axis=1) / np.maximum((~pole).sum(axis=1), 1)
+        u = np.where(pole, others[:, None], u)
+    return np.stack([np.clip(u, 0.0, 1.0), v], axis=2)
 
 
 def uv_sphere(radius: float = 1.0, n_lat: int = 16, n_lon: int = 32):
