@@ -1,5 +1,6 @@
-"""``meshshade bake``: per-vertex radiance of a translucent mesh, written as a coloured PLY (thin layer over
-:func:`meshshade.transport.baking.bake` and :func:`meshshade.output.bake_file.write_bake`)."""
+"""``meshshade bake``: per-vertex radiance of a translucent mesh, written as a coloured PLY, glTF or USD, and/or a
+texture of its UV map (thin layer over :func:`meshshade.transport.baking.bake`,
+:func:`meshshade.output.texture.bake_texture` and :mod:`meshshade.output.bake_file`)."""
 from __future__ import annotations
 
 import argparse
@@ -8,8 +9,10 @@ from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_ligh
                                    add_model_arg, add_near_field_arg, add_transport_arg, lights_from_args,
                                    mesh_and_material, number)
 from meshshade.asset_cache import AssetCache
-from meshshade.io import check_output_path
-from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, write_bake
+from meshshade.errors import ParameterError
+from meshshade.io import check_output_path, read_uv_map
+from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, texture_outputs, write_bake, write_texture
+from meshshade.output.texture import bake_texture, check_texture_options
 from meshshade.transport import bake, describe_result
 from meshshade.transport.baking import check_bake_options
 
@@ -29,30 +32,79 @@ def add_bake_args(p: argparse.ArgumentParser) -> None:
     add_far_field_arg(p)
     add_transport_arg(p)
     add_near_field_arg(p)
-    p.add_argument("--out", required=True, metavar="OUT.ply|.glb|.gltf|.usd|.usda|.usdc",
+    p.add_argument("--out", metavar="OUT.ply|.glb|.gltf|.usd|.usda|.usdc",
                    help="the baked mesh, format from the extension: PLY with radiance_r/g/b (W/mm^2) and tone-mapped "
-                        "red/green/blue; glTF/GLB with COLOR_0 and _RADIANCE; USD with displayColor and "
-                        "primvars:meshshade:radiance")
+                        "red/green/blue; glTF/GLB with COLOR_0 and _RADIANCE (with --texture: the texture bound as "
+                        "emissive); USD with displayColor and primvars:meshshade:radiance")
     p.add_argument("--npz", metavar="OUT.npz", help="also save radiance, k1, k2, d1, d2, beam distance")
+    p.add_argument("--texture", metavar="OUT.exr",
+                   help="also (or instead of --out) bake into a texture of the mesh's UV map (OBJ vt, glTF TEXCOORD_0, "
+                        "PLY s/t or u/v; an automatic atlas when it has none, written as OUT.obj): linear exitance "
+                        "W/mm^2 as float OpenEXR and tone-mapped as OUT.png")
+    p.add_argument("--texture-size", type=int, default=2048, metavar="N",
+                   help="texels per side of the texture (default 2048)")
+    p.add_argument("--padding", type=int, default=16, metavar="N",
+                   help="texels around each UV island filled from its border, against bleeding in filtering and "
+                        "mipmaps (default 16)")
+    p.add_argument("--texture-refine", default="auto", metavar="auto|N",
+                   help="segments per edge of the surface the texture bake solves on (default auto: the mesh split "
+                        "until its edges are about what the material resolves; 1: the mesh as it is)")
+
+
+def _refine(text):
+    if text == "auto":
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        raise ParameterError(f"--texture-refine must be auto or a whole number, got {text!r}") from None
 
 
 def run_bake(args) -> int:
-    check_output_path(args.out, [args.mesh], suffixes=tuple(BAKE_FORMATS))
-    check_bake_output(args.out)
+    if not args.out and not args.texture:
+        raise ParameterError("give --out OUT.ply|.glb|.gltf|.usd (per-vertex) or --texture OUT.exr (a texture), "
+                             "or both")
+    outs = [args.mesh]
+    if args.out:
+        check_output_path(args.out, [args.mesh], suffixes=tuple(BAKE_FORMATS))
+        check_bake_output(args.out)
+        outs.append(args.out)
     if args.npz:
-        check_output_path(args.npz, [args.mesh, args.out], suffixes=(".npz",), option="--npz")
+        check_output_path(args.npz, outs, suffixes=(".npz",), option="--npz")
+        outs.append(args.npz)
+    if args.texture:
+        size, padding, refine = check_texture_options(args.texture_size, args.padding, _refine(args.texture_refine))
+        for path in texture_outputs(args.texture, atlas=False).values():
+            check_output_path(path, outs, suffixes=(path.suffix,), option="--texture")
     check_bake_options(args.model, args.cutoff_tol, args.curvature_radius, args.geodesic, args.far_field,
                        transport=args.transport, near_field=args.near_field)
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
-    result = bake(mesh, material, lights, model=args.model, cutoff_tol=args.cutoff_tol,
-                  curvature_radius_mm=args.curvature_radius, progress=not args.quiet, geodesic=args.geodesic,
-                  far_field=args.far_field, transport=args.transport, near_field=args.near_field,
-                  volume_cache=AssetCache("volume"))
-    write_bake(result, mesh, args.out, npz=args.npz, lights=lights)
+    options = dict(model=args.model, cutoff_tol=args.cutoff_tol, curvature_radius_mm=args.curvature_radius,
+                   progress=not args.quiet, geodesic=args.geodesic, far_field=args.far_field,
+                   transport=args.transport, near_field=args.near_field, volume_cache=AssetCache("volume"))
+    texture = None
+    if args.texture:
+        uv = read_uv_map(args.mesh, mesh)
+        if uv is None:   # an automatic atlas, written beside the texture
+            check_output_path(texture_outputs(args.texture, atlas=True)["obj"], outs, suffixes=(".obj",),
+                              option="--texture (its automatic UV atlas)")
+        texture = bake_texture(mesh, material, lights, uv=uv, size=size, padding=padding, refine=refine, **options)
+        result = texture.vertex_result()
+    else:
+        result = bake(mesh, material, lights, **options)
+    written = []
+    if texture is not None:
+        written += write_texture(texture, mesh, args.texture, lights=lights)
+    if args.out:
+        write_bake(result, mesh, args.out, npz=args.npz, lights=lights, texture=texture,
+                   texture_path=args.texture)
+        written += [args.out] + ([args.npz] if args.npz else [])
     if not args.quiet:
         print(describe_result(result))
         if result.plan is not None:
             print(result.plan.describe())
-        print(f"wrote {args.out}" + (f" and {args.npz}" if args.npz else ""))
+        if texture is not None:
+            print(texture.describe())
+        print("wrote " + ", ".join(str(w) for w in written))
     return 0

@@ -148,18 +148,33 @@ def read_json(path):
         return None
 
 
-def write_obj(path, vertices, faces, *, comment: str | None = None) -> Path:
+def write_obj(path, vertices, faces, *, uv=None, comment: str | None = None) -> Path:
     """Write an OBJ (atomically) of ``vertices`` (n, 3), every float64 written exactly (17 significant digits, so
-    :func:`load_mesh` reads back the same numbers), and 0-based triangle ``faces`` (m, 3)."""
+    :func:`load_mesh` reads back the same numbers), and 0-based triangle ``faces`` (m, 3); with ``uv`` (m, 3, 2)
+    per-corner texture coordinates, each distinct (u, v) once as ``vt`` (in order of first use) and faces as
+    ``f v/vt``."""
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
     if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
         raise ValueError(f"vertices and faces must be (n, 3) and (m, 3), got {V.shape} and {F.shape}")
+    if uv is not None:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.shape != (F.shape[0], 3, 2):
+            raise ValueError(f"uv must be ({F.shape[0]}, 3, 2) per face corner, got {uv.shape}")
+        table, first, inverse = np.unique(uv.reshape(-1, 2), axis=0, return_index=True, return_inverse=True)
+        order = np.argsort(first, kind="stable")
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        T, TI = table[order], rank[inverse.reshape(-1)].reshape(-1, 3)
     path = check_output_path(path, suffixes=(".obj",), option="OBJ output")
     with atomic_write(path) as tmp:
         with open(tmp, "w", encoding="ascii") as fh:
             if comment:
                 fh.write("".join(f"# {line}\n" for line in comment.splitlines()))
             np.savetxt(fh, V, fmt="v %.17g %.17g %.17g")
-            np.savetxt(fh, F + 1, fmt="f %d %d %d")
+            if uv is None:
+                np.savetxt(fh, F + 1, fmt="f %d %d %d")
+            else:
+                np.savetxt(fh, T, fmt="vt %.17g %.17g")
+                np.savetxt(fh, np.stack([F + 1, TI + 1], axis=2).reshape(-1, 6), fmt="f %d/%d %d/%d %d/%d")
     return path

@@ -10,6 +10,10 @@ format follows the extension of ``out`` (:data:`BAKE_FORMATS`):
   three.js, game engines, Blender's importer);
 * ``.usd`` / ``.usdc`` / ``.usda``: :mod:`meshshade.output.usd` (``primvars:displayColor``,
   ``primvars:meshshade:radiance``; source units with ``metersPerUnit``; film pipelines).
+
+A texture bake (:func:`write_texture`, :mod:`meshshade.output.texture`) writes ``OUT.exr`` (linear RGBA float32,
+``meshshade:*`` metadata), ``OUT.png`` (tone-mapped sRGB) and, for an automatic atlas, ``OUT.obj`` (the mesh with
+``vt`` and ``f v/vt``); a glTF written with it carries ``TEXCOORD_0`` and the texture as emissive.
 """
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ from meshshade.io import write_bytes, write_text
 from meshshade.errors import OutputError
 from meshshade.light.sources import describe_light
 from meshshade.output.gltf import glb_bytes, gltf_document, gltf_text
+from meshshade.output.texture import encode_png, texture_metadata, texture_rgba
 from meshshade.output.tonemap import to_uint8, tonemap_linear
 from meshshade.output.usd import pxr_modules, usd_stage
 from meshshade.transport.baking import BakeResult
@@ -44,13 +49,40 @@ def check_bake_output(out) -> str:
     return fmt
 
 
-def write_bake(result: BakeResult, mesh, out, *, npz=None, lights=None) -> None:
+def texture_outputs(path, *, atlas: bool) -> dict:
+    """The files of a texture bake named ``path`` (.exr): {"exr", "png"} and, with an automatic ``atlas``, "obj"
+    (the mesh with the atlas's UVs, so the texture can be used)."""
+    p = Path(path)
+    out = {"exr": p, "png": p.with_suffix(".png")}
+    if atlas:
+        out["obj"] = p.with_suffix(".obj")
+    return out
+
+
+def write_texture(tex, mesh, path, *, lights=None) -> list:
+    """Write a :class:`~meshshade.output.texture.TextureBake`: the linear RGBA EXR (metadata: units and settings),
+    the tone-mapped PNG and, for an automatic atlas, the mesh with its UVs as OBJ (in the source file's units).
+    Returns the paths written."""
+    files = texture_outputs(path, atlas=tex.uv_source == "xatlas")
+    linear, display = texture_rgba(tex)
+    lights_text = "; ".join(describe_light(lt, i) for i, lt in enumerate(lights)) if lights else None
+    io.write_exr(files["exr"], linear, texture_metadata(tex, lights_text))
+    io.write_png(files["png"], display)
+    if "obj" in files:
+        io.write_obj(files["obj"], mesh.vertices_in_source_units(), mesh.faces, uv=tex.uv,
+                     comment=f"meshshade automatic UV atlas (xatlas) of {mesh.source or 'the mesh'}, for "
+                             f"{files['exr'].name}; positions in the source file's units")
+    return list(files.values())
+
+
+def write_bake(result: BakeResult, mesh, out, *, npz=None, lights=None, texture=None, texture_path=None) -> None:
     """Write the baked mesh ``out`` in the format of its extension (module docstring; the PLY holds
     radiance_r/g/b float W/mm^2 + uchar red/green/blue, Drago tone-mapped) and, when ``npz`` is given, an NPZ
     with radiance (n, 3) W/mm^2, k1, k2 (n,) 1/mm, d1, d2 (n, 3), vertex_areas (n,) mm^2, cutoff_mm (3,),
     entry_positions (k, 3) mm, entry_power (k,) W, beam_distance (n,) mm (with a beam) and the auto plan's
     auto_kernel (k,) / auto_exact_geodesic (k,) (``model="auto"``). ``lights`` (optional) are recorded in the
-    glTF and USD metadata."""
+    glTF and USD metadata. With ``texture`` (a TextureBake) a glTF binds its tone-mapped texture as emissive and
+    names the linear one, ``texture_path``."""
     M = result.radiance
     fmt = bake_format(out)
     display = tonemap_linear(M, operator="drago")
@@ -70,7 +102,11 @@ def write_bake(result: BakeResult, mesh, out, *, npz=None, lights=None) -> None:
             comments.append(f"meshshade {result.plan.describe()}")
         io.write_mesh_ply(out, mesh, props, to_uint8(display), comments=comments)
     elif fmt in ("glb", "gltf"):
-        doc, data = gltf_document(mesh.vertices, mesh.faces, display, M, extras=meta)
+        tex = None
+        if texture is not None:
+            tex = {"uv": texture.uv, "png": encode_png(texture_rgba(texture)[1]),
+                   "linear_uri": Path(texture_path).name if texture_path else None}
+        doc, data = gltf_document(mesh.vertices, mesh.faces, display, M, extras=meta, texture=tex)
         if fmt == "glb":
             write_bytes(out, glb_bytes(doc, data))
         else:
