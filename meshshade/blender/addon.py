@@ -6,7 +6,9 @@ process). What it reads from the scene: the active mesh object (its base mesh, t
 transform), the scene's unit scale, and every sun, point and spot light that renders. What it writes: the float
 colour attribute :data:`RADIANCE_ATTRIBUTE` (linear exitance, W/mm²) and the byte colour attribute
 :data:`DISPLAY_ATTRIBUTE` (tone-mapped, made the active and render colour), optionally a material
-:data:`MATERIAL_NAME` that shows the exitance.
+:data:`MATERIAL_NAME` that shows the exitance. With "Bake to texture", also a float image ``meshshade <object>``
+of the active UV map (:func:`apply_texture`: the CLI's ``--texture``, linear W/mm², alpha the coverage), shown by
+the material through an Image Texture node instead of the attribute.
 """
 from __future__ import annotations
 
@@ -16,11 +18,12 @@ import traceback
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty,
+                       StringProperty)
 
 from meshshade.blender.convert import (BlenderLight, colour_groups, convert_lights, mm_per_blender_unit,
                                        world_faces, world_vertices_mm)
-from meshshade.blender.job import BakeJob, BakeJobError, BakeSettings
+from meshshade.blender.job import BakeJob, BakeSettings
 from meshshade import io
 from meshshade.errors import MeshshadeError
 from meshshade.materials import PRESETS
@@ -83,6 +86,11 @@ class _BakeProperties:
                                                     "passes, else direct (the volume model has its own)"),
                                    ("hierarchical", "hierarchical", "near field + clusters (near-linear cost)"),
                                    ("direct", "direct", "every pair within the cutoff (reference)")])
+    texture: BoolProperty(name="Bake to texture", default=False,
+                          description="also bake into a float image of the active UV map (each texel a point on "
+                                      "the surface: sharper than the vertices)")
+    texture_size: IntProperty(name="Texture size", default=2048, min=8, max=16384,
+                              description="texels per side of the baked image")
     make_material: BoolProperty(name="Assign display material", default=False,
                                 description=f"create or update the material '{MATERIAL_NAME}' (Attribute "
                                             f"{RADIANCE_ATTRIBUTE} -> Emission) and make it the object's active one")
@@ -95,7 +103,7 @@ class _BakeProperties:
 
 
 _SETTING_NAMES = ("material", "sigma_s_prime", "sigma_a", "eta", "model", "cutoff_tol", "geodesic", "transport",
-                  "make_material")
+                  "texture", "texture_size", "make_material")
 
 
 class MESHSHADE_PG_settings(_BakeProperties, bpy.types.PropertyGroup):
@@ -154,6 +162,20 @@ def mesh_arrays(ob) -> tuple[np.ndarray, np.ndarray]:
     return co.reshape(-1, 3).astype(np.float64), tris.reshape(-1, 3).astype(np.int64)
 
 
+def corner_uv(ob) -> np.ndarray:
+    """(m, 3, 2) UVs of the active UV map at the corners of ``ob``'s loop triangles (as :func:`mesh_arrays`)."""
+    me = ob.data
+    layer = me.uv_layers.active
+    if layer is None:
+        raise MeshshadeError(f"{ob.name}: the mesh has no UV map to bake a texture into (add one: UV > Unwrap)")
+    uv = np.empty(len(me.loops) * 2, dtype=np.float32)
+    layer.data.foreach_get("uv", uv)
+    me.calc_loop_triangles()
+    loops = np.empty(len(me.loop_triangles) * 3, dtype=np.int32)
+    me.loop_triangles.foreach_get("loops", loops)
+    return uv.reshape(-1, 2).astype(np.float64)[loops].reshape(-1, 3, 2)
+
+
 def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJob, list[str]]:
     """The job for ``ob`` and notes to report (lights left out, modifiers ignored); MeshshadeError on bad
     input."""
@@ -170,9 +192,15 @@ def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJo
     mods = [m.name for m in ob.modifiers if m.show_render]
     if mods:
         notes.append(f"{ob.name}: baked on the base mesh; modifiers ({', '.join(mods)}) interpolate the result")
+    uv = None
+    if settings.texture:
+        uv = corner_uv(ob)
+        if np.linalg.det(M[:3, :3]) < 0.0:   # world_faces flips the winding of a mirrored object: so its corners
+            uv = uv[:, [0, 2, 1]]
     job = BakeJob(world_vertices_mm(local, M, mpu), world_faces(tris, M), colour_groups(lights),
                   settings.bake_settings(), python=python or bake_python(context),
-                  log=io.temp_path(LOG_NAME))
+                  log=io.temp_path(LOG_NAME), uv=uv,
+                  texture_size=int(settings.texture_size) if settings.texture else None)
     job.object_name, job.n_vertices = ob.name, len(ob.data.vertices)
     return job, notes
 
@@ -206,16 +234,43 @@ def apply_result(ob, radiance: np.ndarray, *, make_material: bool = False) -> No
         ob.active_material = radiance_material()
 
 
-def radiance_material():
-    """The material :data:`MATERIAL_NAME`: Attribute ``meshshade_radiance`` -> Emission of strength
-    :data:`EMISSION_PER_W_PER_MM2` -> output (made or reset)."""
+def texture_image_name(ob) -> str:
+    return f"meshshade {ob.name}"
+
+
+def apply_texture(ob, texture: np.ndarray, *, make_material: bool = False):
+    """Write ``texture`` (H, W, 4) (RGB linear W/mm², A coverage; row 0 the top) into the float image
+    :func:`texture_image_name` (made or resized; Blender stores rows from the bottom); with ``make_material`` the
+    display material shows it through the active UV map. Returns the image."""
+    H, W = texture.shape[:2]
+    name = texture_image_name(ob)
+    img = bpy.data.images.get(name)
+    if img is not None and (tuple(img.size) != (W, H) or not img.is_float):
+        bpy.data.images.remove(img)
+        img = None
+    if img is None:
+        img = bpy.data.images.new(name, width=W, height=H, alpha=True, float_buffer=True)
+    img.pixels.foreach_set(np.ascontiguousarray(texture[::-1], dtype=np.float32).ravel())
+    img.update()
+    if make_material:
+        ob.active_material = radiance_material(img)
+    return img
+
+
+def radiance_material(image=None):
+    """The material :data:`MATERIAL_NAME`: Attribute ``meshshade_radiance`` (or the baked ``image`` through the
+    active UV map) -> Emission of strength :data:`EMISSION_PER_W_PER_MM2` -> output (made or reset)."""
     mat = bpy.data.materials.get(MATERIAL_NAME) or bpy.data.materials.new(MATERIAL_NAME)
     if not getattr(mat, "node_tree", None) and hasattr(mat, "use_nodes"):
         mat.use_nodes = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
-    attr = nodes.new("ShaderNodeAttribute")
-    attr.attribute_type, attr.attribute_name = "GEOMETRY", RADIANCE_ATTRIBUTE
+    if image is None:
+        attr = nodes.new("ShaderNodeAttribute")
+        attr.attribute_type, attr.attribute_name = "GEOMETRY", RADIANCE_ATTRIBUTE
+    else:
+        attr = nodes.new("ShaderNodeTexImage")
+        attr.image, attr.interpolation = image, "Linear"
     attr.location = (-400, 0)
     emit = nodes.new("ShaderNodeEmission")
     emit.inputs["Strength"].default_value = EMISSION_PER_W_PER_MM2
@@ -261,7 +316,11 @@ class MESHSHADE_OT_bake(_BakeProperties, bpy.types.Operator):
         ob = bpy.data.objects.get(job.object_name)
         if ob is None:
             raise MeshshadeError(f"the object {job.object_name!r} was deleted during the bake")
-        apply_result(ob, job.radiance, make_material=self.make_material)
+        apply_result(ob, job.radiance, make_material=self.make_material and job.texture is None)
+        if job.texture is not None:
+            img = apply_texture(ob, job.texture, make_material=self.make_material)
+            self.report({"INFO"}, f"meshshade: texture {img.size[0]}x{img.size[1]} of the active UV map in image "
+                                  f"'{img.name}' (linear W/mm²; save it as OpenEXR to keep it)")
         for w in job.warnings:
             self.report({"WARNING"}, w)
         peak = job.radiance.max(axis=0)
@@ -369,6 +428,11 @@ class MESHSHADE_PT_panel(bpy.types.Panel):
         col.prop(s, "cutoff_tol")
         col.prop(s, "geodesic")
         col.prop(s, "transport")
+        row = layout.row(align=True)
+        row.prop(s, "texture")
+        sub = row.row(align=True)
+        sub.enabled = s.texture
+        sub.prop(s, "texture_size")
         layout.prop(s, "make_material")
         try:
             mpu = mm_per_blender_unit(context.scene.unit_settings.scale_length)

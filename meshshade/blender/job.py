@@ -6,7 +6,9 @@ float64 exact: :func:`meshshade.io.write_obj`) into a private folder, runs the c
 light colour (:func:`meshshade.blender.convert.colour_groups`), reads its progress lines, and sums the groups'
 exitance weighted by their colours. The command is the same ``meshshade bake`` a user would run, so the add-on's
 result is the CLI's to float precision. ``python`` (default: the running interpreter, Blender's own) may be
-another environment with meshshade installed (the add-on's preference "Python for bakes").
+another environment with meshshade installed (the add-on's preference "Python for bakes"). With ``texture_size``
+(and the UV map ``uv``, per corner) each run also bakes a texture (``meshshade bake --texture``) and
+:attr:`BakeJob.texture` is their colour-weighted sum.
 
 :meth:`BakeJob.poll` never blocks (the add-on calls it from a timer); :meth:`BakeJob.cancel` stops the child
 (SIGINT, then SIGKILL after :data:`CANCEL_GRACE` s) and removes the folder; :meth:`BakeJob.wait` runs it to the
@@ -98,6 +100,7 @@ class _Run:
     colour: np.ndarray
     args: list
     npz: Path
+    exr: Path | None = None
     proc: subprocess.Popen | None = None
     lines: list = field(default_factory=list)
     reader: threading.Thread | None = None
@@ -110,11 +113,14 @@ class BakeJob:
     float64 W/mm^2 is the colour-weighted sum, :attr:`warnings` the bake's warning lines, :attr:`summary` its
     report. A failure raises :class:`BakeJobError` from :meth:`poll` / :meth:`wait` with the command's one-line
     error. ``python``: the interpreter that runs ``meshshade`` (default: this one). ``log``: a file that receives
-    every child's output (for a failure that is not a user mistake).
+    every child's output (for a failure that is not a user mistake). ``texture_size``: also bake a texture of that
+    many texels per side over the per-corner UV map ``uv`` (m, 3, 2) with ``padding``; :attr:`texture` (H, W, 4)
+    float64 is then the colour-weighted exitance (RGB, W/mm^2; row 0 the top, v = 1) and the coverage (A).
     """
 
     def __init__(self, vertices, faces, groups, settings: BakeSettings, *, python: str | None = None,
-                 log: str | os.PathLike | None = None):
+                 log: str | os.PathLike | None = None, uv=None, texture_size: int | None = None,
+                 padding: int = 16):
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.faces = np.asarray(faces, dtype=np.int64)
         self.groups = groups
@@ -124,6 +130,12 @@ class BakeJob:
         self.fraction = 0.0
         self.message = "starting"
         self.radiance: np.ndarray | None = None
+        self.uv = None if uv is None else np.asarray(uv, dtype=np.float64)
+        self.texture_size, self.padding = texture_size, int(padding)
+        if texture_size is not None and (self.uv is None or self.uv.shape != (self.faces.shape[0], 3, 2)):
+            raise BakeJobError("a texture bake needs a UV map: one (u, v) per face corner")
+        self.texture: np.ndarray | None = None
+        self._texture_sum: np.ndarray | None = None
         self.warnings: list[str] = []
         self.summary: list[str] = []
         self.cancelled = False
@@ -139,14 +151,19 @@ class BakeJob:
         if not Path(self.python).exists():
             raise BakeJobError(f"the Python for bakes does not exist: {self.python}")
         self._dir = io.scratch_folder("meshshade-blender-")
-        mesh = io.write_obj(self._dir / "mesh.obj", self.vertices, self.faces,
+        textured = self.texture_size is not None
+        mesh = io.write_obj(self._dir / "mesh.obj", self.vertices, self.faces, uv=self.uv if textured else None,
                             comment="meshshade: world-space mesh in mm, written by the Blender add-on")
         for k, (colour, lights) in enumerate(self.groups):
             npz = self._dir / f"group{k}.npz"
+            exr = self._dir / f"group{k}.exr" if textured else None
             args = ["-m", "meshshade.cli", "bake", str(mesh), "--units", "mm", *self.settings.cli_args(),
                     *[a for lt in lights for a in ("--light", light_spec(lt))],
                     "--out", str(self._dir / f"group{k}.ply"), "--npz", str(npz)]
-            self._runs.append(_Run(np.asarray(colour, dtype=np.float64), args, npz))
+            if textured:
+                args += ["--texture", str(exr), "--texture-size", str(int(self.texture_size)),
+                         "--padding", str(self.padding)]
+            self._runs.append(_Run(np.asarray(colour, dtype=np.float64), args, npz, exr))
         self._sum = np.zeros((self.vertices.shape[0], 3))
         self._next()
         return self
@@ -199,10 +216,18 @@ class BakeJob:
         self.summary += [ln for ln in run.lines if not ln.startswith("meshshade: ")]
         with np.load(run.npz) as z:
             self._sum += run.colour * np.asarray(z["radiance"], dtype=np.float64)
+        if run.exr is not None:
+            pixels, _ = io.read_exr(run.exr)
+            pixels = np.asarray(pixels, dtype=np.float64)
+            if self._texture_sum is None:
+                self._texture_sum = np.zeros(pixels.shape[:2] + (4,))
+                self._texture_sum[..., 3] = pixels[..., 3]
+            self._texture_sum[..., :3] += run.colour * pixels[..., :3]
         if self._current + 1 < len(self._runs):
             self._next()
             return False
         self.radiance, self.fraction, self.message = self._sum, 1.0, "done"
+        self.texture = self._texture_sum
         self._cleanup()
         return True
 

@@ -291,3 +291,62 @@ def test_spot_falloff_and_point_watts_are_cycles_own(registered, tmp_path):
         sel = np.abs(r - ring) < 0.2
         assert px[sel].mean() == pytest.approx(expected[sel].mean(), rel=0.02), ring
     assert np.all(px[r > 6.2] < 1e-3 * px.max())   # outside the cone
+
+
+def test_texture_bake_equals_the_cli_texture_of_the_same_scene(registered, tmp_path):
+    """Issue 31: the add-on's image of the active UV map is the CLI's ``--texture`` of the same world-space mesh
+    and UV map (float precision), rows in Blender's order (bottom first)."""
+    from meshshade.io import read_exr, write_obj
+
+    bpy.context.scene.unit_settings.scale_length = 0.01
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0, location=(0.2, -0.1, 0.3),
+                                          rotation=(0.4, 0.1, 0.7))
+    ob = bpy.context.active_object
+    sun = new_light("Sun", "SUN", 800.0, rotation=(0.5, 0.3, 0.0), color=(1.0, 0.9, 0.8))
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.meshshade_bake(material="skin1", texture=True, texture_size=64,
+                                         make_material=True) == {"FINISHED"}
+    img = bpy.data.images[f"meshshade {ob.name}"]
+    assert tuple(img.size) == (64, 64) and img.is_float
+    got = np.array(img.pixels[:], dtype=np.float32).reshape(64, 64, 4)[::-1]      # row 0: the top
+    nodes = ob.active_material.node_tree.nodes
+    assert any(n.type == "TEX_IMAGE" and n.image == img for n in nodes)
+
+    # the same bake by hand: world-space mesh in mm with the active UV map per triangle corner
+    me = ob.data
+    M = np.array(ob.matrix_world)
+    co = np.array([v.co for v in me.vertices], dtype=np.float64)
+    V = (co @ M[:3, :3].T + M[:3, 3]) * MM_PER_BU
+    me.calc_loop_triangles()
+    F = np.array([t.vertices[:] for t in me.loop_triangles])
+    uv = np.array([[me.uv_layers.active.data[k].uv[:] for k in t.loops] for t in me.loop_triangles])
+    obj = write_obj(tmp_path / "world.obj", V, F, uv=uv)
+    sun_dir = -np.array(sun.matrix_world)[:3, 2]
+    exr = tmp_path / "cli.exr"
+    subprocess.run([sys.executable, "-m", "meshshade.cli", "bake", str(obj), "--units", "mm", "--material", "skin1",
+                    "--light", f"directional:{','.join(repr(float(x)) for x in sun_dir)}:{800 * 1e-6!r}",
+                    "--quiet", "--texture", str(exr), "--texture-size", "64"], check=True)
+    cli_px, _ = read_exr(exr)
+    expected = cli_px[..., :3] * np.array([1.0, 0.9, 0.8], dtype=np.float32)
+    assert expected.max() > 0
+    np.testing.assert_allclose(got[..., :3], expected, rtol=2e-6, atol=1e-6 * expected.max())
+    np.testing.assert_array_equal(got[..., 3], cli_px[..., 3])
+
+
+def test_glb_with_a_texture_imports_with_the_texture_bound_as_emission(registered, tmp_path):
+    from meshshade.geometry.procedural import icosphere, spherical_uv
+    from meshshade.io import write_obj
+
+    V, F = icosphere(10.0, 2)
+    obj = write_obj(tmp_path / "s.obj", V, F, uv=spherical_uv(V, F))
+    glb = tmp_path / "s.glb"
+    subprocess.run([sys.executable, "-m", "meshshade.cli", "bake", str(obj), "--units", "mm", "--material", "skin1",
+                    "--light", "directional:0.2,0.1,-1:1e-3", "--quiet", "--texture", str(tmp_path / "s.exr"),
+                    "--texture-size", "32", "--out", str(glb)], check=True)
+    assert bpy.ops.import_scene.gltf(filepath=str(glb)) == {"FINISHED"}
+    ob = next(o for o in bpy.context.scene.objects if o.type == "MESH")
+    assert len(ob.data.uv_layers) == 1
+    bsdf = next(n for n in ob.active_material.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    emission = bsdf.inputs["Emission Color"]
+    assert emission.is_linked and emission.links[0].from_node.type == "TEX_IMAGE"
+    assert tuple(emission.links[0].from_node.image.size) == (32, 32)
