@@ -89,7 +89,8 @@ def run_bake(args) -> int:
         if uv is None:   # an automatic atlas, written beside the texture
             check_output_path(texture_outputs(args.texture, atlas=True)["obj"], outs, suffixes=(".obj",),
                               option="--texture (its automatic UV atlas)")
-        texture = bake_texture(mesh, material, lights, uv=uv, size=size, padding=padding, refine=refine, **options)
+        texture = bake_texture(mesh, material, lights, uv=uv, size=size, padding=padding, refine=refine,
+                               atlas_cache=AssetCache("uv-atlas"), **options)
         result = texture.vertex_result()
     else:
         result = bake(mesh, material, lights, **options)

@@ -25,6 +25,7 @@ Where the mesh needs no refinement (n = 1), a texel at a vertex equals the verte
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import struct
 import time
@@ -124,20 +125,46 @@ def texture_refinement(mesh, material) -> int:
     return int(min(MAX_REFINE, max(1, math.ceil(float(mesh.mean_edge_length) / target - 1e-9))))
 
 
+def atlas_key(mesh, size: int, padding: int) -> str:
+    """Hex digest naming the automatic atlas of ``mesh`` for a texture of ``size`` with charts ``padding`` apart."""
+    h = hashlib.sha256(f"xatlas/1 {int(size)} {int(padding)}".encode())
+    for a in (np.ascontiguousarray(mesh.vertices, dtype=np.float64), np.ascontiguousarray(mesh.faces, dtype=np.int64)):
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:32]
+
+
+def texture_atlas(mesh, size: int, padding: int, cache=None) -> tuple[np.ndarray, dict]:
+    """(uv, stats) of the automatic atlas, looked up in and kept in ``cache`` (an object with ``read(key)`` and
+    ``write(key, **arrays)``, :class:`meshshade.asset_cache.AssetCache`) when one is given."""
+    key = atlas_key(mesh, size, padding) if cache is not None else None
+    got = cache.read(key) if cache is not None else None
+    if got is not None and "uv" in got and got["uv"].shape == (mesh.n_faces, 3, 2):
+        return np.asarray(got["uv"], dtype=np.float64), {"uv_source": "xatlas", "uv_charts": int(got["charts"]),
+                                                          "uv_utilisation": float(got["utilisation"]),
+                                                          "uv_atlas_cached": True}
+    uv, stats = automatic_atlas(mesh.vertices, mesh.faces, size=size, padding=padding)
+    if cache is not None:
+        cache.write(key, uv=uv, charts=np.int64(stats["uv_charts"]), utilisation=np.float64(stats["uv_utilisation"]))
+    return uv, {**stats, "uv_atlas_cached": False}
+
+
 def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: int = 16, refine=None,
-                 **bake_options) -> TextureBake:
+                 atlas_cache=None, **bake_options) -> TextureBake:
     """Bake ``mesh`` (mm) into a ``size`` x ``size`` texture of its UV map ``uv`` ((m, 3, 2) per-corner, or None
-    for an automatic atlas by xatlas); module docstring for what each texel holds. ``refine``: segments per edge
-    of the surface the transport runs on (None: :func:`texture_refinement`); ``bake_options`` go to
-    :func:`meshshade.transport.baking.bake` (model, progress, volume_cache, ...)."""
+    for an automatic atlas by xatlas, kept in ``atlas_cache`` when given: :func:`texture_atlas`); module docstring
+    for what each texel holds. ``refine``: segments per edge of the surface the transport runs on (None:
+    :func:`texture_refinement`); ``bake_options`` go to :func:`meshshade.transport.baking.bake` (model,
+    progress, volume_cache, ...)."""
     size, padding, refine = check_texture_options(size, padding, refine)
     timings, stats = {}, {}
     t0 = time.perf_counter()
     if uv is None:
-        uv, atlas = automatic_atlas(mesh.vertices, mesh.faces, size=size,
-                                    padding=max(2, min(padding, 8)))
+        uv, atlas = texture_atlas(mesh, size, max(2, min(padding, 8)), atlas_cache)
         stats.update(atlas)
         source = "xatlas"
+        timings["uv atlas"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
     else:
         source = "mesh"
     uv = np.asarray(uv, dtype=np.float64)

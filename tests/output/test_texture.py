@@ -173,3 +173,19 @@ def _vertex_faces(F, n):
     bary = np.zeros((n, 3))
     bary[np.arange(n), corner] = 1.0
     return face, bary
+
+
+def test_the_automatic_atlas_is_kept_in_the_asset_cache(tmp_path, monkeypatch):
+    from meshshade.asset_cache import AssetCache
+    from meshshade.output.texture import texture_atlas
+
+    monkeypatch.setenv("MESHSHADE_ASSET_CACHE", str(tmp_path))
+    mesh = Mesh.from_arrays(*icosphere(5.0, 2))
+    cache = AssetCache("uv-atlas")
+    uv1, s1 = texture_atlas(mesh, 128, 4, cache)
+    uv2, s2 = texture_atlas(mesh, 128, 4, cache)
+    assert (s1["uv_atlas_cached"], s2["uv_atlas_cached"]) == (False, True)
+    np.testing.assert_array_equal(uv1, uv2)
+    assert s1["uv_charts"] == s2["uv_charts"]
+    _, s3 = texture_atlas(mesh, 256, 4, cache)                  # another size: another atlas
+    assert not s3["uv_atlas_cached"]
