@@ -3,8 +3,8 @@ values), run by :func:`meshshade.batch.runner.run_batch`.
 
 A job here is exactly one ``meshshade bake | render | compare | mc | profile`` invocation: its options are the
 command's long options without the dashes (``cutoff-tol`` or ``cutoff_tol``), ``mesh`` for the input mesh, and
-output options (``out``, ``npz``, ``summary``, ``csv``, ``plot``) as plain file names, which are written inside
-the job's own folder. A job therefore produces the same files as the command run by hand.
+output options (``out``, ``npz``, ``texture``, ``summary``, ``csv``, ``plot``) as plain file names, which are
+written inside the job's own folder (a texture's PNG and atlas beside it). A job therefore produces the same files as the command run by hand.
 
 Job file (TOML)::
 
@@ -58,7 +58,7 @@ COMMANDS = {
 }
 #: output options per command (file names inside the job's folder) and the default of the required one
 OUTPUTS = {
-    "bake": {"out": "bake.ply", "npz": None},
+    "bake": {"out": "bake.ply", "npz": None, "texture": None},
     "render": {"out": "render"},
     "compare": {"out": "."},
     "mc": {"out": "mc.ply", "npz": None, "summary": None},

@@ -384,3 +384,12 @@ def test_ctrl_c_stops_the_batch_leaving_finished_jobs_whole_and_no_partial_folde
     assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("meshshade: interrupted"), err
     assert sorted(p.name for p in out.iterdir()) == ["first", MANIFEST]
     assert _manifest(out)["first"]["status"] == "ok"
+
+
+def test_a_texture_bake_job_writes_its_files_in_its_folder(scene, tmp_path):
+    job = command_job("tex", "bake", mesh=str(scene / "ball.ply"), material="skin1", light="directional:0,0,-1",
+                      texture="ball.exr", texture_size=32)
+    rec = run_job(job, tmp_path)
+    assert rec["status"] == "ok", rec
+    assert {"bake.ply", "ball.exr", "ball.png", "ball.obj"} <= set(rec["outputs"])   # the PLY has no UVs: atlas
+    assert {p.name for p in (tmp_path / "tex").iterdir()} >= {"bake.ply", "ball.exr", "ball.png", "ball.obj"}
