@@ -161,7 +161,8 @@ def add_geodesic_arg(p: argparse.ArgumentParser) -> None:
 
 def add_far_field_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--far-field", default=None, choices=["off", "clustered"],
-                   help="directional/point lights: sum pairs beyond r_near (1 %% of the dipole's energy) by clusters "
+                   help="directional/point lights: sum pairs beyond r_near (where 10 %% of the dipole's energy lies beyond) "
+                        "by clusters "
                         "of the planar dipole (default: off; auto uses it where the surface is flat on the scale "
                         "of the cutoff)")
 

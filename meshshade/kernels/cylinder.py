@@ -321,7 +321,7 @@ def cylinder_exact_profile(theta, z, *, R0_opt, albedo_prime, eta, rtol=1e-8, fu
         medium and MeshshadeError is raised. (Diffusion theory itself is poor for radii of ~1 mean free path.)
     albedo_prime : float in (0, 1]
         Reduced albedo sigma_s'/sigma_t'.
-    eta : float > 0
+    eta : float in [1, 2.5] (:func:`meshshade.kernels.optics.check_eta`)
         Relative index of refraction.
     rtol : float > 0
         Accuracy target. The n-series and the q-range are truncated at ``eps = 1e-4 rtol`` (clipped to

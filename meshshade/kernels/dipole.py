@@ -76,7 +76,7 @@ def dipole_profile(r_opt, *, albedo_prime, eta):
         Distance from the entry point times sigma_t' (dimensionless).
     albedo_prime : array_like of float in [0, 1]
         Reduced albedo sigma_s'/sigma_t'.
-    eta : array_like of float > 0
+    eta : array_like of float in [1, 2.5] (:func:`meshshade.kernels.optics.check_eta`)
         Relative index of refraction.
 
     Returns

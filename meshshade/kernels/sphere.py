@@ -335,7 +335,7 @@ def sphere_series_profile(theta, *, R0_opt, albedo_prime, eta, rtol=1e-10):
         Sphere radius times sigma_t'. Below z_r = 1 the source is placed at the centre (module docstring).
     albedo_prime : float in [0, 1]
         Reduced albedo sigma_s'/sigma_t'; 1 (mu = 0) is handled exactly.
-    eta : float > 0
+    eta : float in [1, 2.5] (:func:`meshshade.kernels.optics.check_eta`)
         Relative index of refraction.
     rtol : float in [1e-16, 0.5]
         Truncation tolerance relative to the peak R_sph(0), uniform in theta (module docstring).

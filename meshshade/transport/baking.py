@@ -36,7 +36,8 @@ from meshshade.preview import mesh_preview
 from meshshade.progress import Progress, kernel_interrupts
 from meshshade.raycast import make_scene
 from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
-from meshshade.transport.farfield import far_field_exitance, far_field_exitance_direct, far_field_radius
+from meshshade.transport.farfield import (DEFAULT_FAR_TOL, far_field_exitance, far_field_exitance_direct,
+                                          far_field_radius)
 from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
                                               vertex_drift, vertex_power)
 from meshshade.transport.gather import PairStream, Stopwatch, chunk_size, cutoff_radii, gather
@@ -112,7 +113,7 @@ def describe_scale(mesh, material: Material) -> str:
 def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff_tol: float = 1e-4,
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool | str = False,
          rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
-         far_field: str | None = None, far_tol: float = 0.1, far_rel_tol: float = 1e-2,
+         far_field: str | None = None, far_tol: float = DEFAULT_FAR_TOL, far_rel_tol: float = 1e-2,
          far_geodesic: str = "cluster", transport="auto", near_field: str | None = None,
          volume=None, volume_cache=None) -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
@@ -438,7 +439,7 @@ RTOL_RANGE = (1e-15, 0.1)
 
 
 def check_bake_options(model=DEFAULT_MODEL, cutoff_tol=1e-4, curvature_radius_mm=None, geodesic="exact",
-                       far_field=None, *, rtol=1e-10, far_tol=0.1, far_rel_tol=1e-2, far_geodesic="cluster",
+                       far_field=None, *, rtol=1e-10, far_tol=DEFAULT_FAR_TOL, far_rel_tol=1e-2, far_geodesic="cluster",
                        backend="embree", auto_options=None, transport="auto", near_field=None) -> str:
     """Reject bad options of :func:`bake` (MeshshadeError, one line naming the option, its value and what is
     allowed) before any work; returns the far-field method with its default resolved. Also used by

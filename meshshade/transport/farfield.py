@@ -54,9 +54,9 @@ DEFAULT_REL_TOL = 0.1
 DEFAULT_BUDGET_SHARE = 0.25
 #: sources per leaf (16 beat 8 and 32 on 10k-40k vertex spheres: fewer node visits, more exact pairs)
 DEFAULT_LEAF_SIZE = 16
-#: default share of the dipole's energy left to the far field when choosing r_near (far_field_radius):
-#: 0.3 gives r_near = 5-6 transport lengths for marble and milk, 1.4-2.6 for skin1
-DEFAULT_FAR_TOL = 0.3
+#: default share of the dipole's energy left to the far field when choosing r_near (far_field_radius; the bake's
+#: ``far_tol``): 0.1 gives r_near = 9-16 transport lengths for marble and milk, 2.3-5.1 for skin1
+DEFAULT_FAR_TOL = 0.1
 #: candidate pairs per chunk in the direct sum (memory ~ 24 bytes per pair)
 DIRECT_PAIRS_PER_CHUNK = 4_000_000
 #: receivers per block of the processing order (k-d leaves, shuffled across threads)
