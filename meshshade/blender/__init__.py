@@ -35,8 +35,8 @@ def _needs_blender(*_args, **_kwargs):
                       "here); see docs/blender.md")
 
 
-try:   # inside Blender (or with the bpy module): the add-on itself
-    import bpy  # noqa: F401
+try:   # inside Blender (or with the bpy module): the add-on itself; a folder named bpy in the working directory
+    from bpy import app  # noqa: F401  (a namespace package without Blender's modules) is not Blender
 except ImportError:
     register = unregister = _needs_blender
 else:

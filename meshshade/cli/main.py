@@ -9,7 +9,9 @@ What a user sees when something goes wrong, and the exit codes:
   cannot be written): one line ``meshshade: error: ...`` on stderr and exit code 2; warnings are one line each
   (``meshshade: warning: ...``);
 * Ctrl-C (SIGINT), SIGTERM and SIGHUP: one line ``meshshade: interrupted ...`` and exit code 128 + the signal's
-  number (130, 143, 129);
+  number (130, 143, 129); one that lands after the outputs were committed (the process finishing: its threads,
+  its interpreter shutting down) says so: ``meshshade: SIGTERM after the outputs were written (they are
+  complete)``, same exit code (:func:`say_late_signals`, installed when ``main`` runs as the program);
 * standard output closed by its reader (``meshshade profile ... | head -1``): silence and exit code 141, as a
   program killed by SIGPIPE.
 
@@ -21,6 +23,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
 import re
 import signal
 import sys
@@ -114,6 +117,23 @@ def _raise_interrupted(signum, frame):
     raise Interrupted(signum)
 
 
+def _late_signal(signum, frame):
+    name = signal.Signals(signum).name
+    try:
+        sys.stderr.write(f"meshshade: {name} after the outputs were written (they are complete)\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(128 + signum)
+
+
+def say_late_signals() -> None:
+    """From now until the process ends, a stop signal (:data:`STOP_SIGNALS`) says that the outputs were already
+    written and ends the process with 128 + its number (a command has finished: nothing is left to clean up)."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, _late_signal)
+
+
 def _report_interrupted(exc) -> int:
     name = signal.Signals(exc.signum).name
     print(f"meshshade: interrupted by {name}; no partial output was left", file=sys.stderr)
@@ -191,6 +211,15 @@ def _guarded_stdout():
 
 
 def main(argv=None) -> int:
+    """Run ``meshshade ARGV`` (``argv`` None: the program's own arguments, and then a signal after the command's
+    outputs are written is reported as such: :func:`say_late_signals`); returns the exit code."""
+    code = _main(argv)
+    if argv is None:
+        say_late_signals()
+    return code
+
+
+def _main(argv=None) -> int:
     parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
     try:

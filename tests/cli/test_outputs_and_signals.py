@@ -372,3 +372,27 @@ def test_quiet_prints_only_what_the_command_exists_to_print(sphere, tmp_path, ca
             assert out == "", (argv[0], out)
         else:
             assert kept in out and "wrote" not in out, (argv[0], out)
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_signal_after_the_outputs_are_written_says_so(sig):
+    """Issue 32: a stop signal while the finished process winds down (its outputs committed) is not silent."""
+    code = ("import os, signal, sys, time\n"
+            "from meshshade.cli.main import main\n"
+            "sys.argv = ['meshshade', 'materials']\n"
+            "rc = main()\n"
+            f"os.kill(os.getpid(), signal.{sig})\n"
+            "time.sleep(5)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env=dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2])))
+    number = int(getattr(signal, sig))
+    assert out.returncode == 128 + number, (out.returncode, out.stderr)
+    assert out.stderr.strip().splitlines()[-1] == f"meshshade: {sig} after the outputs were written (they are complete)"
+    assert "Traceback" not in out.stderr and "skin1" in out.stdout
+
+
+def test_main_with_explicit_arguments_leaves_the_signal_handlers_alone(cli):
+    before = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT)}
+    rc, _, _ = cli.run(["materials"])
+    assert rc == 0
+    assert {s: signal.getsignal(s) for s in before} == before
