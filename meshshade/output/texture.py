@@ -7,7 +7,8 @@ evaluated there, not interpolated from the mesh's vertex values:
 1. **The surface is refined to what the material resolves.** Where the mesh's mean edge is longer than
    REFINE_SPACING x the volume transport's column spacing (:func:`meshshade.volume.transport.grading`: the lateral
    resolution of its layers), each triangle is split into n^2 on its own facet (same polyhedron, normals of the
-   original interpolated; :mod:`meshshade.geometry.refine`) and the bake runs on that surface: the light enters at
+   original interpolated; :mod:`meshshade.geometry.refine`; within MAX_REFINED_VERTICES, with a warning where
+   that stops it short) and the bake runs on that surface: the light enters at
    its vertices and the volume is meshed under them. Without this a 642-vertex ball's volume solution is 5 % off
    on average (+8 % past the terminator; measured against the exact Robin ball series), whatever is done at the
    texels afterwards.
@@ -29,6 +30,7 @@ import hashlib
 import math
 import struct
 import time
+import warnings
 import zlib
 from dataclasses import dataclass, field, replace
 
@@ -42,13 +44,16 @@ from meshshade.output.tonemap import to_uint8, tonemap_linear
 from meshshade.transport.baking import BakeResult, bake
 from meshshade.volume.transport import grading
 
-__all__ = ["TextureBake", "bake_texture", "texture_refinement", "REFINE_SPACING", "MAX_REFINE",
-           "check_texture_options"]
+__all__ = ["TextureBake", "bake_texture", "texture_refinement", "refinement_budget", "REFINE_SPACING", "MAX_REFINE",
+           "MAX_REFINED_VERTICES", "check_texture_options"]
 
 #: the surface is refined until its mean edge is at most this many column spacings of the volume mesh
 REFINE_SPACING = 2.0
 #: at most this many segments per edge (n^2 triangles per face)
 MAX_REFINE = 8
+#: the automatic refinement keeps the refined surface within this many vertices (a 141k-vertex head bakes in 3.5 min
+#: and 2.8 GB on 2 cores: docs/benchmarks.md); beyond it the texture says it is coarser than the material resolves
+MAX_REFINED_VERTICES = 250_000
 #: texture sizes accepted (texels per side)
 MIN_SIZE, MAX_SIZE = 8, 16384
 
@@ -120,9 +125,15 @@ def check_texture_options(size=2048, padding=16, refine=None) -> tuple[int, int,
 
 def texture_refinement(mesh, material) -> int:
     """Segments per edge so that the mean edge is within :data:`REFINE_SPACING` column spacings (module
-    docstring), at most :data:`MAX_REFINE`."""
+    docstring), at most :data:`MAX_REFINE` (see :func:`refinement_budget` for the vertex budget)."""
     target = REFINE_SPACING * grading(material)[4]
     return int(min(MAX_REFINE, max(1, math.ceil(float(mesh.mean_edge_length) / target - 1e-9))))
+
+
+def refinement_budget(mesh) -> int:
+    """The most segments per edge that keep the refined surface within :data:`MAX_REFINED_VERTICES` (about n^2
+    times the vertices), at least 1."""
+    return max(1, int(math.isqrt(MAX_REFINED_VERTICES // max(mesh.n_vertices, 1))))
 
 
 def atlas_key(mesh, size: int, padding: int) -> str:
@@ -173,6 +184,14 @@ def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: 
     stats.update(rstats)
     timings["texture rasterise"] = time.perf_counter() - t0
     n = texture_refinement(mesh, material) if refine is None else refine
+    if refine is None and n > refinement_budget(mesh):
+        wanted, n = n, refinement_budget(mesh)
+        stats["texture_refine_wanted"] = wanted
+        warnings.warn(f"texture: the surface was split {n}x{n}, not the {wanted}x{wanted} the material resolves "
+                      f"(that would be about {wanted * wanted * mesh.n_vertices:,} vertices, over "
+                      f"{MAX_REFINED_VERTICES:,}): texels between vertices are coarser than the light's scale; "
+                      "--texture-refine N asks for more (check --units: the mesh's mean edge is "
+                      f"{mesh.mean_edge_length:.3g} mm)", stacklevel=2)
     t0 = time.perf_counter()
     surface = refined_mesh(mesh, n)
     timings["texture refine"] = time.perf_counter() - t0

@@ -189,3 +189,17 @@ def test_the_automatic_atlas_is_kept_in_the_asset_cache(tmp_path, monkeypatch):
     assert s1["uv_charts"] == s2["uv_charts"]
     _, s3 = texture_atlas(mesh, 256, 4, cache)                  # another size: another atlas
     assert not s3["uv_atlas_cached"]
+
+
+def test_the_automatic_refinement_keeps_to_its_vertex_budget(monkeypatch):
+    """A mesh whose edges are far longer than the material resolves (here: a 42-vertex ball at 200 mm, mean edge
+    over 100 mm against skin1's 0.9 mm) would ask for 8x8; the budget stops it short and says so."""
+    import meshshade.output.texture as texture
+
+    mesh = Mesh.from_arrays(*icosphere(200.0, 1))
+    assert texture_refinement(mesh, SKIN) == 8
+    monkeypatch.setattr(texture, "MAX_REFINED_VERTICES", 4 * mesh.n_vertices)
+    with pytest.warns(UserWarning, match=r"split 2x2, not the 8x8"):
+        tex = bake_texture(mesh, SKIN, SUN, uv=spherical_uv(mesh.vertices, mesh.faces), size=32, padding=0,
+                           model="dipole")
+    assert tex.refine == 2 and tex.stats["texture_refine_wanted"] == 8
