@@ -103,14 +103,20 @@ def _read_obj(path: Path):
     return _read_obj_lines(path, original)
 
 
-def _read_obj_lines(path: Path, text: str | None = None):
+def _read_obj_lines(path: Path, text: str | None = None, *, uv: bool = False):
     """Line-by-line OBJ reader: general (polygons, relative indices) and precise about errors.
 
-    ``text``: the file's decoded text when the caller has read it already (see ``_decode_text``)."""
+    ``text``: the file's decoded text when the caller has read it already (see ``_decode_text``). With ``uv``,
+    also the texture coordinates: returns (V, F, corner UV (m, 3, 2) or None when the file has no ``vt``), the
+    corners' ``f v/vt`` indices fan-triangulated as the faces are; a file with ``vt`` where some faces have none is
+    refused with the count."""
     if text is None:
         text = _decode_text(path.read_bytes(), path)
     verts: list = []
     faces: list = []
+    vt: list = []
+    corners: list = []
+    untextured = 0
     n_polygons = 0
     pending = ""
     for lineno, raw in enumerate(text.replace("\r\n", "\n").replace("\r", "\n").split("\n"), start=1):
@@ -128,10 +134,18 @@ def _read_obj_lines(path: Path, text: str | None = None):
             except (IndexError, ValueError):
                 raise MeshValidationError(f"{path}:{lineno}: malformed vertex line {line.strip()[:60]!r}") \
                     from None
+        elif parts[0] == "vt" and uv:
+            try:
+                vt.append((float(parts[1]), float(parts[2]) if len(parts) > 2 else 0.0))
+            except (IndexError, ValueError):
+                raise MeshValidationError(f"{path}:{lineno}: malformed texture coordinate line "
+                                          f"{line.strip()[:60]!r}") from None
         elif parts[0] == "f":
             n = len(verts)
+            fields = [p.split("/") for p in parts[1:]]
             try:
-                idx = [int(p.split("/", 1)[0]) for p in parts[1:]]
+                idx = [int(f[0]) for f in fields]
+                tex = [int(f[1]) for f in fields] if uv and all(len(f) > 1 and f[1] for f in fields) else None
             except ValueError:
                 raise MeshValidationError(f"{path}:{lineno}: malformed face line {line.strip()[:60]!r}") \
                     from None
@@ -147,11 +161,29 @@ def _read_obj_lines(path: Path, text: str | None = None):
             if len(idx) > 3:
                 n_polygons += 1
             faces.extend((idx[0], idx[k], idx[k + 1]) for k in range(1, len(idx) - 1))
+            if uv:
+                if tex is None:
+                    untextured += len(idx) - 2
+                    tex = [0] * len(idx)
+                tex = [t - 1 if t > 0 else len(vt) + t for t in tex]
+                corners.extend((tex[0], tex[k], tex[k + 1]) for k in range(1, len(tex) - 1))
     if not verts and not faces:
         raise MeshValidationError(f"no OBJ vertex or face records in {path}")
     if n_polygons:
         _warn_polygons(path, n_polygons)
-    return np.array(verts, dtype=np.float64).reshape(-1, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
+    V, F = np.array(verts, dtype=np.float64).reshape(-1, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
+    if not uv:
+        return V, F
+    if not vt:
+        return V, F, None
+    if untextured:
+        raise MeshValidationError(f"{path}: {untextured} of {F.shape[0]} triangles have no texture coordinates "
+                                  "(f v/vt): a texture needs every face mapped")
+    C = np.array(corners, dtype=np.int64).reshape(-1, 3)
+    T = np.array(vt, dtype=np.float64)
+    if C.size and (C.min() < 0 or C.max() >= T.shape[0]):
+        raise MeshValidationError(f"{path}: a face refers to texture coordinate {int(C.max()) + 1} of {T.shape[0]}")
+    return V, F, T[C]
 
 
 # --- OFF -----------------------------------------------------------------------------------------------------

@@ -111,8 +111,8 @@ class TextureBake:
 def check_texture_options(size=2048, padding=16, refine=None) -> tuple[int, int, int | None]:
     """(size, padding, refine) checked: one-line ParameterError otherwise."""
     def whole(value, name, lo, hi):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) and not (
-                isinstance(value, float) and value.is_integer()):
+        integral = isinstance(value, (int, np.integer)) or (isinstance(value, float) and value.is_integer())
+        if isinstance(value, bool) or not integral:
             raise ParameterError(f"{name} must be a whole number, got {value!r}")
         if not lo <= int(value) <= hi:
             raise ParameterError(f"{name} must lie in [{lo}, {hi}], got {value!r}")

@@ -7,9 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from meshshade.errors import MeshValidationError
+
 from meshshade.geometry.procedural import box, icosphere, spherical_uv
 from meshshade.geometry.uv import rasterise_uv
-from meshshade.io import load_mesh, read_exr, write_obj
+from meshshade.io import load_mesh, read_exr, read_mesh_arrays, write_obj
 from meshshade.io.uv_maps import read_corner_uv, read_uv_map
 
 SUN = ["--light", "directional:0,0,-1:1", "--material", "skin1", "--quiet"]
@@ -25,7 +27,9 @@ def _obj_with_uv(tmp_path, name="ball.obj", radius=5.0, level=2, uv=None):
 
 def test_obj_uvs_round_trip_exactly(tmp_path):
     path, V, F, uv = _obj_with_uv(tmp_path)
-    np.testing.assert_array_equal(read_corner_uv(path), uv)
+    faces, corner_uv = read_corner_uv(path)
+    np.testing.assert_array_equal(corner_uv, uv)
+    np.testing.assert_array_equal(faces, read_mesh_arrays(path)[1])
     np.testing.assert_array_equal(read_uv_map(path, load_mesh(path)), uv)
     import trimesh
     t = trimesh.load(path, process=False)          # an independent reader (it splits the vertices at seams)
@@ -37,7 +41,8 @@ def test_obj_quads_with_vt_are_fan_triangulated_like_the_geometry(tmp_path):
     text = ("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n")
     path = tmp_path / "quad.obj"
     path.write_text(text)
-    uv = read_corner_uv(path)
+    faces, uv = read_corner_uv(path)
+    np.testing.assert_array_equal(faces, [[0, 1, 2], [0, 2, 3]])
     np.testing.assert_array_equal(uv, [[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]])
 
 
@@ -72,6 +77,14 @@ def test_ply_vertex_s_t_are_read(tmp_path):
     path = tmp_path / "ball.ply"
     path.write_text(head + body)
     np.testing.assert_allclose(read_uv_map(path, load_mesh(path)), st[F], rtol=0, atol=0)
+
+
+def test_an_obj_with_some_faces_unmapped_is_refused(tmp_path):
+    path = tmp_path / "part.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nf 1/1 2/2 3/3\nf 1 3 4\n")
+    with pytest.raises(MeshValidationError, match="1 of 2 triangles have no texture coordinates"):
+        read_corner_uv(path)
+    np.testing.assert_array_equal(read_mesh_arrays(path)[1], [[0, 1, 2], [0, 2, 3]])   # the geometry reads
 
 
 def test_files_without_uvs_give_none(tmp_path):
@@ -119,8 +132,12 @@ def test_texture_with_glb_binds_the_texture_as_emissive(cli, tmp_path):
     assert geom.visual.material.emissiveTexture is not None
     assert geom.visual.material.emissiveTexture.size == (32, 32)
     # every glTF corner's UV is the file's corner UV (the seam's vertices split)
-    got = read_uv_map(tmp_path / "ball.glb", load_mesh(tmp_path / "ball.glb", units="m"))
+    glb = load_mesh(tmp_path / "ball.glb", units="m")
+    got = read_uv_map(tmp_path / "ball.glb", glb)
     np.testing.assert_allclose(got, uv, atol=1e-7)
+    # the mesh's vertices first and in order, then the seam copies of the vertices the extras name
+    source = np.concatenate([np.arange(V.shape[0]), _seam_source(tmp_path / "ball.glb")])
+    np.testing.assert_allclose(glb.vertices, V[source], atol=1e-4)         # float32 metres back to mm
 
 
 @pytest.mark.parametrize("args, needle", [
@@ -164,3 +181,12 @@ def test_a_mesh_with_uvs_may_share_the_texture_name(cli, tmp_path):
     rc, _, err = cli.run(["bake", tmp_path / "t.obj", *SUN, "--texture", tmp_path / "t.exr", "--texture-size", 16])
     assert rc == 0, err
     assert (tmp_path / "t.exr").exists() and (tmp_path / "t.png").exists()
+
+
+def _seam_source(path):
+    import json
+    import struct
+    data = path.read_bytes()
+    n = struct.unpack("<I", data[12:16])[0]
+    doc = json.loads(data[20:20 + n])
+    return np.asarray(doc["meshes"][0]["primitives"][0]["extras"]["seam_vertex_source"], dtype=np.int64)
