@@ -16,12 +16,13 @@ What the file holds (glTF 2.0 specification, Khronos 2017/2021):
 
 With a texture bake (``texture=``, :func:`textured_vertices`): vertices are split where a vertex has several UVs
 (a seam): the mesh's vertices come first, in order, each with the UV of its first corner, and the other
-(vertex, UV) pairs follow in the order of their first corner, with ``_SOURCE_VERTEX`` (uint32) naming the mesh's
-vertex of every glTF vertex; ``TEXCOORD_0`` holds the UVs (v flipped: glTF's origin is the image's top left); the
-material is emissive with the tone-mapped texture (PNG, embedded; an 8-bit image needs no
-``KHR_materials_emissive_strength``) on a black, non-metallic base, so any viewer shows the bake as it was
-computed; the linear texture (OpenEXR, which glTF cannot embed as an image) is named in the material's
-``extras.linear_texture`` with its units.
+(vertex, UV) pairs follow in the order of their first corner, the primitive's ``extras.seam_vertex_source``
+listing the mesh's vertex of each of those (not a second custom vertex attribute: Blender 5.0's importer
+mixes custom attributes of different widths and fails about one import in two); ``TEXCOORD_0`` holds the UVs
+(v flipped: glTF's origin is the image's top left); the material is emissive with the tone-mapped texture
+(PNG, embedded; an 8-bit image needs no ``KHR_materials_emissive_strength``) on a black, non-metallic base, so
+any viewer shows the bake as it was computed; the linear texture (OpenEXR, which glTF cannot embed as an image) is
+named in the material's ``extras.linear_texture`` with its units.
 """
 from __future__ import annotations
 
@@ -34,10 +35,9 @@ import numpy as np
 from meshshade import __version__
 from meshshade.errors import OutputError
 
-__all__ = ["gltf_document", "glb_bytes", "gltf_text", "textured_vertices", "RADIANCE_ATTRIBUTE", "SOURCE_ATTRIBUTE"]
+__all__ = ["gltf_document", "glb_bytes", "gltf_text", "textured_vertices", "RADIANCE_ATTRIBUTE"]
 
 RADIANCE_ATTRIBUTE = "_RADIANCE"
-SOURCE_ATTRIBUTE = "_SOURCE_VERTEX"
 _FLOAT, _UINT = 5126, 5125            # componentType
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 _F32_MAX = float(np.finfo(np.float32).max)
@@ -83,9 +83,11 @@ def gltf_document(vertices_mm, faces, display_linear, radiance, *, extras: dict 
     radiance : (n, 3) W/mm^2; extras : JSON-ready dict recorded in ``asset.extras``; texture : None or
     ``{"uv": (m, 3, 2), "png": bytes, "linear_uri": str}`` (module docstring).
     """
-    source = None
+    source, n_seam = None, 0
     if texture is not None:
-        source, faces, uv = textured_vertices(np.shape(vertices_mm)[0], faces, texture["uv"])
+        n_mesh = np.shape(vertices_mm)[0]
+        source, faces, uv = textured_vertices(n_mesh, faces, texture["uv"])
+        n_seam = source.size - n_mesh
         vertices_mm = np.asarray(vertices_mm, dtype=np.float64)[source]
         display_linear = np.asarray(display_linear, dtype=np.float64)[source]
         radiance = np.asarray(radiance, dtype=np.float64)[source]
@@ -124,13 +126,12 @@ def gltf_document(vertices_mm, faces, display_linear, radiance, *, extras: dict 
                 "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0.0,
                                          "roughnessFactor": 1.0},
                 "extensions": {"KHR_materials_unlit": {}}}
-    textures = {}
+    textures, seam = {}, {}
     if texture is not None:
+        seam = {"extras": {"seam_vertex_source": source[source.size - n_seam:].tolist()}}
         T = _f32("TEXCOORD_0", np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1))
         attributes = {"POSITION": pos, "TEXCOORD_0": add(T.tobytes(), _ARRAY_BUFFER, {
-            "componentType": _FLOAT, "count": int(T.shape[0]), "type": "VEC2"}), RADIANCE_ATTRIBUTE: rad,
-            SOURCE_ATTRIBUTE: add(np.ascontiguousarray(source, dtype="<u4").tobytes(), _ARRAY_BUFFER, {
-                "componentType": _UINT, "count": int(source.size), "type": "SCALAR"})}
+            "componentType": _FLOAT, "count": int(T.shape[0]), "type": "VEC2"}), RADIANCE_ATTRIBUTE: rad}
         png = bytes(texture["png"])
         blobs.append(b"\0" * ((-offset) % 4))
         offset += (-offset) % 4
@@ -159,7 +160,7 @@ def gltf_document(vertices_mm, faces, display_linear, radiance, *, extras: dict 
         "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0, "name": "meshshade_bake"}],
         "meshes": [{"name": "meshshade_bake", "primitives": [{
-            "attributes": attributes, "indices": ind, "material": 0, "mode": 4}]}],
+            "attributes": attributes, "indices": ind, "material": 0, "mode": 4, **seam}]}],
         "materials": [material],
         **textures,
         "buffers": [{"byteLength": len(data)}],
