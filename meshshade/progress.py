@@ -21,7 +21,7 @@ through (``progress=True`` or a task name in :func:`meshshade.transport.baking.b
 Time comes from ``clock`` (default :func:`time.monotonic`), so tests drive it with a fake clock.
 
 Ctrl-C: Python acts on a signal only between bytecodes, so long computations are cut into calls of a few
-tenths of a second (:func:`meshshade.geometry.geodesics.neighbourhoods.run_paced`). A signal that arrives while
+tenths of a second (:func:`meshshade.pacing.run_paced`). A signal that arrives while
 a numba kernel runs in the main thread is acted upon when numba converts the kernel's results, which numba
 reports as a ``SystemError``; :func:`kernel_interrupts` (around such calls) and :func:`interrupt_in` (for a
 command-line front end) recover the KeyboardInterrupt.

@@ -4,7 +4,7 @@
   the terminal bar, driven by a fake clock (no sleeps); bake and mc report through it;
 * interrupts: a signal during a numba kernel in the main thread is the KeyboardInterrupt it is, not numba's
   SystemError (a real kernel and a real signal, synchronised on the kernel's own flag); the geodesic queries
-  run in paced blocks (meshshade.geometry.geodesics.neighbourhoods.run_paced) whose queued part an interrupt
+  run in paced blocks (meshshade.pacing.run_paced) whose queued part an interrupt
   cancels, and whose boundaries never change a result.
 """
 from __future__ import annotations
@@ -23,12 +23,13 @@ from numba import njit
 from meshshade import progress as P
 from meshshade.geometry.geodesics import neighbourhoods as NB
 from meshshade.geometry.geodesics.arc import FastGeodesicNeighbourhoods
-from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods, Pacer, run_paced
+from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.light import parse_light_spec
 from meshshade.materials import material_from_options
 from meshshade.montecarlo.simulation import simulate
+from meshshade.pacing import BLOCK_SECONDS, Pacer, run_paced
 from meshshade.progress import Progress, format_duration, interrupt_in, kernel_interrupts
 from meshshade.transport.baking import bake
 
@@ -233,14 +234,20 @@ def test_interrupt_in_finds_the_interrupt_in_a_chain_and_nothing_else():
 def test_pacer_sizes_blocks_by_work_and_measured_speed():
     """Blocks of about BLOCK_SECONDS: from the conservative prior at first, then from the measured speed."""
     work = np.full(1000, 1000.0)  # 1000 expected pairs per source
-    pacer = Pacer(work, max_block=512)
+    prior = NB.PRIOR_SECONDS_PER_PAIR  # what the geodesic queries start from
+    pacer = Pacer(work, prior=prior, max_block=512)
     first = pacer.next(0)
-    assert first == int(NB.BLOCK_SECONDS / (1000 * NB._PRIOR_SECONDS_PER_PAIR))  # 5 sources at 40 us per pair
+    assert first == int(BLOCK_SECONDS / (1000 * prior))  # 5 sources at 40 us per pair
     pacer.record(0, first, first * 1000 * 2e-6)  # measured: 2 us per pair
     assert pacer.next(first) - first == 100  # 0.2 s / (1000 pairs x 2 us)
-    assert Pacer(work, min_block=10).next(0) == 10  # e.g. arc: at least a source per thread
-    assert Pacer(np.full(10, 1e12)).next(0) == 1  # at least one source
-    assert Pacer(np.ones(10), max_block=4).next(8) == 10  # never past the end
+    assert Pacer(work, prior=prior, min_block=10).next(0) == 10  # e.g. arc: at least a source per thread
+    assert Pacer(np.full(10, 1e12), prior=prior).next(0) == 1  # at least one source
+    assert Pacer(np.ones(10), prior=prior, max_block=4).next(8) == 10  # never past the end
+    # without a prior the first block is the smallest, and the measured speed sizes the next
+    pacer = Pacer(work, min_block=3, max_block=512)
+    assert pacer.next(0) == 3
+    pacer.record(0, 3, 3 * 1000 * 2e-6)
+    assert pacer.next(3) - 3 == 100
 
 
 def test_interrupt_cancels_the_queued_blocks():

@@ -4,10 +4,10 @@ Each case starts a job that takes minutes (an icosphere of 10 242 vertices, 30 m
 light, curved kernel, exact geodesics: about 4 min of bake on 2 cores) in a child process whose progress lines
 come at every update (``MESHSHADE_PROGRESS_INTERVAL=0``, stderr is a pipe), waits for the child's own progress
 lines (no sleeps), sends SIGINT and measures how long the child takes to exit. Before the geodesic queries were
-cut into calls of about 0.2 s (``meshshade.geometry.geodesics.neighbourhoods.run_paced``) the child finished every
-queued block of its chunk first: 7-20 s at this size; now well under a second. The bound is generous for a
-loaded machine. The child must exit 130 with one ``meshshade: interrupted`` line (after its progress lines), no
-traceback, and leave the folder as it was.
+cut into calls of about 0.2 s (``meshshade.pacing.run_paced``) the child finished every queued block of its chunk
+first: 7-20 s at this size; now well under a second. The bound is generous for a loaded machine. The child must
+exit 130 with one ``meshshade: interrupted`` line (after its progress lines), no traceback, and leave the folder as
+it was.
 """
 from __future__ import annotations
 

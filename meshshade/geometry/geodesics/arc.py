@@ -1,8 +1,9 @@
 """Fast approximate geodesic neighbourhoods ("arc" method): ball-restricted Dijkstra + curvature-corrected chord.
 
 Same query and result (:class:`~meshshade.geometry.geodesics.neighbourhoods.Neighbourhoods`) as
-:class:`~meshshade.geometry.geodesics.neighbourhoods.GeodesicNeighbourhoods`, about 4-5x faster per pair in bakes (tools/bench_bake.py).  Per source x_i (numba, ``prange`` over threads, each thread
-with its own stamp-marked scratch arrays, so nothing is cleared between sources and no work is O(N^2)):
+:class:`~meshshade.geometry.geodesics.neighbourhoods.GeodesicNeighbourhoods`, about 4-5x faster per pair in bakes
+(tools/bench_bake.py).  Per source x_i (numba, ``prange`` over threads, each thread with its own stamp-marked
+scratch arrays, so nothing is cleared between sources and no work is O(N^2)):
 
 1. Topology.  A Dijkstra over mesh edges from the source vertex (or the three corners of its face), entering only
    vertices inside the ball ``|x_o - x_i| <= cutoff`` and with edge-path length ``d_graph <= 1.6 cutoff``.
@@ -53,10 +54,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from meshshade.geometry.geodesics.neighbourhoods import (GeodesicNeighbourhoods, Neighbourhoods, Pacer,
-                                                           _default_threads, assemble_neighbourhoods,
-                                                           expected_work, pace_rate, run_paced)
+from meshshade.geometry.geodesics.neighbourhoods import (PRIOR_SECONDS_PER_PAIR, GeodesicNeighbourhoods,
+                                                           Neighbourhoods, assemble_neighbourhoods, expected_work)
 from meshshade.geometry.mesh import face_normals
+from meshshade.pacing import Pacer, default_threads, pace_rate, run_paced
 
 __all__ = ["FastGeodesicNeighbourhoods", "ACCURACY"]
 
@@ -284,7 +285,7 @@ class FastGeodesicNeighbourhoods:
         self.r_max = float(r_max)
         self.eps = float(eps)
         self.tau = float(tau)
-        self.n_threads = int(n_threads or _default_threads())
+        self.n_threads = int(n_threads or default_threads())
         self._vperm, self._vinv = t["vperm"], t["vinv"]
         self._X = np.ascontiguousarray(self.vertices[self._vperm])
         self._N = np.ascontiguousarray(self.vertex_normals[self._vperm])
@@ -356,12 +357,13 @@ class FastGeodesicNeighbourhoods:
         # arc normal: the vertex normal, or the barycentric blend of the face's vertex normals
         an = np.where(on_face[:, None], np.einsum("kj,kjc->kc", bary, NV[fc]), NV[np.maximum(sv, 0)])
         an /= np.where((ln := np.linalg.norm(an, axis=1, keepdims=True)) > 0, ln, 1.0)
-        # each call is parallel over the threads and takes about BLOCK_SECONDS (Ctrl-C acts between calls)
+        # each call is parallel over the threads and takes about pacing.BLOCK_SECONDS (Ctrl-C acts between calls)
         if block_size:
             pacer = Pacer(np.ones(k), seconds=np.inf, min_block=int(block_size), max_block=int(block_size))
         else:
             work = expected_work(cut, self.n_vertices, self._area_per_vertex) / self.n_threads
-            pacer = Pacer(work, pace_rate(self._pace, work), min_block=self.n_threads, max_block=4096)
+            pacer = Pacer(work, pace_rate(self._pace, work), prior=PRIOR_SECONDS_PER_PAIR, min_block=self.n_threads,
+                          max_block=4096)
         res = run_paced(lambda a, b: self._run(psv[a:b], corners[a:b], np.ascontiguousarray(pts[a:b]),
                                                np.ascontiguousarray(an[a:b]), cut[a:b]),
                         pacer, k, progress=progress)

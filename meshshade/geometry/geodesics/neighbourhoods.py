@@ -22,9 +22,9 @@ Method (``method="window"``, the default): exact polyhedral geodesics
 Faster, less accurate (``method="fmm"``, ``"dijkstra"``)
     ``"fmm"``: first-order fast marching (Kimmel & Sethian 1998) with the point-source triangle update of
     Novotni & Klein (2002) and re-opening, on the same bucket queue; exact on flat meshes without obtuse
-    triangles (0.5 % max on a random Delaunay plate), about 4x cheaper than "window"; max error 0.1-0.7 % on icospheres, the torus and spot, 1-2 % on bunny and
-    hand, 5 % on the head (obtuse triangles).  ``"dijkstra"`` (edge paths) overestimates by 16-60 % (max;
-    8-15 % mean) and is kept as the baseline.
+    triangles (0.5 % max on a random Delaunay plate), about 4x cheaper than "window"; max error 0.1-0.7 % on
+    icospheres, the torus and spot, 1-2 % on bunny and hand, 5 % on the head (obtuse triangles).  ``"dijkstra"``
+    (edge paths) overestimates by 16-60 % (max; 8-15 % mean) and is kept as the baseline.
 
 Azimuth
     phi is the angle, from the sample's first principal direction d1, of the projection of x_o - x_i onto the
@@ -35,9 +35,6 @@ Azimuth
 """
 from __future__ import annotations
 
-import os
-import time
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,7 +44,7 @@ from meshshade.geometry.geodesics import _window_kernels as _k
 from meshshade.geometry.geodesics._saddle_kernels import _build_fans
 from meshshade.geometry.mesh import face_geometry, face_normals
 from meshshade.geometry.topology import vertex_adjacency
-from meshshade.progress import kernel_interrupts, polled_interrupts
+from meshshade.pacing import Pacer, default_threads, pace_rate, run_paced
 
 __all__ = ["GeodesicNeighbourhoods", "Neighbourhoods", "geodesic_neighbourhoods", "geodesic_distances_from",
            "tangent_azimuth", "METHODS"]
@@ -55,15 +52,13 @@ __all__ = ["GeodesicNeighbourhoods", "Neighbourhoods", "geodesic_neighbourhoods"
 METHODS = ("window", "fmm", "dijkstra")
 #: barycentric weights are kept at least this far inside their face (a source on an edge lights both faces)
 _BARY_FLOOR = 1e-9
-#: seconds of work per kernel call of a query: Python acts on Ctrl-C (and SIGTERM, SIGHUP) only between calls,
-#: never inside a numba kernel, so this bounds how long an interrupt waits (see :func:`run_paced`)
-BLOCK_SECONDS = 0.2
-#: seconds per unit of work (one expected pair) assumed before any call has been timed: the slowest measured,
-#: exact windows over a whole pebble of 10k vertices or half an icosphere of 41k (30-40 us per pair; 1-13 us
-#: is typical over a few hundred vertices)
-_PRIOR_SECONDS_PER_PAIR = 4e-5
+#: seconds per unit of work (one expected pair, :func:`expected_work`) assumed before any kernel call of a query
+#: has been timed (:class:`meshshade.pacing.Pacer`'s ``prior``): the slowest measured, exact windows over a whole
+#: pebble of 10k vertices or half an icosphere of 41k (30-40 us per pair; 1-13 us is typical over a few hundred
+#: vertices)
+PRIOR_SECONDS_PER_PAIR = 4e-5
 #: work of one source beyond its expected pairs (seeding, the queue), in pairs
-_SOURCE_OVERHEAD_PAIRS = 16.0
+SOURCE_OVERHEAD_PAIRS = 16.0
 #: pairs per slice of :func:`assemble_neighbourhoods` (each numpy call on a slice takes a few tens of ms)
 ASSEMBLE_PAIRS = 1 << 19
 
@@ -194,7 +189,8 @@ def _build_topology(V: np.ndarray, F: np.ndarray) -> dict:
     dst = dst[np.argsort(2 * src + (dst < src), kind="stable")]
     e_len = np.linalg.norm(V[dst] - V[src], axis=1)
     out = dict(he_tail=tail, he_head=head, he_opp=opp, he_twin=twin, he_tox=tox, he_tsx=tsx, he_len=L,
-               he_ox=ox, he_oy=oy, v_ptr=v_ptr, v_he=v_he.astype(np.int64), angle_excess=angle_sum - 2.0 * np.pi, open_vertex=open_vertex,
+               he_ox=ox, he_oy=oy, v_ptr=v_ptr, v_he=v_he.astype(np.int64), angle_excess=angle_sum - 2.0 * np.pi,
+               open_vertex=open_vertex,
                he_corner=np.where(good, angle, 0.0), v_theta=angle_sum,
                e_ptr=e_ptr, e_nbr=dst, e_len=e_len, good_face=good_face,
                n_boundary_edges=int(np.count_nonzero(sizes == 1)),
@@ -224,15 +220,8 @@ def _morton_order(P: np.ndarray) -> np.ndarray:
     return np.argsort(code, kind="stable")
 
 
-def _default_threads() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - macOS/Windows
-        return max(1, os.cpu_count() or 1)
-
-
 # ---------------------------------------------------------------------------------------------------------------
-# pacing: kernel calls of about BLOCK_SECONDS each
+# cost model of a query (for the pacing of its kernel calls, meshshade.pacing)
 # ---------------------------------------------------------------------------------------------------------------
 
 def expected_work(cutoff_mm, n_vertices: int, area_per_vertex: float) -> np.ndarray:
@@ -241,125 +230,7 @@ def expected_work(cutoff_mm, n_vertices: int, area_per_vertex: float) -> np.ndar
     cut = np.asarray(cutoff_mm, dtype=np.float64)
     with np.errstate(over="ignore", invalid="ignore"):
         pairs = np.minimum(np.pi * cut * cut / max(area_per_vertex, 1e-300), float(n_vertices))
-    return np.where(np.isnan(pairs), float(n_vertices), pairs) + _SOURCE_OVERHEAD_PAIRS
-
-
-def pace_rate(rates: dict, work) -> dict:
-    """The measured-speed record (:class:`Pacer`'s ``rate``) for sources of this much ``work`` (k,), kept per
-    factor-2 class of the mean work per source: the cost per pair grows with the neighbourhood (exact windows:
-    2-5 us per pair over a few hundred vertices, 30-40 us over a whole mesh of 10-40k), and a bake alternates
-    queries of very different radii (auto's near and far zones)."""
-    mean = float(np.mean(work)) if len(work) else 1.0
-    return rates.setdefault(int(np.log2(max(mean, 1.0))), {})
-
-
-class Pacer:
-    """Cuts k sources into consecutive blocks of about ``seconds`` of kernel work each.
-
-    ``work`` (k,) estimates each source's work (:func:`expected_work`); the seconds per unit of work are measured
-    on the calls made so far (``rate``, a dict the caller may keep across queries: ``{"seconds", "work"}``, older
-    calls fading by half every few calls), starting from a conservative prior. A block has between ``min_block``
-    and ``max_block`` sources. Where blocks end never changes a result: every source is computed on its own.
-    """
-
-    def __init__(self, work, rate: dict | None = None, *, seconds: float = BLOCK_SECONDS, min_block: int = 1,
-                 max_block: int = 512):
-        self.cum = np.cumsum(np.asarray(work, dtype=np.float64))
-        self.rate = {} if rate is None else rate
-        self.seconds = float(seconds)
-        self.min_block, self.max_block = max(1, int(min_block)), max(1, int(max_block))
-
-    def seconds_per_work(self) -> float:
-        r = self.rate
-        return r["seconds"] / r["work"] if r.get("work", 0.0) > 0 else _PRIOR_SECONDS_PER_PAIR
-
-    def next(self, a: int) -> int:
-        """End (exclusive) of the block that starts at source ``a``."""
-        k = self.cum.shape[0]
-        start = self.cum[a - 1] if a > 0 else 0.0
-        b = int(np.searchsorted(self.cum, start + self.seconds / self.seconds_per_work(), side="right"))
-        return int(min(k, a + self.max_block, max(b, a + self.min_block)))
-
-    def work(self, a: int, b: int) -> float:
-        return float(self.cum[b - 1] - (self.cum[a - 1] if a > 0 else 0.0))
-
-    def record(self, a: int, b: int, seconds: float) -> None:
-        """A call over sources ``a:b`` took ``seconds``."""
-        r = self.rate
-        r["seconds"] = 0.8 * r.get("seconds", 0.0) + seconds
-        r["work"] = 0.8 * r.get("work", 0.0) + self.work(a, b)
-
-
-#: seconds between two looks for an interrupt while run_paced waits on its worker threads
-POLL_SECONDS = 0.02
-
-
-def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, stop=None) -> list:
-    """``run(a, b)`` over consecutive blocks ``a:b`` of ``k`` sources chosen by ``pacer``; the results in source
-    order.
-
-    With ``n_threads`` > 1 the blocks run on worker threads (the kernels release the GIL), at most two per
-    thread submitted at a time, while the calling thread waits (a wait Python interrupts at once). Each call
-    takes about :data:`BLOCK_SECONDS`, so after Ctrl-C (a KeyboardInterrupt raised in the calling thread, also
-    by ``progress``) at most the blocks already running finish before it propagates; the queued ones are
-    cancelled, and ``stop`` ((1,) array or None) is set to 1, which tells the running kernels that watch it to
-    return at once (their results are dropped). In the calling thread, an interrupt that numba reports as a
-    SystemError is raised as the KeyboardInterrupt it is (:func:`meshshade.progress.kernel_interrupts`).
-    ``progress(done, k)`` is called after each block with the number of sources done.
-    """
-    results: dict = {}
-    done = 0
-    if k == 0:
-        return []
-    first = pacer.next(0)
-    if n_threads <= 1 or first >= k:
-        a = 0
-        while a < k:
-            b = first if a == 0 else pacer.next(a)
-            t = time.perf_counter()
-            with kernel_interrupts():  # a Ctrl-C during the call: KeyboardInterrupt, never numba's SystemError
-                results[a] = run(a, b)
-            pacer.record(a, b, time.perf_counter() - t)
-            done += b - a
-            a = b
-            if progress is not None:
-                progress(done, k)
-        return [results[a] for a in sorted(results)]
-
-    def timed(a, b):
-        t = time.perf_counter()
-        out = run(a, b)
-        return out, time.perf_counter() - t
-
-    ex = ThreadPoolExecutor(max_workers=n_threads)
-    pending: dict = {}
-    # signals are polled between the executor's calls, never raised inside them (progress.polled_interrupts)
-    with polled_interrupts() as poll:
-        try:
-            a = 0
-            while a < k or pending:
-                while a < k and len(pending) < 2 * n_threads:
-                    b = first if a == 0 else pacer.next(a)
-                    pending[ex.submit(timed, a, b)] = (a, b)
-                    a = b
-                finished, _ = wait(pending, timeout=POLL_SECONDS, return_when=FIRST_COMPLETED)
-                poll()
-                for f in finished:
-                    a0, b0 = pending.pop(f)
-                    results[a0], seconds = f.result()
-                    pacer.record(a0, b0, seconds)
-                    done += b0 - a0
-                    if progress is not None:
-                        progress(done, k)
-        except BaseException:
-            if stop is not None:
-                stop[0] = 1  # kernels that watch it return at their next step
-            raise
-        finally:  # on an interrupt or error: queued blocks are dropped, running ones finish (or stop early)
-            for f in pending:
-                f.cancel()
-            ex.shutdown(wait=True)
-    return [results[a] for a in sorted(results)]
+    return np.where(np.isnan(pairs), float(n_vertices), pairs) + SOURCE_OVERHEAD_PAIRS
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -555,9 +426,10 @@ class GeodesicNeighbourhoods:
         progress : callable(done, total) or None
             Called after each block of sources with the number of sources done.
         block_size : int or None
-            Sources per kernel call (default: as many as take about :data:`BLOCK_SECONDS`, by the pairs expected
-            within the cutoff and the measured speed of the previous calls, so that Ctrl-C acts within about that
-            long; at most 512 and a quarter of the sources per thread). Results do not depend on it.
+            Sources per kernel call (default: as many as take about :data:`meshshade.pacing.BLOCK_SECONDS`, by the
+            pairs expected within the cutoff and the measured speed of the previous calls, so that Ctrl-C acts
+            within about that long; at most 512 and a quarter of the sources per thread). Results do not depend on
+            it.
 
         Returns
         -------
@@ -569,13 +441,13 @@ class GeodesicNeighbourhoods:
         cut = np.broadcast_to(np.asarray(cutoff_mm, dtype=np.float64), (k,)).copy()
         if not np.all(cut >= 0) or np.any(np.isnan(cut)):
             raise ValueError("cutoff_mm must be >= 0 (inf allowed)")
-        nthreads = int(self.n_threads or _default_threads())
+        nthreads = int(self.n_threads or default_threads())
         most = max(1, min(512, -(-k // (4 * nthreads))))  # several blocks per thread, for balance
         if block_size:
             pacer = Pacer(np.ones(k), seconds=np.inf, min_block=int(block_size), max_block=int(block_size))
         else:
             work = expected_work(cut, self.n_vertices, self._area_per_vertex)
-            pacer = Pacer(work, pace_rate(self._pace, work), max_block=most)
+            pacer = Pacer(work, pace_rate(self._pace, work), prior=PRIOR_SECONDS_PER_PAIR, max_block=most)
         stop = np.zeros(1, np.int64)  # set by run_paced when interrupted: running window kernels return early
         results = run_paced(lambda a, b: self._run_block(sv[a:b], sf[a:b], bary[a:b], cut[a:b], stop), pacer, k,
                             n_threads=nthreads, progress=progress, stop=stop)
