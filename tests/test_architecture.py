@@ -10,7 +10,13 @@ Rules (the issue "One package per stage"):
     (``meshshade.io`` imports numba);
 (c) only ``meshshade/raycast/`` imports embreex or loads a native library (Embree) with ctypes;
 (d) no import cycles among meshshade modules (graph of all imports, module- and function-level);
-(e) no function-level imports of meshshade modules (they hide the dependency graph).
+(e) no function-level imports of meshshade modules (they hide the dependency graph);
+(f) no module uses another package's private names: an underscore name (``_INV_SAT``, ``_row_at``) or an
+    underscore module (``_window_kernels``) is imported, or reached as an attribute of an imported module, only
+    from within the directory that holds it (``meshshade/io/meshes.py`` may import ``meshshade/io/_reading.py``;
+    ``meshshade/transport/x.py`` may not import ``meshshade.kernels.curvature.policies._INV_SAT``): a name shared
+    across packages is public, named without the underscore and documented. Exceptions: :data:`PRIVATE_ALLOWED`,
+    each with its reason, and an entry that is no longer needed fails too.
 
 The checkers are plain functions of a root directory (the folder that holds the ``meshshade`` package); nothing
 is imported or executed. They are themselves tested on a small fake package written to tmp_path with one
@@ -42,6 +48,20 @@ FILE_FUNCTIONS = {"open", "io.open", "codecs.open", "os.open", "os.replace", "os
 FILE_MODULES = ("shutil.", "tempfile.")
 CTYPES_LOADERS = ("ctypes.CDLL", "ctypes.PyDLL", "ctypes.WinDLL", "ctypes.OleDLL", "ctypes.LibraryLoader",
                   "ctypes.cdll", "ctypes.pydll", "ctypes.windll", "ctypes.util.find_library")
+
+#: why the kernels' private helpers are still shared across packages (issue 32 gives each kernel one implementation)
+KERNEL_UNIFICATION = "being unified under issue 32 (kernel implementation)"
+#: (importing module's path, the private name it uses, dotted) -> why it may, until its owner removes the entry
+PRIVATE_ALLOWED = {
+    **{("meshshade/kernels/fitted_curvature.py", f"meshshade.kernels.curvature.{name}"): KERNEL_UNIFICATION
+       for name in ("coefficients._ratios_direct", "table._MU_RHO_ZERO", "table._PER_UNIT", "table._PHI_MAX",
+                    "table._cheb_to_monomial", "table._dipole_exp_block", "table._piece_pair")},
+    **{("meshshade/transport/hierarchy_kernels.py", name): KERNEL_UNIFICATION
+       for name in ("meshshade.kernels.curvature.coefficients._ratios_direct",
+                    "meshshade.kernels.curvature.policies._DELTA_MAX", "meshshade.kernels.curvature.policies._INV_SAT",
+                    "meshshade.kernels.curvature.table._PER_UNIT", "meshshade.kernels.curvature.table._table_eval",
+                    "meshshade.kernels.fitted_curvature._row_at")},
+}
 
 
 @dataclass(frozen=True)
@@ -354,6 +374,65 @@ def check_function_level_imports(root: Path, package: str = PACKAGE) -> list[Vio
     return out
 
 
+def _is_private(name: str) -> bool:
+    """``_x`` and ``__x`` are private; ``__x__`` (``__version__``, ``__future__``) is not."""
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _used_names(mod: Module, package: str):
+    """``(line, [component, ...])`` of every dotted meshshade name the module imports (``from a.b import c``:
+    ``[meshshade, a, b, c]``; relative imports resolved) or reaches as a private attribute of an imported name
+    (``K._OPTS`` after ``from meshshade.montecarlo import kernels as K``)."""
+    for node in ast.walk(mod.tree):
+        if isinstance(node, ast.ImportFrom):
+            base = _absolute(mod, node.level, node.module)
+            chains = [f"{base}.{a.name}" for a in node.names if a.name != "*"]
+        elif isinstance(node, ast.Import):
+            chains = [a.name for a in node.names]
+        elif isinstance(node, ast.Attribute) and _is_private(node.attr):
+            chains = [_dotted(node, mod.aliases) or ""]
+        else:
+            continue
+        for chain in chains:
+            parts = chain.split(".")
+            if parts[0] == package:
+                yield node.lineno, parts
+
+
+def private_uses(root: Path, package: str = PACKAGE) -> list[Violation]:
+    """(f) every use of a private name (or private module) held in another directory than the user's.
+
+    The owner of a private component is the nearest module above it (``meshshade.io`` for ``meshshade.io._reading``,
+    ``...policies`` for ``...policies._INV_SAT``, the module for a class's ``_method``); the use is private to a
+    package when the owner's file lies in the user's own directory. The message is the private name, dotted up to
+    its first private component."""
+    mods = collect_modules(root, package)
+    out = []
+    for mod in mods.values():
+        seen = set()
+        for line, parts in _used_names(mod, package):
+            i = next((i for i, p in enumerate(parts) if i > 0 and _is_private(p)), None)
+            if i is None:
+                continue
+            owner = next((".".join(parts[:j]) for j in range(i, 0, -1) if ".".join(parts[:j]) in mods), None)
+            name = ".".join(parts[: i + 1])
+            if owner is None or mods[owner].path.parent == mod.path.parent or (line, name) in seen:
+                continue
+            seen.add((line, name))
+            out.append(Violation("private", mod.rel, line, name))
+    return out
+
+
+def check_private_imports(root: Path, package: str = PACKAGE, allowed=PRIVATE_ALLOWED) -> list[Violation]:
+    """(f) the private uses across packages that :data:`PRIVATE_ALLOWED` does not excuse."""
+    return [v for v in private_uses(root, package) if (v.path, v.message) not in allowed]
+
+
+def stale_allowances(found, allowed) -> list[str]:
+    """Allow-list keys that no longer match anything found (``found``: the keys of what the rule sees)."""
+    return sorted(f"{key}: {reason}" for key, reason in allowed.items() if key not in set(found))
+
+
 def _report(violations) -> str:
     return "\n".join(str(v) for v in violations)
 
@@ -389,6 +468,19 @@ def test_no_import_cycles_between_stages():
 def test_no_function_level_meshshade_imports():
     violations = check_function_level_imports(ROOT)
     assert not violations, "\n" + _report(violations)
+
+
+def test_no_private_names_used_across_packages():
+    violations = check_private_imports(ROOT)
+    assert not violations, ("\nmake the name public (no underscore, documented) or move it:\n"
+                            + "\n".join(f"{v.path}:{v.line}: uses {v.message}" for v in violations))
+
+
+def test_every_private_allowance_is_still_needed():
+    """An entry whose use is gone must go too (its owner removes it with the use)."""
+    stale = stale_allowances([(v.path, v.message) for v in private_uses(ROOT)], PRIVATE_ALLOWED)
+    assert not stale, "\nremove from PRIVATE_ALLOWED:\n" + "\n".join(stale)
+    assert all(isinstance(reason, str) and reason.strip() for reason in PRIVATE_ALLOWED.values())
 
 
 def test_the_lint_sees_the_whole_package():
@@ -524,6 +616,52 @@ def test_checker_finds_cycles_through_function_level_imports(fake_root):
     (fake_root / "meshshade" / "a.py").write_text("")
     (fake_root / "meshshade" / "errors.py").write_text("def g():\n    import meshshade.c\n")
     assert import_cycles(fake_root) == [["meshshade.c", "meshshade.errors"]]
+
+
+def test_checker_flags_private_names_used_across_packages(tmp_path):
+    """Private names and modules are free within their directory and flagged from any other, however reached."""
+    files = {
+        "__init__.py": "from meshshade.io import _reading  # PLANTED: the root package is another directory\n",
+        "io/__init__.py": "from meshshade.io._reading import _decode\n",
+        "io/_reading.py": "def _decode(b):\n    return b\n\n\ndef decode(b):\n    return b\n",
+        "io/meshes.py": ("from meshshade.io import _reading\nfrom meshshade.io._reading import _decode\n"
+                         "from . import _reading as R\n\nX = _reading._decode, R._decode, _decode\n"),
+        "io/formats/__init__.py": "",
+        "io/formats/ply.py": "from .._reading import decode  # PLANTED: a subpackage is another directory\n",
+        "kernels/__init__.py": "__version__ = '1'\n",
+        "kernels/policies.py": ("_INV_SAT = 0.5\n\n\nclass Policy:\n    def _step(self):\n"
+                                "        return _INV_SAT\n"),
+        "transport/__init__.py": "",
+        "transport/x.py": ("from __future__ import annotations\n\n"
+                           "import meshshade.kernels.policies\n"
+                           "from meshshade.kernels import __version__, policies as P\n"
+                           "from meshshade.kernels.policies import Policy, _INV_SAT  # PLANTED\n\n"
+                           "A = P._INV_SAT  # PLANTED\n"
+                           "B = meshshade.kernels.policies._INV_SAT  # PLANTED\n"
+                           "C = Policy._step  # PLANTED\n"
+                           "D = Policy()._step, __version__, P.Policy\n"),
+        "transport/y.py": "from meshshade.io._reading import decode  # PLANTED: a private module\n",
+        "transport/z.py": "import meshshade.io._reading as R  # PLANTED\n",
+    }
+    for rel, text in files.items():
+        (tmp_path / "meshshade" / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / "meshshade" / rel).write_text(text)
+    found = sorted((v.path, v.line, v.message) for v in private_uses(tmp_path))
+    planted = sorted((f"meshshade/{rel}", i) for rel, text in files.items()
+                     for i, line in enumerate(text.splitlines(), 1) if "PLANTED" in line)
+    assert sorted({(path, line) for path, line, _ in found}) == planted
+    assert ("meshshade/transport/x.py", 5, "meshshade.kernels.policies._INV_SAT") in found
+    assert ("meshshade/transport/x.py", 9, "meshshade.kernels.policies.Policy._step") in found
+    assert ("meshshade/transport/z.py", 1, "meshshade.io._reading") in found
+    assert ("meshshade/io/formats/ply.py", 1, "meshshade.io._reading") in found
+    # an allow-list entry excuses exactly its (module, name); unused entries are reported
+    allowed = {(path, name): "a reason" for path, _, name in found if path == "meshshade/transport/x.py"}
+    assert {v.path for v in check_private_imports(tmp_path, allowed=allowed)} == {
+        "meshshade/__init__.py", "meshshade/io/formats/ply.py", "meshshade/transport/y.py",
+        "meshshade/transport/z.py"}
+    stale = {**allowed, ("meshshade/transport/x.py", "meshshade.kernels.policies._GONE"): "gone"}
+    assert stale_allowances([(p, n) for p, _, n in found], stale) == [
+        "('meshshade/transport/x.py', 'meshshade.kernels.policies._GONE'): gone"]
 
 
 def test_checker_flags_function_level_meshshade_imports(fake_root):
