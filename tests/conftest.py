@@ -48,7 +48,7 @@ def data_dir() -> Path:
     return DATA
 
 
-#: header lines of the reference CSVs (tools/_refheader.py): "# key: value", continued on "#   more"
+#: header lines of the reference CSVs (tools/references/_refheader.py): "# key: value", continued on "#   more"
 _HEADER_LINE = re.compile(r"^# ([a-z][a-z0-9 _-]*): (.*)$")
 _REQUIRED = ("title", "generator", "sha256", "dependencies", "mpmath", "dps", "date")
 
@@ -93,7 +93,7 @@ def stale_generators(header: dict[str, str], root: Path = ROOT) -> list[str]:
 def load_reference(name: str, data: Path = DATA, root: Path = ROOT) -> tuple[dict[str, str], list[dict[str, str]]]:
     """``(header, rows)`` of ``tests/data/<name>``, after checking it is current.
 
-    ``header`` maps the ``# key: value`` lines written by tools/_refheader.py (title, dps, generator, sha256,
+    ``header`` maps the ``# key: value`` lines written by tools/references/_refheader.py (title, dps, generator, sha256,
     dependencies, mpmath, date, ...); ``rows`` are the CSV rows as dicts of strings (column -> text; the tests
     convert). Fails if the header lacks an entry, if the sha256 of the generator in tools/ (or of a script it
     imports) differs from the recorded one ("rerun tools/<script>"), or if the file has no rows.

@@ -10,8 +10,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_api_pages_list_every_public_module():
-    """docs/api/*.md are what tools/gen_api_docs.py makes from the tree (a new module must appear there)."""
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "gen_api_docs.py"), "--check"],
+    """docs/api/*.md are what tools/docs/gen_api_docs.py makes from the tree (a new module must appear there)."""
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "docs" / "gen_api_docs.py"), "--check"],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
@@ -28,7 +28,7 @@ def test_physics_citations_in_code_resolve():
     sections, equations = _physics_sections_and_equations()
     assert sections and equations, "docs/physics.md has no numbered sections or equations"
     bad = []
-    for path in [*ROOT.glob("meshshade/**/*.py"), *ROOT.glob("tests/**/*.py"), *ROOT.glob("tools/*.py")]:
+    for path in [*ROOT.glob("meshshade/**/*.py"), *ROOT.glob("tests/**/*.py"), *ROOT.glob("tools/**/*.py")]:
         for line_no, line in enumerate(path.read_text().splitlines(), 1):
             if "physics.md" not in line:
                 continue

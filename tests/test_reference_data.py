@@ -25,7 +25,7 @@ def test_every_reference_csv_is_listed_in_the_readme():
 @pytest.mark.parametrize("name", CSVS)
 def test_reference_csv_is_current(reference_csv, name):
     header, rows = reference_csv(name)
-    assert header["generator"].startswith("tools/precompute_") and len(header["sha256"]) == 64
+    assert header["generator"].startswith("tools/references/precompute_") and len(header["sha256"]) == 64
     assert header["mpmath"] and header["dps"] and header["date"]
     assert rows and all(None not in row and None not in row.values() for row in rows)  # no ragged rows
 

@@ -85,7 +85,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *, qui
             threads = max(1, cores // n)
             # Dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which makes glibc return memory after every
             # large free; a bake allocates and frees large arrays all the time and ran 20-50 % slower so
-            # (tools/bench_batch.py). Workers keep glibc's default here.
+            # (tools/benchmarks/bench_batch.py). Workers keep glibc's default here.
             # Worker processes log to stderr; at shutdown after an interrupt they report lost connections with
             # tracebacks. A job's own errors are in its record, so worker logs are kept to critical ones.
             with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,

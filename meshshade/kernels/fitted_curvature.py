@@ -28,8 +28,8 @@ exactly and fits only the rest to Monte Carlo:
 * ``S`` is the identity for |E| <= E_LIN and saturates smoothly (C^2) towards +-E_SAT beyond it (eq. (84)), so the
   model is positive, bounded by ``R_near e^{+-E_SAT}`` and smooth for every input.
 
-The coefficients are fitted by ``tools/fit_curvature_model.py`` to the exact-shape Monte Carlo training set
-(``tools/curvature_training_set.py``) and stored with their provenance and held-out errors in
+The coefficients are fitted by ``tools/tables/fit_curvature_model.py`` to the exact-shape Monte Carlo training set
+(``tools/tables/curvature_training_set.py``) and stored with their provenance and held-out errors in
 :mod:`meshshade.kernels.fitted_curvature_table`.
 """
 from __future__ import annotations
@@ -360,7 +360,7 @@ def fitted_dipole_profile(tab: CurvatureTable, rho_opt, phi=None, *, k1_opt, k2_
 def shipped_coefficients() -> np.ndarray:
     """The shipped coefficients, after checking they were fitted for these features."""
     if tuple(getattr(table, "FEATURES", ())) != FEATURES:
-        raise ValueError("fitted_curvature_table.py was fitted for other features: rerun tools/fit_curvature_model.py")
+        raise ValueError("the table was fitted for other features: rerun tools/tables/fit_curvature_model.py")
     return np.asarray(table.COEF, dtype=np.float64)
 
 

@@ -6,7 +6,7 @@ with strengths fitted to exact transport (docs/physics.md §13, eq. (76)), in op
 R^(1) is the exact single scattering (:mod:`meshshade.kernels.single_scattering`). R_t is d'Eon's dipole for a
 unit isotropic point source at depth t (:func:`meshshade.kernels.beam_diffusion.point_source_reflectance`). The
 depths t_k are fixed, and the strengths w_k >= 0 were fitted, per medium of a grid in (log10(1 - alpha'), eta, g),
-to the exact half-space Monte Carlo's orders >= 2 and total (``tools/make_near_field_table.py``, whose output is
+to the exact half-space Monte Carlo's orders >= 2 and total (``tools/tables/make_near_field_table.py``, whose output is
 :mod:`meshshade.kernels.near_field_table`, with its provenance). Between grid nodes the strengths are interpolated
 trilinearly. The model is linear in them, so that interpolates the fitted models themselves. Each term is a point
 source's dipole at a known depth, so a curvature kernel or an exact shape solution for a source at depth a can be
@@ -110,7 +110,7 @@ def incidence_gain(*, albedo_prime, eta, g=0.0, cos_t=1.0) -> float:
     returns than of light entering along the normal (docs/physics.md eq. (86)). Eq. (81)'s depth projection gives
     W_81 = near_field_total(cos_t) / near_field_total(1); exact transport shows only the fraction RHO of that growth
     (:mod:`meshshade.kernels.incidence_table`, fitted to the exact half-space Monte Carlo per incidence angle by
-    ``tools/make_incidence_table.py``), interpolated trilinearly in (log10(1 - alpha'), eta, g) and linearly in
+    ``tools/tables/make_incidence_table.py``), interpolated trilinearly in (log10(1 - alpha'), eta, g) and linearly in
     the incidence angle outside, sin(theta_i) = eta sin(theta_t) (below the first tabulated angle its value, where
     the gain itself is small; beyond the last, the last)."""
     cos_t = float(cos_t)

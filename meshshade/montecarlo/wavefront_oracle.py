@@ -2,7 +2,7 @@
 
 Not a production path: it is kept only as the simple, independent reference that the pooled engine
 (:mod:`meshshade.montecarlo.engine`) is tested and benchmarked against (``simulate(..., fast_interior=False)``,
-``tools/bench_mc.py``). All live photons advance together by one free path per iteration; dead photons are
+``tools/benchmarks/bench_mc.py``). All live photons advance together by one free path per iteration; dead photons are
 replaced by new ones from the lights as long as photons remain (a regenerating pool of ``pool`` photons, so the
 long tail of the walk does not starve the Embree batches). Physics and tallies as in
 :mod:`meshshade.montecarlo.simulation`, sampling from :mod:`meshshade.montecarlo.sampling`.

@@ -25,7 +25,7 @@ far) <= M_far_exact a running lower bound (nearest clusters are visited first). 
     |M_far(x) - M_far_exact(x)|  <=  stats["error_bound"](x)  <=  rel_tol * M_far_exact(x)
 
 for every receiver and channel (up to float64 rounding). Measured maximum errors are 40-100x below the
-guaranteed bound (tools/bench_farfield.py), because a cluster's third-order terms largely cancel. Relative to
+guaranteed bound (tools/benchmarks/bench_farfield.py), because a cluster's third-order terms largely cancel. Relative to
 the total exitance the error is at most ``rel_tol`` times the far field's share of it (see
 :func:`far_field_radius`).
 

@@ -1,6 +1,6 @@
 """The Blender add-on with a real Blender (the ``bpy`` module, Blender 5.0), headless.
 
-Skipped where ``bpy`` is not importable (the main test environment: bpy pins numpy 1.26); ``tools/test_blender.sh``
+Skipped where ``bpy`` is not importable (the main test environment: bpy pins numpy 1.26); ``tools/dev/test_blender.sh``
 builds a Blender environment and runs them. References come from outside the add-on: the command-line bake of
 the same world-space mesh with lights the test converts by hand from Blender's documented units, Blender's own
 glTF importer, and Cycles renders.
@@ -23,7 +23,7 @@ for _var in ("BLENDER_USER_RESOURCES", "BLENDER_USER_SCRIPTS", "BLENDER_USER_CON
     os.environ.setdefault(_var, str(_USER / _var.lower()))
 
 bpy = pytest.importorskip("bpy", reason="bpy (Blender 5.0 as a Python module) is not installed in this environment; "
-                                         "tools/test_blender.sh runs these tests in one that has it")
+                                         "tools/dev/test_blender.sh runs these tests in one that has it")
 pytestmark = pytest.mark.blender
 
 import meshshade.blender  # noqa: E402

@@ -74,9 +74,9 @@ def test_procedural_rejects_bad_parameters(call):
 
 
 def test_assets_match_their_generators():
-    """assets/*.ply are what tools/make_assets.py says (float32 positions in mm, same faces), and clean."""
+    """assets/*.ply are what tools/tables/make_assets.py says (float32 positions in mm, same faces), and clean."""
     root = Path(__file__).resolve().parents[2]
-    spec = importlib.util.spec_from_file_location("make_assets", root / "tools" / "make_assets.py")
+    spec = importlib.util.spec_from_file_location("make_assets", root / "tools" / "tables" / "make_assets.py")
     make_assets = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(make_assets)
     for name in make_assets.ASSETS:

@@ -2,7 +2,7 @@
 
 References: great circles on icospheres (R = 10 mm), helices sqrt((R dtheta)^2 + dz^2) on a cylinder, straight
 lines and corner paths on flat domains, and ``igl.exact_geodesic`` (libigl's exact polyhedral MMP geodesics) on a
-torus and on a shared mesh.  Accuracy figures for the README come from ``tools/bench_neighbourhood.py``.
+torus and on a shared mesh.  Accuracy figures for the README come from ``tools/benchmarks/bench_neighbourhood.py``.
 """
 from __future__ import annotations
 

@@ -2,8 +2,9 @@
 docs/physics.md §11 tables and the exact sphere, cylinder and spherical-cavity solutions.
 
 References: tests/data/curvature_aux_reference.csv and curvature_coefficients_reference.csv, written offline
-by tools/precompute_curvature_references.py (mpmath quadrature of the t-integrals of docs/physics.md §7.2 at 40-50
-digits; provenance in the CSV headers). Tables quoted from docs/physics.md §11.3, §11.6, §11.7 (skin test case
+by tools/references/precompute_curvature_references.py (mpmath quadrature of the t-integrals of
+docs/physics.md §7.2 at 40-50 digits; provenance in the CSV headers).
+Tables quoted from docs/physics.md §11.3, §11.6, §11.7 (skin test case
 sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3: sigma_t' = 1.01 /mm, alpha' = 1/1.01); lengths in mm are
 converted with rho_opt = 1.01 rho_mm and C_mm = C_opt/1.01.
 
@@ -46,7 +47,8 @@ MATERIALS = {  # (albedo_prime, eta) for sigma_s', sigma_a [1/mm] of Jensen 2001
 def _read(reference_csv, name):
     """Rows of tests/data/<name> through the shared loader (it checks the generator's sha256)."""
     header, rows = reference_csv(name)
-    assert header["generator"] == "tools/precompute_curvature_references.py" and header["dps"].startswith("40 ")
+    assert header["generator"] == "tools/references/precompute_curvature_references.py"
+    assert header["dps"].startswith("40 ")
     return rows
 
 

@@ -146,14 +146,14 @@ def test_cylinder_exact_profile_energy_closed_form(R0, alb, eta):
 
 
 # ------------------------------------------------------------------------------------------------------
-# mpmath references (tools/precompute_cylinder_references.py)
+# mpmath references (tools/references/precompute_cylinder_references.py)
 # ------------------------------------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
 def reference_rows(reference_csv):
     """Rows of tests/data/cylinder_reference.csv (the shared loader checks the generator's sha256)."""
     header, rows = reference_csv("cylinder_reference.csv")
-    assert header["generator"] == "tools/precompute_cylinder_references.py" and header["dps"] == "34"
+    assert header["generator"] == "tools/references/precompute_cylinder_references.py" and header["dps"] == "34"
     assert "function" in header and len(rows) >= 20
     return rows
 

@@ -1,6 +1,6 @@
 """Planar dipole R_d (meshshade.kernels.dipole) against mpmath references, closed forms and invariants.
 
-References: tests/data/dipole_reference.csv, written by tools/precompute_dipole_references.py (an independent
+References: tests/data/dipole_reference.csv, written by tools/references/precompute_dipole_references.py (an independent
 mpmath implementation at 50 digits; provenance in the CSV header). Formulas: docs/physics.md §2 and §4.
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ EPS = np.finfo(np.float64).eps
 def reference(reference_csv):
     """Rows of tests/data/dipole_reference.csv (the shared loader checks the generator's sha256)."""
     header, rows = reference_csv("dipole_reference.csv")
-    assert header["generator"] == "tools/precompute_dipole_references.py" and header["dps"].startswith("50 ")
+    assert header["generator"] == "tools/references/precompute_dipole_references.py" and header["dps"].startswith("50 ")
     return rows
 
 

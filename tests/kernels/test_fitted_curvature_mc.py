@@ -5,7 +5,7 @@ so independent photons) on shapes of radius 1/sigma_tr, the radius the fit held 
 the curvature factor is the ratio to the half-space run on the same rings, as in the training set. Where first
 order is out of range (nu > 0.25) the fitted model's mean error over these rings, as a fraction of the first-order
 kernel's, was measured at 0.25 (held-out radius, alpha' = 0.9) and 0.30 (held-out medium alpha' = 0.95, eta = 1.4,
-radii 1 and 4 / sigma_tr; over the whole held-out set of tools/fit_curvature_model.py: 0.32 and 0.26); the test
+radii 1 and 4 / sigma_tr; over the whole held-out set of tools/tables/fit_curvature_model.py: 0.32 and 0.26); the test
 asserts the issue's target, 0.5, and no worse than first order (+0.5 % for noise) within its range (measured 1.6 %
 against 2.5 %). With the fitted terms zeroed (the exponentiated first order) both fail."""
 from __future__ import annotations

@@ -14,7 +14,8 @@ from meshshade.kernels.fresnel import fresnel_reflectance, fresnel_transmittance
 def reference(reference_csv):
     """Columns of tests/data/fresnel_reference.csv as float arrays (the shared loader checks the generator)."""
     header, table = reference_csv("fresnel_reference.csv")
-    assert header["generator"] == "tools/precompute_fresnel_references.py" and header["dps"].startswith("50 ")
+    assert header["generator"] == "tools/references/precompute_fresnel_references.py"
+    assert header["dps"].startswith("50 ")
     return {k: np.array([float(r[k]) for r in table]) for k in table[0]}
 
 
@@ -62,7 +63,7 @@ def test_fresnel_reflectance_monotonic_in_angle(eta_i, eta_t):
 
 
 def test_fresnel_reflectance_mpmath_reference(reference):
-    """Against tests/data/fresnel_reference.csv (tools/precompute_fresnel_references.py, mpmath 50 digits,
+    """Against tests/data/fresnel_reference.csv (tools/references/precompute_fresnel_references.py, mpmath 50 digits,
     Fresnel's sine/tangent laws: an independent form of the equations). Observed max rel. error 1e-15."""
     ref = reference
     F = fresnel_reflectance(ref["cos_i"], ref["eta_i"], ref["eta_t"])
@@ -72,7 +73,7 @@ def test_fresnel_reflectance_mpmath_reference(reference):
 @pytest.mark.slow
 def test_fresnel_reflectance_live_mpmath(data_dir, reference):
     """Recompute the reference rows in mpmath and compare them with the committed CSV."""
-    spec = importlib.util.spec_from_file_location("fresnel_ref", data_dir.parents[1] / "tools" /
+    spec = importlib.util.spec_from_file_location("fresnel_ref", data_dir.parents[1] / "tools" / "references" /
                                                   "precompute_fresnel_references.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

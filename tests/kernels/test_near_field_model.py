@@ -1,5 +1,5 @@
 """The fitted near-field model (meshshade.kernels.near_field): exact single scattering plus d'Eon dipoles at fixed
-depths on the beam, with strengths fitted to the exact half-space Monte Carlo (tools/make_near_field_table.py).
+depths on the beam, with strengths fitted to the exact half-space Monte Carlo (tools/tables/make_near_field_table.py).
 
 Held out: the media here are checked against a fresh Monte Carlo run with seeds the table never used, and most lie
 between the grid's nodes (eta = 1.3, g = 0.8, skin1's albedos), so the check covers the fit and the interpolation.
@@ -141,12 +141,13 @@ def test_incidence_gain_against_a_fresh_monte_carlo(material, angle):
 
 @pytest.mark.parametrize("shape", ["plane", "sphere"])
 def test_the_near_field_table_tool_runs(shape, capsys):
-    """tools/near_field_table.py (the validation tables of docs/validation.md "Near the light") on both shapes, with
-    few photons: one summary line per model (its half-space path once lost a helper and failed with a NameError)."""
+    """tools/studies/near_field_table.py (the validation tables of docs/validation.md "Near the light") on both
+    shapes, with few photons: one summary line per model (its half-space path once lost a helper and failed with a
+    NameError)."""
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[2] / "tools" / "near_field_table.py"
+    path = Path(__file__).resolve().parents[2] / "tools" / "studies" / "near_field_table.py"
     spec = importlib.util.spec_from_file_location("near_field_table_tool", path)
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)

@@ -1,6 +1,6 @@
 """Exact-sphere kernel (meshshade.kernels.sphere) against mpmath references, analytic limits and docs/physics.md §11 tables.
 
-References: tests/data/sphere_reference.csv, written offline by tools/precompute_references.py (the series in
+References: tests/data/sphere_reference.csv, written offline by tools/references/precompute_references.py (the series in
 its original I_nu/K_nu form at 38-193 digits; provenance in the CSV header). Tables quoted from docs/physics.md
 §11.3-§11.5 (skin test case sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3, i.e. sigma_t' = 1.01 /mm,
 alpha' = 1/1.01); lengths in mm are converted with R0_opt = 1.01 R0_mm.
@@ -30,10 +30,11 @@ SKIN = {"albedo_prime": 1.0 / 1.01, "eta": 1.3}
 @pytest.fixture(scope="module")
 def groups(reference_csv):
     """Reference rows grouped per (case, R0): parameters, theta and value arrays, and the peak (theta = 0).
-    The shared loader checks the sha256 of tools/precompute_references.py and of the dipole script it imports."""
+    The shared loader checks the sha256 of tools/references/precompute_references.py and of the dipole script it
+    imports."""
     header, rows = reference_csv("sphere_reference.csv")
-    assert header["generator"] == "tools/precompute_references.py"
-    assert header["dependencies"].startswith("tools/precompute_dipole_references.py sha256 ")
+    assert header["generator"] == "tools/references/precompute_references.py"
+    assert header["dependencies"].startswith("tools/references/precompute_dipole_references.py sha256 ")
     out = defaultdict(lambda: {"theta": [], "value": []})
     for row in rows:
         g = out[(row["case"], row["R0_opt"])]

@@ -141,7 +141,7 @@ def test_cli_mc_bad_input_exit_2(tmp_path, capsys):
     assert "error" in capsys.readouterr().err
 
 
-# MC R(s) [mm^-2] and relative stderr on the 10 mm sphere at s = 1, 2, 5 mm: tools/mc_sphere_table.py (1e6
+# MC R(s) [mm^-2] and relative stderr on the 10 mm sphere at s = 1, 2, 5 mm: tools/studies/mc_sphere_table.py (1e6
 # photons, seed 7, default icosphere, annuli of half-width max(0.1 s, 0.05 mm)), docs/validation.md; and the
 # exact diffusion sphere's error against it there, (exact - MC)/MC over the same annuli
 SPHERE10_MC = np.array([2.4305e-02, 9.4947e-03, 1.7687e-03])
@@ -151,7 +151,7 @@ SPHERE10_EXACT_ERR = np.array([0.388, 0.175, -0.017])
 
 def _annulus_mean(mat, shape, s, h):
     """The exact-sphere profile averaged over the annuli [s - h, s + h] (area-weighted, 33-point Gauss-Legendre),
-    as tools/mc_sphere_table.py does."""
+    as tools/studies/mc_sphere_table.py does."""
     x, w = np.polynomial.legendre.leggauss(33)
     R = shape.radius_mm
     out = []
@@ -205,7 +205,7 @@ def test_simulate_slab_matches_adding_doubling(mu_s, mu_a, g, n, d, side):
 @pytest.mark.parametrize("R0", [10.0, 50.0])
 def test_mc_profile_sphere_vs_exact_diffusion(R0):
     """Skin-like medium: diffusion (exact sphere series) agrees with MC to < 8 % beyond 5 transport lengths and
-    underestimates it by > 30 % within a quarter transport length of the beam (tools/mc_sphere_table.py)."""
+    underestimates it by > 30 % within a quarter transport length of the beam (tools/studies/mc_sphere_table.py)."""
     mat = Material(1.0, 0.01, eta=1.3)
     shape = Shape.make("sphere", R0)
     s = np.array([0.25, 5.0, 10.0])

@@ -2,7 +2,7 @@
 
 Same query and result (:class:`~meshshade.geometry.geodesics.neighbourhoods.Neighbourhoods`) as
 :class:`~meshshade.geometry.geodesics.neighbourhoods.GeodesicNeighbourhoods`, about 4-5x faster per pair in bakes
-(tools/bench_bake.py).  Per source x_i (numba, ``prange`` over threads, each thread with its own stamp-marked
+(tools/benchmarks/bench_bake.py).  Per source x_i (numba, ``prange`` over threads, each thread with its own stamp-marked
 scratch arrays, so nothing is cleared between sources and no work is O(N^2)):
 
 1. Topology.  A Dijkstra over mesh edges from the source vertex (or the three corners of its face), entering only
@@ -47,7 +47,7 @@ exact ones except within 0.02 % of the cutoff.  Known failure: the far arm of a 
 radius) seen from within ~6 mm of the fold passes the ratio test (the chord is short but the edge path only
 1.2-1.5x longer); no leaks occur across gaps (touching spheres, folds seen from further away).
 
-Speed: ``tools/bench_fast_neighbourhood.py`` (see the commit message for figures on this machine).
+Speed: ``tools/benchmarks/bench_fast_neighbourhood.py`` (see the commit message for figures on this machine).
 """
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ from meshshade.pacing import Pacer, default_threads, pace_rate, run_paced
 
 __all__ = ["FastGeodesicNeighbourhoods", "ACCURACY"]
 
-#: measured accuracy table (filled from tools/bench_fast_neighbourhood.py --accuracy); see the module docstring
+#: measured accuracy table (filled from tools/benchmarks/bench_fast_neighbourhood.py --accuracy); see the docstring
 ACCURACY: dict = {}
 
 _ANCESTORS = 48       # string-pulling depth of the fallback

@@ -18,7 +18,7 @@ Method (``method="window"``, the default): exact polyhedral geodesics
     (fitted order 1.96); on a 5 mm cylinder with 0.47 mm edges -0.018 %.
     Saddle vertices emit pseudo-source windows only into the sector where a path through them can be shortest
     (MMP's rule).  Cost: 10-25 windows per vertex (14 on a sphere, 25 on the sliver-rich head), ~0.15 us each,
-    i.e. about 2-4 us per (source, neighbour) pair on one core (``tools/bench_neighbourhood.py``).
+    i.e. about 2-4 us per (source, neighbour) pair on one core (``tools/benchmarks/bench_neighbourhood.py``).
 Faster, less accurate (``method="fmm"``, ``"dijkstra"``)
     ``"fmm"``: first-order fast marching (Kimmel & Sethian 1998) with the point-source triangle update of
     Novotni & Klein (2002) and re-opening, on the same bucket queue; exact on flat meshes without obtuse

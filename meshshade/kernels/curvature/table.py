@@ -13,8 +13,8 @@ tested (:meth:`CurvatureTable.max_interpolation_error`). Beyond the table the co
 :func:`~meshshade.kernels.dipole.dipole_diffuse_reflectance` with ``e^delta`` folded into its two exponentials
 (no exponential more than the dipole), and cos(2 phi) is a branch-free polynomial (within 2e-16 of libm).
 
-Performance, measured by tools/bench_curvature.py (1e6 pairs, skin, rho <= 50 mm, |k| <= 0.1/mm): 22-26 ns per
-pair for curvature_profile with phi, 20-24 ns with cos2phi, against 9-11 ns for the dipole in a bare compiled
+Performance, measured by tools/benchmarks/bench_curvature.py (1e6 pairs, skin, rho <= 50 mm, |k| <= 0.1/mm): 22-26 ns
+per pair for curvature_profile with phi, 20-24 ns with cos2phi, against 9-11 ns for the dipole in a bare compiled
 loop (ratio 2.0-2.9). The floor of that ratio is the table lookup: its 16 gathered coefficients do not vectorise
 (about 6 ns per pair). (When the numpy ``dipole_profile`` was a numpy expression it took 29-34 ns, ratio
 0.7-0.9; it now runs the same compiled closed form as the bare loop, within ~1.3x of its time on a loaded

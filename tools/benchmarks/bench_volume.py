@@ -1,0 +1,185 @@
+"""The default bake (the volume transport) against Monte Carlo: accuracy, wall time, and how its cost grows (issue 29).
+
+Rows (JSON, one object per line on stdout):
+
+* ``accuracy`` per scene: the default ``bake`` from scratch (asset cache off: the tetrahedral mesh is built) and
+  again with the tetrahedral mesh cached, ``mc --photons 2e6`` (seed 202) and a reference Monte Carlo of
+  ``--reference-photons`` (seed 101, kept in the asset cache ``bench-references`` between runs). Errors: mean
+  |M / ref - 1| per channel over (a) *lit* vertices (an unshadowed entry sample of positive power) and (b)
+  *unlit* vertices whose reference is above 1e-2 of the channel's peak (light that crossed the body or went round
+  it), for the bake and the 2e6-photon Monte Carlo alike, with wall times and their ratios (same run).
+* ``scaling``: the head (200 mm, skin1, the sun) loop-subdivided ``--levels`` times: the default bake's wall time
+  from scratch and its peak resident memory (each size in a fresh process), and the fitted cost exponent.
+
+Scenes (the sun along (0.3, -0.4, -0.866) unless said): sphere20 (an icosphere of radius 20 mm, level 5, 10k
+vertices, skin1, the sun from above), spot50 (spot.obj at 50 mm, skin1), head200 (the head scan at 200 mm, skin1), blub80 (blub.obj at
+80 mm, marble). The meshes other than the sphere come from ../shared/meshes (skipped with a note without it).
+
+    python tools/benchmarks/bench_volume.py [--scenes sphere20,spot50] [--reference-photons 2e7] [--scaling --levels 2]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from meshshade.geometry.mesh import Mesh
+from meshshade.geometry.procedural import icosphere
+from meshshade.asset_cache import AssetCache
+from meshshade.io import read_mesh_arrays
+from meshshade.light import DirectionalLight
+from meshshade.light.samples import entry_samples
+from meshshade.materials import Material
+from meshshade.montecarlo import simulate
+from meshshade.raycast import make_scene
+from meshshade.transport import bake
+
+SHARED = Path(__file__).resolve().parents[3] / "shared" / "meshes"
+SUN = (0.3, -0.4, -0.866)
+
+
+def _scaled(name, size_mm):
+    V, F = read_mesh_arrays(SHARED / name)
+    V = V - 0.5 * (V.min(axis=0) + V.max(axis=0))
+    return Mesh.from_arrays(V * (size_mm / float(np.ptp(V, axis=0).max())), F, source=name)
+
+
+def scene(name):
+    """(mesh, material, light) of a scene, or None when its mesh is not at hand."""
+    if name == "sphere20":
+        return Mesh.from_arrays(*icosphere(20.0, 5)), Material.preset("skin1"), DirectionalLight((0, 0, -1), 1.0)
+    files = {"spot50": ("spot.obj", 50.0, "skin1"), "head200": ("lee_perry_smith_head.obj", 200.0, "skin1"),
+             "blub80": ("blub.obj", 80.0, "marble")}
+    if name not in files:
+        raise SystemExit(f"unknown scene {name!r}; choose among sphere20, {', '.join(files)}")
+    f, size, mat = files[name]
+    if not (SHARED / f).exists():
+        return None
+    return _scaled(f, size), Material.preset(mat), DirectionalLight(SUN, 1.0)
+
+
+def errors(M, ref, lit):
+    peak = ref.max(axis=0)
+    out = {"lit": [], "unlit": [], "unlit_count": []}
+    for c in range(3):
+        sl = lit & (ref[:, c] > 0)
+        su = ~lit & (ref[:, c] > 1e-2 * peak[c])
+        out["lit"].append(round(float(np.mean(np.abs(M[sl, c] / ref[sl, c] - 1.0))), 4))
+        out["unlit"].append(round(float(np.mean(np.abs(M[su, c] / ref[su, c] - 1.0))), 4) if su.any() else None)
+        out["unlit_count"].append(int(su.sum()))
+    return out
+
+
+def reference(name, mesh, mat, light, photons):
+    cache = AssetCache("bench-references")
+    key = f"{name}-{int(photons)}-seed101"
+    got = cache.read(key)
+    if got is not None and got["radiance"].shape == (mesh.n_vertices, 3):
+        return got["radiance"], float(got["seconds"])
+    ref = simulate(mesh, mat, [light], photons=int(photons), seed=101, beam_distances=False)
+    cache.write(key, radiance=ref.radiance, seconds=ref.seconds)
+    return ref.radiance, ref.seconds
+
+
+def accuracy(name, args):
+    got = scene(name)
+    if got is None:
+        return {"row": "accuracy", "scene": name, "skipped": f"{SHARED} not found"}
+    mesh, mat, light = got
+    es = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, [light],
+                       make_scene(mesh.vertices, mesh.faces), mat.eta)
+    lit = np.zeros(mesh.n_vertices, dtype=bool)
+    lit[es.vertex[(es.vertex >= 0) & (es.power > 0)]] = True
+    small = Mesh.from_arrays(*icosphere(5.0, 1))                    # compile both outside the timings
+    bake(small, mat, [light])
+    simulate(small, mat, [light], photons=4096, seed=1, beam_distances=False)
+    with tempfile.TemporaryDirectory() as tmp:
+        os.environ["MESHSHADE_ASSET_CACHE"] = tmp
+        t = time.perf_counter()
+        scratch = bake(mesh, mat, [light], volume_cache=AssetCache("volume"))
+        t_scratch = time.perf_counter() - t
+        t = time.perf_counter()
+        cached = bake(mesh, mat, [light], volume_cache=AssetCache("volume"))
+        t_cached = time.perf_counter() - t
+        del os.environ["MESHSHADE_ASSET_CACHE"]
+    ref, ref_s = reference(name, mesh, mat, light, args.reference_photons)
+    mc = simulate(mesh, mat, [light], photons=int(args.mc_photons), seed=202, beam_distances=False)
+    return {"row": "accuracy", "scene": name, "vertices": int(mesh.n_vertices), "material": mat.name,
+            "bake": {"seconds_from_scratch": round(t_scratch, 2), "seconds_cached": round(t_cached, 2),
+                     "timings": {k: round(v, 3) for k, v in scratch.timings.items()},
+                     "tetrahedra": scratch.stats.get("volume_tetrahedra"), "model": scratch.model,
+                     **errors(scratch.radiance, ref, lit)},
+            "mc": {"photons": int(args.mc_photons), "seconds": round(mc.seconds, 2), **errors(mc.radiance, ref, lit)},
+            "mc_over_bake_time": {"from_scratch": round(mc.seconds / t_scratch, 2),
+                                  "cached": round(mc.seconds / t_cached, 2)},
+            "reference": {"photons": int(args.reference_photons), "seconds": round(ref_s, 1)},
+            "tetrahedra_identical_when_cached": bool(np.array_equal(scratch.radiance, cached.radiance))}
+
+
+def _one_size(level):
+    """Child process: bake the head subdivided ``level`` times; prints its vertex count, seconds and peak RSS."""
+    import igl
+
+    got = scene("head200")
+    mesh, mat, light = got
+    V, F = mesh.vertices, mesh.faces
+    if level:
+        V, F = igl.loop(np.asarray(V), np.asarray(F), level)
+    mesh = Mesh.from_arrays(V, F)
+    bake(Mesh.from_arrays(*icosphere(5.0, 1)), mat, [light])
+    os.environ["MESHSHADE_ASSET_CACHE"] = "off"
+    t = time.perf_counter()
+    res = bake(mesh, mat, [light])
+    sec = time.perf_counter() - t
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # MiB on Linux
+    print(json.dumps({"vertices": int(mesh.n_vertices), "seconds": round(sec, 2), "peak_rss_mib": round(rss),
+                      "tetrahedra": res.stats.get("volume_tetrahedra"),
+                      "timings": {k: round(v, 2) for k, v in res.timings.items()}}))
+
+
+def scaling(args):
+    if scene("head200") is None:
+        return {"row": "scaling", "skipped": f"{SHARED} not found"}
+    sizes = []
+    for level in range(args.levels + 1):
+        out = subprocess.run([sys.executable, __file__, "--one-size", str(level)], capture_output=True, text=True)
+        if out.returncode:
+            lines = [x for x in out.stderr.strip().splitlines() if "Error" in x or "error" in x]
+            sizes.append({"level": level, "failed": f"exit {out.returncode}: "
+                          + (lines[-1] if lines else "no error message (killed?)")})
+            continue
+        sizes.append({"level": level, **json.loads(out.stdout.strip().splitlines()[-1])})
+    ok = [s for s in sizes if "seconds" in s]
+    exponent = (float(np.polyfit(np.log([s["vertices"] for s in ok]), np.log([s["seconds"] for s in ok]), 1)[0])
+                if len(ok) > 1 else None)
+    return {"row": "scaling", "scene": "head200 loop-subdivided", "sizes": sizes,
+            "cost_exponent": None if exponent is None else round(exponent, 3)}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", default="sphere20,spot50")
+    ap.add_argument("--reference-photons", type=float, default=2e7)
+    ap.add_argument("--mc-photons", type=float, default=2e6)
+    ap.add_argument("--scaling", action="store_true")
+    ap.add_argument("--levels", type=int, default=2)
+    ap.add_argument("--one-size", type=int, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.one_size is not None:
+        return _one_size(args.one_size)
+    for name in [s for s in args.scenes.split(",") if s]:
+        print(json.dumps(accuracy(name, args)), flush=True)
+    if args.scaling:
+        print(json.dumps(scaling(args)), flush=True)
+
+
+if __name__ == "__main__":
+    main()
