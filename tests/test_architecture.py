@@ -16,7 +16,12 @@ Rules (the issue "One package per stage"):
     from within the directory that holds it (``meshshade/io/meshes.py`` may import ``meshshade/io/_reading.py``;
     ``meshshade/transport/x.py`` may not import ``meshshade.kernels.curvature.policies._INV_SAT``): a name shared
     across packages is public, named without the underscore and documented. Exceptions: :data:`PRIVATE_ALLOWED`,
-    each with its reason, and an entry that is no longer needed fails too.
+    each with its reason, and an entry that is no longer needed fails too;
+(h) no function takes more than :data:`MAX_PARAMS` parameters (positional and keyword-only alike; ``self`` and
+    ``cls``, ``*args`` and ``**kwargs`` not counted), except numba's compiled loops (decorated with ``njit``,
+    ``jit``, ``vectorize``... or passed to one, ``njit(parallel=True)(_walk)``: their interface is numba's, arrays
+    and scalars) and the entries of :data:`PARAMS_ALLOWED`, each with its reason. Many values that travel together
+    are a small record (a NamedTuple or a dataclass), not a long signature.
 
 The checkers are plain functions of a root directory (the folder that holds the ``meshshade`` package); nothing
 is imported or executed. They are themselves tested on a small fake package written to tmp_path with one
@@ -61,6 +66,28 @@ PRIVATE_ALLOWED = {
                     "meshshade.kernels.curvature.policies._DELTA_MAX", "meshshade.kernels.curvature.policies._INV_SAT",
                     "meshshade.kernels.curvature.table._PER_UNIT", "meshshade.kernels.curvature.table._table_eval",
                     "meshshade.kernels.fitted_curvature._row_at")},
+}
+
+#: the most parameters a function takes (rule (h))
+MAX_PARAMS = 12
+#: numba's compilers (under ``numba.``): what they decorate or wrap is a compiled loop, outside rule (h)
+COMPILERS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stencil", "generated_jit"}
+#: why a public entry point may take more: its options are keyword-only, named at every call
+PUBLIC_OPTIONS = "a public entry point whose options are keyword-only (each named at every call, none positional)"
+#: (module path, function qualname) -> why it may take more than MAX_PARAMS parameters
+PARAMS_ALLOWED = {
+    ("meshshade/transport/baking.py", "bake"): PUBLIC_OPTIONS,
+    ("meshshade/transport/baking.py", "check_bake_options"): PUBLIC_OPTIONS + "; the options of bake, checked",
+    ("meshshade/output/compare.py", "run_comparison"): PUBLIC_OPTIONS,
+    ("meshshade/montecarlo/simulation.py", "simulate"): PUBLIC_OPTIONS,
+    ("meshshade/transport/hierarchical.py", "SurfaceTransport.build"): PUBLIC_OPTIONS + "; " + KERNEL_UNIFICATION,
+    **{(path, f"{cls}.query"): ("the geodesic query (6 source arrays, 8 keyword-only options), called by "
+                                "transport/gather.py, hierarchical.py and baking.py, which are " + KERNEL_UNIFICATION
+                                + "; a record of the sources (positions, faces, bary, vertex, normals) is the fix")
+       for path, cls in (("meshshade/geometry/geodesics/neighbourhoods.py", "GeodesicNeighbourhoods"),
+                         ("meshshade/geometry/geodesics/arc.py", "FastGeodesicNeighbourhoods"))},
+    ("meshshade/transport/baking.py", "_direct"): (
+        "17 positional: the options of bake passed on; " + KERNEL_UNIFICATION + ", whose owner gives it a record"),
 }
 
 
@@ -433,6 +460,71 @@ def stale_allowances(found, allowed) -> list[str]:
     return sorted(f"{key}: {reason}" for key, reason in allowed.items() if key not in set(found))
 
 
+def _compiled_functions(mod: Module) -> set[ast.AST]:
+    """The function definitions of a module that numba compiles: decorated by one of numba's :data:`COMPILERS`,
+    or passed by name to one (``walk_parallel = njit(parallel=True)(_walk)``, ``njit(_f)``)."""
+    def compiler(node):
+        node = node.func if isinstance(node, ast.Call) else node
+        name = _dotted(node, mod.aliases) or ""
+        return name.split(".")[0] == "numba" and name.split(".")[-1] in COMPILERS
+    wrapped = set()
+    for node in ast.walk(mod.tree):
+        if isinstance(node, ast.Call) and (compiler(node.func) or (isinstance(node.func, ast.Call)
+                                                                   and compiler(node.func.func))):
+            wrapped |= {a.id for a in node.args if isinstance(a, ast.Name)}
+    return {node for node in ast.walk(mod.tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and (node.name in wrapped or any(compiler(d) for d in node.decorator_list))}
+
+
+def _functions(tree: ast.Module):
+    """``(qualname, node, is_method)`` of every function definition, nested ones and methods included."""
+    def visit(body, prefix, in_class):
+        for node in body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                yield prefix + node.name, node, in_class
+                yield from visit(node.body, f"{prefix}{node.name}.", False)
+            elif isinstance(node, ast.ClassDef):
+                yield from visit(node.body, f"{prefix}{node.name}.", True)
+            elif isinstance(node, (ast.If, ast.Try, ast.With, ast.For, ast.While)):
+                yield from visit([n for f in ("body", "orelse", "finalbody", "handlers") for n in getattr(node, f, [])
+                                  if isinstance(n, ast.stmt) or isinstance(n, ast.excepthandler)],
+                                 prefix, in_class)
+            elif isinstance(node, ast.ExceptHandler):
+                yield from visit(node.body, prefix, in_class)
+    yield from visit(tree.body, "", False)
+
+
+def n_params(node: ast.FunctionDef, is_method: bool) -> int:
+    """Named parameters (positional and keyword-only; not ``*args``, ``**kwargs``, nor a method's ``self``/``cls``,
+    a staticmethod's first parameter being its own)."""
+    args = node.args
+    n = len(args.posonlyargs) + len(args.args) + len(args.kwonlyargs)
+    static = any(isinstance(d, ast.Name) and d.id == "staticmethod" for d in node.decorator_list)
+    return n - 1 if is_method and not static and (args.posonlyargs or args.args) else n
+
+
+def long_signatures(root: Path, package: str = PACKAGE, limit: int = MAX_PARAMS) -> list[Violation]:
+    """(h) every function, outside numba's compiled loops, with more than ``limit`` parameters; the message is
+    ``qualname (n parameters)``."""
+    out = []
+    for mod in collect_modules(root, package).values():
+        compiled = _compiled_functions(mod)
+        for qualname, node, is_method in _functions(mod.tree):
+            n = n_params(node, is_method)
+            if n > limit and node not in compiled:
+                out.append(Violation("params", mod.rel, node.lineno, f"{qualname} ({n} parameters)"))
+    return out
+
+
+def _qualname(violation: Violation) -> str:
+    return violation.message.split(" (")[0]
+
+
+def check_long_signatures(root: Path, package: str = PACKAGE, allowed=PARAMS_ALLOWED) -> list[Violation]:
+    """(h) the long signatures that :data:`PARAMS_ALLOWED` does not excuse."""
+    return [v for v in long_signatures(root, package) if (v.path, _qualname(v)) not in allowed]
+
+
 def _report(violations) -> str:
     return "\n".join(str(v) for v in violations)
 
@@ -481,6 +573,18 @@ def test_every_private_allowance_is_still_needed():
     stale = stale_allowances([(v.path, v.message) for v in private_uses(ROOT)], PRIVATE_ALLOWED)
     assert not stale, "\nremove from PRIVATE_ALLOWED:\n" + "\n".join(stale)
     assert all(isinstance(reason, str) and reason.strip() for reason in PRIVATE_ALLOWED.values())
+
+
+def test_no_function_takes_more_than_twelve_parameters():
+    violations = check_long_signatures(ROOT)
+    assert not violations, (f"\nmore than {MAX_PARAMS} parameters (group what travels together in a record):\n"
+                            + _report(violations))
+
+
+def test_every_parameter_allowance_is_still_needed():
+    stale = stale_allowances([(v.path, _qualname(v)) for v in long_signatures(ROOT)], PARAMS_ALLOWED)
+    assert not stale, "\nremove from PARAMS_ALLOWED:\n" + "\n".join(stale)
+    assert all(isinstance(reason, str) and reason.strip() for reason in PARAMS_ALLOWED.values())
 
 
 def test_the_lint_sees_the_whole_package():
@@ -662,6 +766,41 @@ def test_checker_flags_private_names_used_across_packages(tmp_path):
     stale = {**allowed, ("meshshade/transport/x.py", "meshshade.kernels.policies._GONE"): "gone"}
     assert stale_allowances([(p, n) for p, _, n in found], stale) == [
         "('meshshade/transport/x.py', 'meshshade.kernels.policies._GONE'): gone"]
+
+
+def test_checker_flags_long_signatures_outside_compiled_loops(tmp_path):
+    """13 parameters are flagged wherever they are (positional or keyword-only, a method's ``self`` aside), except
+    in numba's compiled loops, however they are compiled."""
+    p12, p13 = ", ".join(f"a{i}" for i in range(12)), ", ".join(f"a{i}" for i in range(13))
+    kw13 = ", ".join(f"a{i}" for i in range(5)) + ", *, " + ", ".join(f"b{i}" for i in range(8))
+    text = (f"import numba\nfrom numba import njit, prange\nfrom somewhere import jit\n\n\n"
+            f"def long({p13}):  # PLANTED\n    pass\n\n\n"
+            f"def options({kw13}):  # PLANTED\n    pass\n\n\n"
+            f"def twelve({p12}, *args, **kwargs):\n    pass\n\n\n"
+            f"class Walk:\n    def __init__(self, {p12}):\n        pass\n\n"
+            f"    @staticmethod\n    def step({p13}):  # PLANTED\n        pass\n\n"
+            f"    @classmethod\n    def build(cls, {p12}):\n        pass\n\n\n"
+            f"def outer():\n    def inner({p13}):  # PLANTED\n        pass\n    return inner\n\n\n"
+            f"@njit(cache=True)\ndef loop({p13}):\n    pass\n\n\n"
+            f"@numba.njit\ndef loop2({p13}):\n    pass\n\n\n"
+            f"@numba.vectorize\ndef ufunc({p13}):\n    pass\n\n\n"
+            f"def _walk({p13}):\n    pass\n\n\n"
+            f"walk_parallel = njit(parallel=True, nogil=True)(_walk)\n\n\n"
+            f"@jit\ndef not_numba({p13}):  # PLANTED: another library's jit\n    pass\n")
+    (tmp_path / "meshshade").mkdir()
+    (tmp_path / "meshshade" / "__init__.py").write_text("")
+    (tmp_path / "meshshade" / "walks.py").write_text(text)
+    found = long_signatures(tmp_path)
+    assert [v.line for v in found] == [i for i, line in enumerate(text.splitlines(), 1) if "PLANTED" in line]
+    assert [v.message for v in found] == ["long (13 parameters)", "options (13 parameters)",
+                                          "Walk.step (13 parameters)", "outer.inner (13 parameters)",
+                                          "not_numba (13 parameters)"]
+    allowed = {("meshshade/walks.py", "options"): "a public entry point", ("meshshade/walks.py", "gone"): "gone"}
+    assert [_qualname(v) for v in check_long_signatures(tmp_path, allowed=allowed)] == [
+        "long", "Walk.step", "outer.inner", "not_numba"]
+    stale = stale_allowances([(v.path, _qualname(v)) for v in found], allowed)
+    assert stale == ["('meshshade/walks.py', 'gone'): gone"]
+    assert long_signatures(tmp_path, limit=13) == []
 
 
 def test_checker_flags_function_level_meshshade_imports(fake_root):

@@ -48,7 +48,7 @@ from meshshade.light import BeamLight
 from meshshade.montecarlo import kernels as K
 from meshshade.montecarlo.direct_walk import walk_parallel
 from meshshade.montecarlo.emission import EmitterKernel, emission_base
-from meshshade.montecarlo.sampling import ROULETTE_BOOST as K_BOOST, ROULETTE_THRESHOLD as K_THRESH
+from meshshade.montecarlo.sampling import ROULETTE_BOOST as K_BOOST, ROULETTE_THRESHOLD as K_THRESH, GroupMedium
 from meshshade.raycast.embree_direct import TFAR_MARGIN_REL
 from meshshade.raycast.scene import OFFSET_ABS, OFFSET_REL
 
@@ -90,18 +90,18 @@ class PoolWalk:
 
     V : (n, 3) float64 mm; F : (m, 3) int64; normals : (m, 3) unit outward face normals; emitter :
     :class:`~meshshade.montecarlo.emitter.Emitter`; scene : EmbreeScene or NumpyScene; grid :
-    :class:`~meshshade.montecarlo.interior.SafeDistanceGrid`; sigma_s, sigma_a : 1/mm; direct :
+    :class:`~meshshade.montecarlo.interior.SafeDistanceGrid`; medium :
+    :class:`~meshshade.montecarlo.sampling.GroupMedium`; direct :
     :class:`~meshshade.raycast.embree_direct.DirectEmbreeScene` or None (batched mode). After :meth:`run`:
     ``face`` (B, m) and ``face_vert`` (B, n) exit power W per batch, ``tot`` (B, 7) W, ``events``, ``boundary``,
     ``rays`` counts, ``exits`` of the beam's photons.
     """
 
-    def __init__(self, V, F, normals, emitter, scene, grid, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam,
-                 seed, group, direct=None):
+    def __init__(self, V, F, normals, emitter, scene, grid, medium: GroupMedium, *, n_batches, keep_beam, seed, group,
+                 direct=None):
         self.V, self.F, self.N, self.em, self.scene, self.grid = V, F, normals, emitter, scene, grid
-        self.sigma_t = sigma_s + sigma_a
-        self.albedo = sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
-        self.g, self.eta, self.B, self.keep_beam = g, eta, n_batches, keep_beam
+        self.sigma_t, self.albedo = medium.sigma_t, medium.albedo
+        self.g, self.eta, self.B, self.keep_beam = medium.g, medium.eta, n_batches, keep_beam
         self.seed, self.group = int(seed), int(group)
         self.face = np.zeros((n_batches, F.shape[0]))
         self.face_vert = np.zeros((n_batches, V.shape[0]))

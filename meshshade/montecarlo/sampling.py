@@ -5,16 +5,49 @@ The pooled engine's numba kernels (:mod:`meshshade.montecarlo.kernels`) implemen
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from meshshade.kernels.fresnel import refract_in  # noqa: F401 - part of the walk's sampling API
 
-__all__ = ["ROULETTE_THRESHOLD", "ROULETTE_BOOST", "sample_hg_cos", "scatter_directions", "refract_in"]
+__all__ = ["ROULETTE_THRESHOLD", "ROULETTE_BOOST", "GroupMedium", "sample_hg_cos", "scatter_directions",
+           "refract_in"]
 
 #: Russian roulette starts below this fraction of the photon's initial weight
 ROULETTE_THRESHOLD = 1e-4
 #: a photon survives the roulette with probability 1/ROULETTE_BOOST, its weight multiplied by ROULETTE_BOOST
 ROULETTE_BOOST = 10.0
+
+
+class GroupMedium(NamedTuple):
+    """The medium one channel group's photons walk in (both engines, :class:`~meshshade.montecarlo.engine.PoolWalk`
+    and :class:`~meshshade.montecarlo.wavefront_oracle.WavefrontWalk`).
+
+    Attributes
+    ----------
+    sigma_s, sigma_a : float, 1/mm
+        Scattering and absorption coefficients (not reduced: the walk samples the phase function).
+    g : float
+        Henyey-Greenstein anisotropy.
+    eta : float
+        Relative index of refraction of the medium.
+    """
+
+    sigma_s: float
+    sigma_a: float
+    g: float
+    eta: float
+
+    @property
+    def sigma_t(self) -> float:
+        """Extinction coefficient sigma_s + sigma_a, 1/mm."""
+        return self.sigma_s + self.sigma_a
+
+    @property
+    def albedo(self) -> float:
+        """Single-scattering albedo sigma_s / sigma_t (0 where sigma_t is 0)."""
+        return self.sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
 
 
 def _orthonormal_basis(d):

@@ -21,6 +21,7 @@ from meshshade.materials import Material
 from meshshade.montecarlo.emitter import Emitter
 from meshshade.montecarlo.engine import PoolWalk
 from meshshade.montecarlo.interior import SafeDistanceGrid, open_surface_warning
+from meshshade.montecarlo.sampling import GroupMedium
 from meshshade.montecarlo.wavefront_oracle import WavefrontWalk
 from meshshade.raycast import make_scene
 from meshshade.raycast.embree_direct import DirectEmbreeScene
@@ -112,15 +113,16 @@ def walk_group(setup: WalkSetup, gi: int, n_photons: int, *, seed: int, n_batche
     generator (``fast_interior=False``, which walks whole runs only)."""
     (ss, sa), _chans = setup.groups[gi]
     m = setup.material
-    common = dict(sigma_s=ss, sigma_a=sa, g=m.g, eta=m.eta, n_batches=n_batches, keep_beam=keep_beam)
+    medium = GroupMedium(ss, sa, m.g, m.eta)
+    common = dict(n_batches=n_batches, keep_beam=keep_beam)
     if setup.fast_interior:
-        walk = PoolWalk(setup.V, setup.F, setup.normals, setup.emitter, setup.scene, setup.grid, seed=seed, group=gi,
-                        direct=setup.direct, **common)
+        walk = PoolWalk(setup.V, setup.F, setup.normals, setup.emitter, setup.scene, setup.grid, medium, seed=seed,
+                        group=gi, direct=setup.direct, **common)
         emitted = walk.run(n_photons, pool=pool, time_budget=time_budget, progress=progress, chunks=chunks)
     else:
         if chunks is not None:
             raise MeshshadeError("the baseline wavefront (fast_interior=False) walks whole runs only")
-        walk = WavefrontWalk(setup.V, setup.F, setup.normals, setup.emitter, setup.scene, **common)
+        walk = WavefrontWalk(setup.V, setup.F, setup.normals, setup.emitter, setup.scene, medium, **common)
         emitted = walk.run(n_photons, rng, pool=pool or 1 << 16, time_budget=time_budget, progress=progress)
     return GroupTally(walk.face, walk.face_vert, walk.tot, int(emitted), int(walk.events), int(walk.boundary),
                       int(walk.rays), {k: list(v) for k, v in walk.exits.items()})

@@ -15,17 +15,16 @@ import numpy as np
 
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.light import BeamLight
-from meshshade.montecarlo.sampling import ROULETTE_BOOST, ROULETTE_THRESHOLD, scatter_directions
+from meshshade.montecarlo.sampling import ROULETTE_BOOST, ROULETTE_THRESHOLD, GroupMedium, scatter_directions
 
 
 class WavefrontWalk:
     """One grey walk (one channel group) with a regenerating wavefront."""
 
-    def __init__(self, V, F, normals, emitter, scene, *, sigma_s, sigma_a, g, eta, n_batches, keep_beam):
+    def __init__(self, V, F, normals, emitter, scene, medium: GroupMedium, *, n_batches, keep_beam):
         self.V, self.F, self.N, self.em, self.scene = V, F, normals, emitter, scene
-        self.sigma_t = sigma_s + sigma_a
-        self.albedo = sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
-        self.g, self.eta, self.B, self.keep_beam = g, eta, n_batches, keep_beam
+        self.sigma_t, self.albedo = medium.sigma_t, medium.albedo
+        self.g, self.eta, self.B, self.keep_beam = medium.g, medium.eta, n_batches, keep_beam
         m, L = F.shape[0], len(emitter.lights)
         self.face = np.zeros((n_batches, m))
         self.face_vert = np.zeros((n_batches, V.shape[0]))

@@ -374,5 +374,5 @@ class FastGeodesicNeighbourhoods:
         nfb = int(sum(int(r[3].sum()) for r in res))
         n_pairs = int(counts.sum())
         self.stats = {"pairs": n_pairs, "settled_fallbacks": nfb, "fallback_fraction": nfb / max(1, n_pairs)}
-        return assemble_neighbourhoods(V, pts, nrm, counts, vertex, dist, cut, self.method, d1=d1, d2=d2, k1=k1,
-                                       k2=k2, chord=chord, tangent=tangent)
+        return assemble_neighbourhoods(Neighbourhoods.from_counts(counts, vertex, dist, cut, self.method), V, pts,
+                                       nrm, d1=d1, d2=d2, k1=k1, k2=k2, chord=chord, tangent=tangent)

@@ -120,6 +120,13 @@ class Neighbourhoods:
         s = slice(self.indptr[i], self.indptr[i + 1])
         return self.vertex[s], self.distance[s]
 
+    @classmethod
+    def from_counts(cls, counts, vertex, distance, cutoff, method: str) -> "Neighbourhoods":
+        """Rows of ``counts`` (k,) pairs each over the flat ``vertex`` and ``distance`` arrays, without chord,
+        tangent or phi (:func:`assemble_neighbourhoods` adds them)."""
+        indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+        return cls(indptr, vertex, distance, None, None, None, cutoff, method)
+
     def __repr__(self) -> str:
         c = self.counts
         mean = float(c.mean()) if c.size else 0.0
@@ -454,8 +461,9 @@ class GeodesicNeighbourhoods:
         counts = np.concatenate([r[0] for r in results]) if results else np.zeros(0, np.int64)
         vertex = np.concatenate([r[1] for r in results]) if results else np.zeros(0, np.int32)
         dist = np.concatenate([r[2] for r in results]) if results else np.zeros(0)
-        return assemble_neighbourhoods(self.vertices, pts, nrm, counts, vertex, dist, cut, self.method, d1=d1,
-                                       d2=d2, k1=k1, k2=k2, chord=chord, tangent=tangent)
+        return assemble_neighbourhoods(Neighbourhoods.from_counts(counts, vertex, dist, cut, self.method),
+                                       self.vertices, pts, nrm, d1=d1, d2=d2, k1=k1, k2=k2, chord=chord,
+                                       tangent=tangent)
 
     def distances_from(self, *, vertex: int | None = None, face: int | None = None, bary=None,
                        cutoff_mm: float = np.inf) -> np.ndarray:
@@ -472,16 +480,17 @@ class GeodesicNeighbourhoods:
         return out
 
 
-def assemble_neighbourhoods(V, pts, nrm, counts, vertex, dist, cut, method, *, d1=None, d2=None, k1=None, k2=None,
-                            chord=True, tangent=False) -> "Neighbourhoods":
-    """Build the CSR :class:`Neighbourhoods` from per-source ``counts`` and the flat ``vertex``/``dist`` arrays,
-    adding the chord, the unit tangent (projection of x_o - x_i on the source's tangent plane) and, when the
-    principal directions are given, the azimuth phi (:func:`tangent_azimuth`). Shared by every solver.
+def assemble_neighbourhoods(rows: Neighbourhoods, V, pts, nrm, *, d1=None, d2=None, k1=None, k2=None, chord=True,
+                            tangent=False) -> Neighbourhoods:
+    """``rows`` (the solver's pairs, :meth:`Neighbourhoods.from_counts`) with the chord, the unit tangent
+    (projection of x_o - x_i on the source's tangent plane) and, when the principal directions are given, the
+    azimuth phi (:func:`tangent_azimuth`) added. Shared by every solver.
 
+    ``V`` (n, 3) mm: the mesh's vertices; ``pts``, ``nrm`` (k, 3): the sources' positions (mm) and unit normals.
     The pairs are processed in slices of :data:`ASSEMBLE_PAIRS` (row by row, so the result does not depend on
     it): each numpy call stays short and Ctrl-C is acted upon between them."""
-    k = counts.shape[0]
-    indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    indptr, vertex, dist, cut, method = rows.indptr, rows.vertex, rows.distance, rows.cutoff, rows.method
+    counts, k = rows.counts, rows.n_sources
     want_phi = d1 is not None and d2 is not None
     ch = tan = phi = None
     if not (chord or tangent or want_phi):
