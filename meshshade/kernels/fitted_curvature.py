@@ -41,9 +41,10 @@ import numpy as np
 
 from meshshade.kernels import fitted_curvature_table as table
 from meshshade.kernels.curvature import CurvatureTable, curvature_ratios
-from meshshade.kernels.curvature.coefficients import _ratios_direct
-from meshshade.kernels.curvature.table import (_MU_RHO_ZERO, _PER_UNIT, _PHI_MAX, _cheb_to_monomial,
-                                               _dipole_exp_block, _piece_pair)
+from meshshade.kernels.curvature.coefficients import ratios_direct
+from meshshade.kernels.curvature.table import (MU_RHO_ZERO, PER_UNIT, PHI_MAX, cheb_to_monomial,
+                                               dipole_exp_block, piece_pair)
+from meshshade.kernels.dipole import dipole_diffuse_reflectance
 from meshshade.kernels.near_field import near_field_profile
 from meshshade.kernels.optics import diffusion_params
 
@@ -75,12 +76,27 @@ E_SAT = 6.0
 def normal_curvatures(phi, k1, k2):
     """(k_along, k_across, tau^2): the normal curvatures along the direction phi from the first principal direction
     and across it (Euler's formula, k_n(phi) and k_n(phi + pi/2)), and the square of the twist
-    tau = (k1 - k2) sin(phi) cos(phi), the off-diagonal of the shape operator in the (along, across) frame."""
-    phi = np.asarray(phi, dtype=np.float64)
-    c2 = np.cos(phi) ** 2
-    k1, k2 = np.asarray(k1, dtype=np.float64), np.asarray(k2, dtype=np.float64)
-    tau = 0.5 * (k1 - k2) * np.sin(2.0 * phi)
+    tau = (k1 - k2) sin(phi) cos(phi), the off-diagonal of the shape operator in the (along, across) frame.
+    Arrays broadcast; each value by :func:`euler_curvatures`."""
+    phi, k1, k2 = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (phi, k1, k2)))
+    flat = [np.ascontiguousarray(x).ravel() for x in (phi, k1, k2)]
+    out = [np.empty(flat[0].size) for _ in range(3)]
+    _normal_curvatures_loop(*flat, *out)
+    return tuple(x.reshape(phi.shape) if phi.ndim else x[0] for x in out)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def euler_curvatures(phi, k1, k2):
+    """(k_along, k_across, tau^2) of one direction (:func:`normal_curvatures`)."""
+    c2 = math.cos(phi) ** 2
+    tau = 0.5 * (k1 - k2) * math.sin(2.0 * phi)
     return k1 * c2 + k2 * (1.0 - c2), k1 * (1.0 - c2) + k2 * c2, tau * tau
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _normal_curvatures_loop(phi, k1, k2, ka, kc, t2):
+    for j in range(phi.size):
+        ka[j], kc[j], t2[j] = euler_curvatures(phi[j], k1[j], k2[j])
 
 
 def fitted_features(r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt, A_minus_1):
@@ -132,7 +148,11 @@ def fitted_saturation(E):
 
 def fitted_exponent(r_opt, k_along, k_across, tau2, a_opt, b_opt, a1_opt, b1_opt, A_minus_1, coef=None):
     """``S(delta + Q)`` of eq. (82) from the first-order ratios (optical units; arrays broadcast; arguments as
-    :func:`fitted_features`); ``coef`` the theta_j (default: the shipped fit)."""
+    :func:`fitted_features`); ``coef`` the theta_j (default: the shipped fit).
+
+    The model as the fit sees it: linear in the features (tools/tables/fit_curvature_model.py fits theta with it).
+    Every kernel evaluates the exponent compiled, by :func:`fitted_pair_exponent`; this numpy form is the fit's
+    and the tests' oracle of that one evaluation."""
     theta = shipped_coefficients() if coef is None else np.asarray(coef, dtype=np.float64)
     _check_coef(theta)
     ka, kc, a, b = (np.asarray(x, dtype=np.float64) for x in (k_along, k_across, a_opt, b_opt))
@@ -149,14 +169,28 @@ def fitted_curvature_factor(r_opt, phi, k1_opt, k2_opt, *, albedo_prime, eta, co
     """``R_fit / R_near = exp(S(delta + Q))`` at distance r, azimuth phi from the first principal direction and
     principal curvatures k1, k2 (optical units; arrays broadcast; scalar material). 1 exactly at k1 = k2 = 0.
     ``k_along_opt``: the curvature along the pair measured between its points (eq. (85)) instead of the entry
-    point's k_n(phi)."""
+    point's k_n(phi). Evaluated by :func:`fitted_pair_exponent`, as every kernel of the bake."""
     r = np.asarray(r_opt, dtype=np.float64)
-    a, b = curvature_ratios(r, albedo_prime=albedo_prime, eta=eta)
-    a1, b1 = curvature_ratios(r, albedo_prime=albedo_prime, eta=1.0)
     ka, kc, t2 = normal_curvatures(phi, k1_opt, k2_opt)
     if k_along_opt is not None:
         ka = np.broadcast_to(np.asarray(k_along_opt, dtype=np.float64), np.broadcast(ka, k_along_opt).shape)
-    return np.exp(fitted_exponent(r, ka, kc, t2, a, b, a1, b1, _boundary(albedo_prime, eta), coef))
+    r, ka, kc, t2 = np.broadcast_arrays(r, ka, kc, t2)
+    if not np.all(np.isfinite(r) & (r >= 0)):
+        raise ValueError("r_opt must be finite and >= 0")
+    tab = CurvatureTable(albedo_prime, eta, max(float(r.max(initial=0.0)) * 1.25, 10.0))
+    m1 = matched_table(tab)
+    th = effective_coefficients(shipped_coefficients() if coef is None else coef, _boundary(albedo_prime, eta))
+    flat = [np.ascontiguousarray(x, dtype=np.float64).ravel() for x in (r, ka, kc, t2)]
+    E = np.empty(flat[0].size)
+    _fitted_exponents(*flat, fitted_row_table(tab, m1, th), tab.n_intervals, tab.mu, tab.z_r, tab.z_b, m1.z_b,
+                      tuple(float(x) for x in th), E)
+    return np.exp(E).reshape(r.shape)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _fitted_exponents(rho, ka, kc, t2, row, n_int, mu, z_r, z_b, z_b1, th, out):
+    for k in range(rho.size):
+        out[k] = fitted_pair_exponent(rho[k], ka[k], kc[k], t2[k], row, n_int, mu, z_r, z_b, z_b1, th)
 
 
 def fitted_curvature_profile(r_opt, phi, k1_opt, k2_opt, *, albedo_prime, eta, g=0.0):
@@ -177,7 +211,7 @@ def near_source_functions(r_opt, th):
 #: table (cubic: their interpolation errors, below 1e-8 and 2e-6 of their largest values, enter the exponent only
 #: through second-order switches and decaying near-source terms)
 _NEAR_DEG = 3
-_NEAR_T, _NEAR_TO_MONO = _cheb_to_monomial(_NEAR_DEG)
+_NEAR_T, _NEAR_TO_MONO = cheb_to_monomial(_NEAR_DEG)
 
 
 def fitted_row_table(tab: CurvatureTable, matched: CurvatureTable, th) -> np.ndarray:
@@ -189,7 +223,7 @@ def fitted_row_table(tab: CurvatureTable, matched: CurvatureTable, th) -> np.nda
     if matched.n_intervals != tab.n_intervals or matched.albedo_prime != tab.albedo_prime:
         raise ValueError("the matched-boundary table must have the material's albedo and extent")
     n = tab.n_intervals
-    u = (np.arange(n)[:, None] + 0.5 * (_NEAR_T[None, :] + 1.0)) / _PER_UNIT        # (n, 4) Chebyshev nodes
+    u = (np.arange(n)[:, None] + 0.5 * (_NEAR_T[None, :] + 1.0)) / PER_UNIT        # (n, 4) Chebyshev nodes
     g, e2 = near_source_functions(u * u, th)
     # a1, b1 at the cubic's nodes from the matched table's own degree-7 pieces (t the nodes' position in a piece)
     powers = _NEAR_T[:, None] ** np.arange(matched.coef.shape[1] // 2)[None, :]      # (4, 8)
@@ -204,22 +238,22 @@ def fitted_row_table(tab: CurvatureTable, matched: CurvatureTable, th) -> np.nda
 def _row_at(r, row, n_int, mu, z_r, z_b, z_b1, th):
     """(a, b, a1, b1, g, e2) at r from :func:`fitted_row_table` (one row gathered: a degree-7 piece pair and four
     cubics); direct quadrature and exponentials beyond it."""
-    u = math.sqrt(r) * _PER_UNIT
+    u = math.sqrt(r) * PER_UNIT
     if u < n_int:
         iu = np.uint64(u)
         t = 2.0 * (u - iu) - 1.0
         t2 = t * t
         c = row[iu]
-        ra, rb = _piece_pair(c, 0, t, t2, t2 * t2)
+        ra, rb = piece_pair(c, 0, t, t2, t2 * t2)
         ra1 = (c[16] + c[20] * t) + t2 * (c[24] + c[28] * t)
         rb1 = (c[17] + c[21] * t) + t2 * (c[25] + c[29] * t)
         g = (c[18] + c[22] * t) + t2 * (c[26] + c[30] * t)
         e2 = (c[19] + c[23] * t) + t2 * (c[27] + c[31] * t)
         return ra, rb, ra1, rb1, g, e2
-    if r * mu >= _MU_RHO_ZERO:
+    if r * mu >= MU_RHO_ZERO:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    ra, rb = _ratios_direct(r, mu, z_r, z_b)
-    ra1, rb1 = _ratios_direct(r, mu, z_r, z_b1)
+    ra, rb = ratios_direct(r, mu, z_r, z_b)
+    ra1, rb1 = ratios_direct(r, mu, z_r, z_b1)
     e2 = math.exp(-r / NEAR_LENGTHS[1])
     return ra, rb, ra1, rb1, th[0] * math.exp(-r / NEAR_LENGTHS[0]) + th[1] * e2 + th[2] * math.exp(
         -r / NEAR_LENGTHS[2]), e2
@@ -256,11 +290,33 @@ def pair_exponent(ka, kc, t2, ra, rb, ra1, rb1, g, e2, th):
     return E
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
+def fitted_pair_exponent(rho, ka, kc, t2, row, n_int, mu, z_r, z_b, z_b1, th):
+    """S(delta + Q) of eq. (82) for one pair at distance ``rho`` with its curvatures along and across ``ka``,
+    ``kc`` and squared twist ``t2`` (optical units), from one row of :func:`fitted_row_table` (``row``, ``n_int``
+    intervals) and the effective coefficients ``th``; 0 for a flat pair. The one evaluation of the fitted model's
+    exponent: the profile loop below and the bake's pairs (:func:`fitted_dipole`) call it."""
+    if ka == 0.0 and kc == 0.0 and t2 == 0.0:
+        return 0.0
+    ra, rb, ra1, rb1, g, e2 = _row_at(rho, row, n_int, mu, z_r, z_b, z_b1, th)
+    return pair_exponent(ka, kc, t2, ra, rb, ra1, rb1, g, e2, th)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def fitted_dipole(rho, ka, kc, t2, row, n_int, alb, mu, z_r, z_b, z_b1, z_v, th):
+    """The fitted model on the point dipole for one pair, ``R_d(rho) exp(S(delta + Q))`` (eqs. (82)-(84),
+    optical units; arguments as :func:`fitted_pair_exponent`, with the material's diffusion parameters)."""
+    if rho * mu >= MU_RHO_ZERO:
+        return 0.0
+    E = fitted_pair_exponent(rho, ka, kc, t2, row, n_int, mu, z_r, z_b, z_b1, th)
+    return dipole_diffuse_reflectance(rho, alb, mu, z_r, z_v, E)
+
+
 @numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
 def _fitted_pairs_loop(rho, ka, kc, t2, row, n_int, alb, mu, z_r, z_b, z_b1, th, out):
     """Compiled R_d(rho) exp(S(delta + Q)) (eqs. (82)-(84) on the point dipole) over pairs with their curvatures along
-    and across and squared twist, blockwise like the curved kernel's loop: (1) the exponent per pair from one row of
-    :func:`fitted_row_table`; (2) the dipole with the exponent folded into its exponentials. Returns True (the
+    and across and squared twist, blockwise like the curved kernel's loop: (1) the exponent per pair
+    (:func:`fitted_pair_exponent`); (2) the dipole with the exponent folded into its exponentials. Returns True (the
     caller raises) on a negative or non-finite rho or a non-finite exponent."""
     z_v = z_r + 2.0 * z_b
     n = rho.size
@@ -273,15 +329,11 @@ def _fitted_pairs_loop(rho, ka, kc, t2, row, n_int, alb, mu, z_r, z_b, z_b1, th,
             r = rho[k]
             if not ((r >= 0.0) & (r < math.inf)):
                 return True
-            if ka[k] == 0.0 and kc[k] == 0.0 and t2[k] == 0.0:
-                dl[j] = 0.0
-                continue
-            ra, rb, ra1, rb1, g, e2 = _row_at(r, row, n_int, mu, z_r, z_b, z_b1, th)
-            E = pair_exponent(ka[k], kc[k], t2[k], ra, rb, ra1, rb1, g, e2, th)
+            E = fitted_pair_exponent(r, ka[k], kc[k], t2[k], row, n_int, mu, z_r, z_b, z_b1, th)
             if not (abs(E) < math.inf):
                 return True
             dl[j] = E
-        _dipole_exp_block(rho[start:start + m], dl[:m], out[start:start + m], alb, mu, z_r, z_v)
+        dipole_exp_block(rho[start:start + m], dl[:m], out[start:start + m], alb, mu, z_r, z_v)
     return False
 
 
@@ -347,8 +399,8 @@ def fitted_dipole_profile(tab: CurvatureTable, rho_opt, phi=None, *, k1_opt, k2_
                                  for x in (rho_opt, phi if cos2phi is None else cos2phi, k1_opt, k2_opt)))
     r, ang, k1, k2 = arrs
     if cos2phi is None:
-        if not np.all(np.abs(ang) <= _PHI_MAX):
-            raise ValueError(f"phi must be finite with |phi| <= {_PHI_MAX:g}")
+        if not np.all(np.abs(ang) <= PHI_MAX):
+            raise ValueError(f"phi must be finite with |phi| <= {PHI_MAX:g}")
         ang = np.cos(2.0 * ang)
     # Euler's formula with cos 2 phi: k_n(phi) = H + (k1 - k2)/2 cos 2 phi, tau^2 = ((k1 - k2)/2)^2 (1 - cos^2 2 phi)
     H, dk = 0.5 * (k1 + k2), 0.5 * (k1 - k2)

@@ -38,7 +38,8 @@ from meshshade.output.tonemap import srgb_encode, tonemap_linear
 from meshshade.raycast import make_scene
 from meshshade.transport.gather import gather
 from meshshade.transport.near_field import drift_angles, near_field_factors, refracted_drift
-from meshshade.transport.pair_kernel import PairKernel, source_frames, source_patch_radius
+from meshshade.transport.pair_kernel import PairKernel, source_frames
+from meshshade.transport.patch_average import source_patch_radius
 
 
 # ------------------------------------------------------------------------------------------------ camera

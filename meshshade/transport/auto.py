@@ -43,11 +43,7 @@ from scipy.spatial import cKDTree
 from meshshade.geometry.topology import vertex_adjacency
 from meshshade.kernels.curvature import VALIDITY_TOL, curvature_ratios
 from meshshade.materials import Material
-from meshshade.transport.models import KERNEL_NAMES
-
-#: plan codes of the kernels (indices into KERNEL_NAMES)
-DIPOLE, CURVED, EXACT_SPHERE, FITTED = (KERNEL_NAMES.index(name) for name in ("dipole", "curved", "exact-sphere",
-                                                                              "fitted"))
+from meshshade.transport.models import KERNEL_NAMES, Kernel
 
 #: defaults (see module docstring; the validity tolerance is the curvature kernel's own, VALIDITY_TOL)
 CURVATURE_TOL = 1e-2
@@ -57,9 +53,10 @@ UMBILIC_TOL = 0.1
 
 @dataclass(frozen=True)
 class AutoPlan:
-    """Per entry sample: ``kernel`` (k,) int8 in {DIPOLE, CURVED, EXACT_SPHERE, FITTED}; ``exact_geodesic`` (k,) bool
-    (exact geodesics in the near zone); ``far_dipole`` (k,) bool (the surface is flat on the scale of the
-    cutoff around the sample, so its far field may be summed by clusters with the planar dipole of the chord)."""
+    """Per entry sample: ``kernel`` (k,) int8, a :class:`~meshshade.transport.models.Kernel` 0-3 (named by
+    KERNEL_NAMES); ``exact_geodesic`` (k,) bool (exact geodesics in the near zone); ``far_dipole`` (k,) bool (the
+    surface is flat on the scale of the cutoff around the sample, so its far field may be summed by clusters with
+    the planar dipole of the chord)."""
 
     kernel: np.ndarray
     exact_geodesic: np.ndarray
@@ -143,10 +140,10 @@ def plan_sources(k1, k2, k_near, k_far, material: Material, near_mm, cutoff_mm, 
     H = 0.5 * (k1 + k2)
     umbilic = ((k2 > 0) & (k1 - k2 <= umbilic_tol * k1) & (np.asarray(k_far) <= (1 + umbilic_tol) * H)
                & (kmin_far >= (1 - umbilic_tol) * H))
-    kernel = np.full(k1.shape, CURVED, dtype=np.int8)
-    kernel[flat] = DIPOLE
-    kernel[~flat & out_of_range & umbilic] = EXACT_SPHERE
-    kernel[~flat & out_of_range & ~umbilic] = FITTED
+    kernel = np.full(k1.shape, Kernel.CURVED, dtype=np.int8)
+    kernel[flat] = Kernel.DIPOLE_SURFACE
+    kernel[~flat & out_of_range & umbilic] = Kernel.EXACT_SPHERE
+    kernel[~flat & out_of_range & ~umbilic] = Kernel.FITTED
     near = np.broadcast_to(np.asarray(near_mm, dtype=np.float64), k1.shape)
     exact_geo = np.asarray(k_near, dtype=np.float64) * near > geodesic_tol
     far_dipole = np.asarray(k_far, dtype=np.float64) * W.max() <= curvature_tol

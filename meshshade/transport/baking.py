@@ -43,7 +43,8 @@ from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, S
 from meshshade.transport.gather import PairStream, Stopwatch, chunk_size, cutoff_radii, gather
 from meshshade.transport.models import DEFAULT_MODEL, MODELS
 from meshshade.transport.near_field import check_near_field, drift_angles, near_field_factors, refracted_drift
-from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, source_frames, source_patch_radius
+from meshshade.transport.pair_kernel import PairKernel, source_frames
+from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
 from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, clusters_pay, neighbourhood_solver
 from meshshade.volume.transport import NORMAL_SPACING, VolumeTransport, grading
 
@@ -327,7 +328,7 @@ def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field,
     clustered, src_cut, chord_cut = _gather_radii(zone, cut, near)
     groups = _zone_groups(zone)
     factors = near_field_factors(material) if near_field == "beam" else None
-    kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors)
+    kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors, reach_mm=cut)
     kernel.pair_points = (samples.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
     if factors is not None:
         kernel.source_scale = factors.incidence_scale(samples.cos_incidence)

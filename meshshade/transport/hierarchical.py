@@ -33,25 +33,21 @@ from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError, ParameterError
 from meshshade.geometry.curvature import principal_curvatures
-from meshshade.kernels.curvature import CurvatureTable
-from meshshade.kernels.fitted_curvature import (effective_coefficients, fitted_row_table, matched_table,
-                                                shipped_coefficients)
 from meshshade.kernels.dipole import dipole_profile
-from meshshade.kernels.optics import diffusion_params
-from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
 from meshshade.progress import Progress, kernel_interrupts
-from meshshade.transport.auto import (CURVED, DIPOLE, EXACT_SPHERE, FITTED, AutoPlan, neighbourhood_curvature,
-                                      plan_sources)
+from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
 from meshshade.transport.farfield import _receiver_order
 from meshshade.transport.farfield_kernels import kd_permutation, node_ranges, tree_depth
 from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.hierarchy_kernels import (KIND_CURVED, KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_FITTED,
-                                                   KIND_SPHERE, cluster_geometry, far_traverse)
-from meshshade.transport.models import MODELS
+from meshshade.transport.hierarchy_kernels import (Clusters, FarFactors, Opening, TreeSources, cluster_geometry,
+                                                   far_traverse)
+from meshshade.transport.kernel_evaluation import SphereTables, kernel_params
+from meshshade.transport.models import MODEL_KERNEL, MODELS, Kernel
 from meshshade.transport.near_field import (check_near_field, drift_angles, near_field_factors,
                                             refracted_drift)
-from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, PairKernel, patch_average_factor, source_frames
+from meshshade.transport.pair_kernel import PairKernel, source_frames
+from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
 from meshshade.transport.zones import NEAR_MARGIN, neighbourhood_solver
 
 #: candidate near radii of each source, in radii of its dual patch (>= PATCH_AVERAGE_RADII: the far field is
@@ -80,9 +76,6 @@ CONE_MIN = 0.8
 LEAF_SIZE = 16
 #: receivers per traversal call (progress and Ctrl-C between calls)
 RECEIVER_BLOCK = 16384
-#: relative width of the exact-sphere radius bins and the theta grid of their tables (as PairKernel)
-SPHERE_RADIUS_RTOL = 1e-3
-SPHERE_THETA_POINTS = 4097
 
 
 class FarFieldUnsupported(MeshshadeError):
@@ -211,7 +204,7 @@ class SurfaceTransport:
     Build with :meth:`build`; :meth:`exitance` maps vertex-sample powers to exitance. Attributes: ``mesh``,
     ``material``, ``model``; ``curvature`` (PrincipalCurvatures of the vertices); ``frames`` (SourceFrames of
     every vertex); ``plan`` (AutoPlan per vertex for ``model="auto"``, else None); ``kind`` (n,) int8 kernel
-    per vertex as a source (hierarchy_kernels.KIND_*); ``cutoff_mm`` (3,); ``near_mm`` (n,) near radius per
+    per vertex as a source (models.Kernel); ``cutoff_mm`` (3,); ``near_mm`` (n,) near radius per
     source; ``near`` the sparse near-field matrices per computed channel (receiver rows, source columns,
     1/mm^2 with the patch average); ``timings`` and ``stats`` of the build.
     """
@@ -233,9 +226,7 @@ class SurfaceTransport:
     shape: np.ndarray
     sphere_row: np.ndarray
     log_radius: np.ndarray
-    sphere_table: np.ndarray
-    sphere_r0: np.ndarray
-    params: tuple
+    params: object
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
     #: "point" or "beam" (transport/near_field.py: the near matrices and every far pair carry the near-field
@@ -299,30 +290,29 @@ class SurfaceTransport:
             plan = plan_sources(frames.k1, frames.k2, kn_near[:, 0], kn_far[:, 0], material, NEAR_MARGIN * near_mm,
                                 cut, kmin_far=-kn_far[:, 1], **(auto_options or {}))
         H = 0.5 * (frames.k1 + frames.k2)
-        kind = np.full(n, KIND_CURVED, dtype=np.int8)
-        if model == "dipole":
-            kind[:] = KIND_DIPOLE_CHORD
-        elif model == "exact-sphere":
-            kind[:] = np.where(H > 0, KIND_SPHERE, KIND_DIPOLE_CHORD)
-        elif model == "fitted":
-            kind[:] = KIND_FITTED
-        elif model == "auto":
-            kind[plan.kernel == DIPOLE] = KIND_DIPOLE_SURFACE
-            kind[plan.kernel == CURVED] = KIND_CURVED
-            kind[plan.kernel == EXACT_SPHERE] = KIND_SPHERE
-            kind[plan.kernel == FITTED] = KIND_FITTED
+        kind = (np.asarray(plan.kernel, dtype=np.int8) if model == "auto"
+                else np.full(n, MODEL_KERNEL[model], dtype=np.int8))
+        if model == "exact-sphere":   # not convex: the chord dipole, a tree of its own
+            kind[H <= 0] = Kernel.DIPOLE_CHORD
         timings["plan"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        sphere = SphereTables(material, rtol)
+        sph_row = np.full(n, -1, dtype=np.int64)
+        sph_row[kind == Kernel.EXACT_SPHERE] = sphere.rows(H[kind == Kernel.EXACT_SPHERE])
+        logr = np.where(sph_row >= 0, np.log(sphere.r0[np.maximum(sph_row, 0)] if sphere.r0.size else 1.0), 0.0)
+        params = kernel_params(material, cut, sphere)
+        timings["sphere tables"] = time.perf_counter() - t0
         factors = near_field_factors(material) if near_field == "beam" else None
-        kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors)
+        # the near matrices read the same tables as the far field (no series at single pairs)
+        kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors, params=params,
+                            sphere=sphere, sphere_series_pairs=0)
         kernel.pair_points = (src.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
         t0 = time.perf_counter()
         if model == "auto":
             exact = plan.exact_geodesic & (geodesic == "exact")
         else:
             exact = np.full(n, geodesic == "exact")
-        sph_row, logr, sph_tab, sph_r0 = _sphere_tables(material, H, kind == KIND_SPHERE, rtol)
-        near, near_pairs, nstats = _near_matrices(mesh, src, frames, kernel, exact, near_mm, patch, progress,
-                                                  (sph_row, sph_tab, sph_r0))
+        near, near_pairs, nstats = _near_matrices(mesh, src, frames, kernel, exact, near_mm, patch, progress)
         timings["near field"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         shape = _shape_operators(frames)
@@ -337,12 +327,11 @@ class SurfaceTransport:
         stats = {"near_pairs": nstats["pairs"], "near_pairs_exact_geodesic": nstats["exact_pairs"],
                  "near_mm_median": float(np.median(near_mm)), "near_patch_radii": float(near_patch_radii),
                  **({"far_distance_error": check["errors"]} if check else {}),
-                 **{f"sources_{name}": int((kind == k).sum()) for k, name in _KIND_NAMES.items()}}
+                 **{f"sources_{k.name.lower()}": int((kind == k).sum()) for k in Kernel}}
         if model == "exact-sphere":
             stats["exact_sphere_fallback_dipole"] = int((H <= 0).sum())
         return cls(mesh, material, model, curv, frames, plan, kind, cut, near_mm, patch, kernel.channels, near,
-                   float(theta), trees, shape, sph_row, logr, sph_tab, sph_r0, _channel_params(material, cut),
-                   timings, stats, near_field, near_pairs)
+                   float(theta), trees, shape, sph_row, logr, params, timings, stats, near_field, near_pairs)
 
     # ------------------------------------------------------------------------------------------------ use
     def sample_plan(self, samples):
@@ -433,7 +422,6 @@ class SurfaceTransport:
         rep = np.arange(3)
         for c, same in self.channels:
             rep[same] = c
-        st, al, mu, zr, zb, zv, a0, coef, n_int, fit, fit_coef, fit_zb = self.params
         recv = mesh.vertices
         rnrm = mesh.vertex_normals
         order = _receiver_order(recv)
@@ -444,66 +432,36 @@ class SurfaceTransport:
             if not np.any(power > 0):
                 continue
             r = tree.rows
-            geo = cluster_geometry(np.ascontiguousarray(mesh.vertices[r]), np.ascontiguousarray(self.frames.normals[r]),
-                                   np.ascontiguousarray(self.shape[r]), power, np.ascontiguousarray(self.patch_mm[r]),
-                                   np.ascontiguousarray(self.near_mm[r]), np.ascontiguousarray(self.sphere_row[r]),
-                                   np.ascontiguousarray(self.log_radius[r]), tree.lo, tree.hi)
+            geo = Clusters(*cluster_geometry(
+                np.ascontiguousarray(mesh.vertices[r]), np.ascontiguousarray(self.frames.normals[r]),
+                np.ascontiguousarray(self.shape[r]), power, np.ascontiguousarray(self.patch_mm[r]),
+                np.ascontiguousarray(self.near_mm[r]), np.ascontiguousarray(self.sphere_row[r]),
+                np.ascontiguousarray(self.log_radius[r]), tree.lo, tree.hi))
             lit_trees.append((k, tree, power, geo))
         timings["clusters"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         bar = Progress(progress if isinstance(progress, str) else "bake", n * max(len(lit_trees), 1), "receivers",
                        enabled=bool(progress) and bool(lit_trees))
         with bar:
+            opening = Opening(self.cutoff_mm, self.theta, CONE_MIN)
             for k, tree, power, geo in lit_trees:
-                P, sig, nsig, ssig, nmean, cone, Smean, rad, rn, srow = geo
                 r = tree.rows
-                args = (k, np.ascontiguousarray(mesh.vertices[r]), np.ascontiguousarray(self.frames.normals[r]),
-                        np.ascontiguousarray(self.shape[r]), power, np.ascontiguousarray(self.near_mm[r]),
-                        np.ascontiguousarray(self.sphere_row[r]), tree.lo, tree.hi, tree.first_leaf, P, sig, nsig, ssig, nmean,
-                        cone, Smean, rad, rn, srow, self.cutoff_mm, self.theta, CONE_MIN, rep, st, al, mu, zr, zb,
-                        zv, a0, coef, n_int, fit, fit_coef, fit_zb, self.sphere_table, self.sphere_r0,
-                        *_drift_args(None if chan is None else d_mm[r], power, tree), dslope, dlog0, dlogstep, dst,
-                        nlog)
+                sources = TreeSources(np.ascontiguousarray(mesh.vertices[r]),
+                                     np.ascontiguousarray(self.frames.normals[r]), np.ascontiguousarray(self.shape[r]),
+                                     power, np.ascontiguousarray(self.near_mm[r]),
+                                     np.ascontiguousarray(self.sphere_row[r]), tree.lo, tree.hi, tree.first_leaf)
+                far = FarFactors(*_drift_args(None if chan is None else d_mm[r], power, tree), dslope, dlog0,
+                                 dlogstep, dst, nlog)
                 for a in range(0, n, RECEIVER_BLOCK):
                     blk = order[a:a + RECEIVER_BLOCK]
                     with kernel_interrupts():
-                        Mf, cnt = far_traverse(recv, rnrm, blk, *args)
+                        Mf, cnt = far_traverse(recv, rnrm, blk, k, sources, geo, opening, rep, self.params, far)
                     M[blk] += Mf[blk]
                     counts += cnt[blk].sum(axis=0)
                     bar.update(blk.size)
         timings["far field"] = time.perf_counter() - t0
         stats = {"far_pairs": int(counts[0]), "far_clusters": int(counts[1]), "timings": timings}
         return M, stats
-
-
-_KIND_NAMES = {KIND_DIPOLE_CHORD: "dipole_chord", KIND_DIPOLE_SURFACE: "dipole_surface", KIND_CURVED: "curved",
-               KIND_SPHERE: "exact_sphere", KIND_FITTED: "fitted"}
-
-
-def _channel_params(material: Material, cut):
-    """Per-channel arrays the numba kernels take: sigma_t', alpha', mu, z_r, z_b, z_v, a(0) (optical units) and
-    the curvature tables' coefficients padded to one (3, n_int, 16) array with their lengths."""
-    p = diffusion_params(material.albedo_prime, material.eta)
-    st = np.ascontiguousarray(material.sigma_t_prime, dtype=np.float64)
-    b3 = lambda v: np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (3,)))  # noqa: E731
-    tables = [CurvatureTable(float(material.albedo_prime[c]), float(material.eta),
-                             max(float(cut[c] * st[c]) * 1.25, 10.0)) for c in range(3)]
-    n_int = np.array([t.coef.shape[0] for t in tables], dtype=np.int64)
-    coef = np.zeros((3, int(n_int.max()), tables[0].coef.shape[1]))
-    for c, t in enumerate(tables):
-        coef[c, :t.coef.shape[0]] = t.coef
-    a0 = np.array([t.a0 for t in tables])
-    # the fitted model: per channel its effective coefficients and its table (fitted_row_table: the material's and
-    # the matched boundary's ratios and the near-source functions on the same intervals), padded as coef
-    fit = np.stack([effective_coefficients(shipped_coefficients(), float(np.ravel(p.A)[0]) - 1.0)] * 3)
-    matched = [matched_table(t) for t in tables]
-    rows = [fitted_row_table(t, m, fit[c]) for c, (t, m) in enumerate(zip(tables, matched))]
-    fit_coef = np.zeros((3, coef.shape[1], rows[0].shape[1]))
-    for c, r in enumerate(rows):
-        fit_coef[c, :r.shape[0]] = r
-    fit_zb = np.array([t.z_b for t in matched])
-    return (st, b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_b), b3(p.z_v), a0, coef, n_int, fit, fit_coef,
-            fit_zb)
 
 
 def _shape_operators(frames) -> np.ndarray:
@@ -515,49 +473,9 @@ def _shape_operators(frames) -> np.ndarray:
     return S
 
 
-def _sphere_tables(material: Material, H, use, rtol):
-    """Exact-sphere tables of the sources ``use`` (local radius 1/H binned to SPHERE_RADIUS_RTOL as PairKernel
-    does): per source the table row (-1 for none) and log radius; the tables log R [1/mm^2] on a uniform theta
-    grid, rows ``3 * bin + channel``, and the radius of each bin."""
-    n = H.size
-    row = np.full(n, -1, dtype=np.int64)
-    logr = np.zeros(n)
-    if not np.any(use):
-        return row, logr, np.zeros((3, 2)), np.ones(1)
-    radius = 1.0 / H[use]
-    q = np.round(np.log(radius) / np.log1p(SPHERE_RADIUS_RTOL)).astype(np.int64)
-    bins, inv = np.unique(q, return_inverse=True)
-    row[use] = inv
-    r0 = np.exp(bins * np.log1p(SPHERE_RADIUS_RTOL))
-    logr[use] = np.log(r0[inv])
-    theta = np.linspace(0.0, np.pi, SPHERE_THETA_POINTS)
-    tab = np.empty((3 * bins.size, SPHERE_THETA_POINTS))
-    for b, R0 in enumerate(r0):
-        for c in range(3):
-            ch = material.channel(c)
-            st = ch["sigma_t_prime"]
-            vals = sphere_series_profile(theta, R0_opt=R0 * st, albedo_prime=ch["albedo_prime"], eta=ch["eta"],
-                                         rtol=rtol) * st * st
-            tab[3 * b + c] = np.log(np.maximum(vals, 1e-300))
-    return row, logr, tab, r0
-
-
-def _sphere_lookup(tab, r0, row, c, s):
-    """R [1/mm^2] from the exact-sphere tables (rows ``3 row + c``) at distances ``s`` mm, log-linear in theta."""
-    m = tab.shape[1] - 1
-    f = np.minimum(s / r0[row], np.pi) / np.pi * m
-    i = np.minimum(f.astype(np.int64), m - 1)
-    w = f - i
-    r = 3 * row + c
-    return np.exp((1.0 - w) * tab[r, i] + w * tab[r, i + 1])
-
-
-def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch, progress, sphere):
+def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch, progress):
     """Sparse near-field matrices per computed channel: W[v, u] = R(v; u) w_patch for the pairs with chord <=
-    near_mm[u] found within geodesic NEAR_MARGIN near_mm[u] of u (exact geodesics where ``exact``, arc elsewhere).
-    Pairs of exact-sphere sources take their kernel from the sphere tables ``sphere`` = (row per source, log R
-    tables, radius per row; log-linear in theta as PairKernel's own tables)."""
-    sph_row, sph_tab, sph_r0 = sphere
+    near_mm[u] found within geodesic NEAR_MARGIN near_mm[u] of u (exact geodesics where ``exact``, arc elsewhere)."""
     n = mesh.n_vertices
     parts = {c: [] for c, _ in kernel.channels}
     rows_all, cols_all, geo_s, geo_phi = [], [], [], []
@@ -586,14 +504,8 @@ def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch,
                 keep = nb.chord <= near_mm[s_idx]
                 s_idx, vtx, s, chord, phi = s_idx[keep], vtx[keep], nb.distance[keep], nb.chord[keep], nb.phi[keep]
                 phi = np.where(np.isfinite(phi), phi, 0.0)  # a degenerate frame (normals that cancel): any azimuth
-                row = sph_row[s_idx]
-                on = row >= 0
                 for c, _ in kernel.channels:
-                    R = np.empty(s.size)
-                    if np.any(~on):
-                        R[~on] = kernel.evaluate(c, s_idx[~on], s[~on], chord[~on], phi[~on], vtx[~on])
-                    if np.any(on):
-                        R[on] = _sphere_lookup(sph_tab, sph_r0, row[on], c, s[on])
+                    R = kernel.evaluate(c, s_idx, s, chord, phi, vtx)
                     a_p = patch[s_idx]
                     close = np.flatnonzero(s < PATCH_AVERAGE_RADII * a_p)
                     if close.size:

@@ -10,31 +10,80 @@ replaced by four kernel values with an error of third order in the cluster's siz
 cancel by symmetry: fourth order for symmetric clusters), whatever the kernel. The third eigenvalue (the sagitta
 of a curved cluster) is dropped: (k a^2/2)^2 against a^2.
 
-Kernels (``kind``): 0 dipole of the chord, 1 dipole of the surface distance, 2 the first-order curved kernel
-(soft policy, docs/physics.md eqs. (49)-(53)) with the source's shape operator, 3 the exact sphere of the source's
-local radius (tabulated per radius bin, log-linear in theta), 4 the fitted curvature model on the dipole
-(docs/physics.md eq. (82); per channel its 16 effective coefficients ``fit`` (3, 16), the fitted model's table
-``fit_coef`` (3, n_int, 32: the material's and its matched boundary's curvature ratios and the near-source
-functions side by side, :func:`~meshshade.kernels.fitted_curvature.fitted_row_table`), and the matched boundary's
-extrapolation distances ``fit_zb``). The surface distance of a far pair is the arc of
-docs/physics.md eq. (59) from the chord and the two normals.
+Every pair's kernel is :func:`meshshade.transport.kernel_evaluation.kernel_value` (``kind`` a
+:class:`~meshshade.transport.models.Kernel`), the one evaluation the near field and the direct sum use too; the
+fitted model's pairs take the normal-section curvature between their two points (:func:`fitted_geometry`). The
+surface distance of a far pair is the arc of docs/physics.md eq. (59) from the chord and the two normals.
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
-from meshshade.kernels.curvature.coefficients import _ratios_direct
-from meshshade.kernels.curvature.policies import _DELTA_MAX, _INV_SAT
-from meshshade.kernels.curvature.table import _PER_UNIT, _table_eval
-from meshshade.kernels.dipole import dipole_diffuse_reflectance
-from meshshade.kernels.fitted_curvature import _row_at, pair_exponent
 from meshshade.transport.farfield_kernels import log_grid_interp, near_factor
+from meshshade.transport.kernel_evaluation import FITTED, kernel_value
 
 STACK_SIZE = 256
-KIND_DIPOLE_CHORD, KIND_DIPOLE_SURFACE, KIND_CURVED, KIND_SPHERE, KIND_FITTED = 0, 1, 2, 3, 4
+
+
+class TreeSources(NamedTuple):
+    """One k-d tree of vertex sources in tree order (rows of the node ranges): positions ``pos`` (k, 3) mm, unit
+    normals ``nrm`` (k, 3), shape operators ``shape`` (k, 6) 1/mm, powers ``power`` (k,) W, near radii ``near``
+    (k,) mm and exact-sphere rows ``sph`` (k,) int64; the nodes' source ranges ``lo``, ``hi`` and the first leaf."""
+
+    pos: np.ndarray
+    nrm: np.ndarray
+    shape: np.ndarray
+    power: np.ndarray
+    near: np.ndarray
+    sph: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    first_leaf: int
+
+
+class Clusters(NamedTuple):
+    """Per node of a :class:`TreeSources` (:func:`cluster_geometry`): power P, sigma points ``sig`` (4, 3), their
+    normals ``nsig`` and shape operators ``ssig`` (4, 6), mean normal, normal-cone cosine, mean shape operator,
+    bounding radius ``rad``, largest near radius ``rn`` and representative sphere row ``srow``."""
+
+    P: np.ndarray
+    sig: np.ndarray
+    nsig: np.ndarray
+    ssig: np.ndarray
+    nmean: np.ndarray
+    cone: np.ndarray
+    Smean: np.ndarray
+    rad: np.ndarray
+    rn: np.ndarray
+    srow: np.ndarray
+
+
+class Opening(NamedTuple):
+    """When the traversal uses a node whole: ``cutoff`` (3,) mm per channel, the opening angle ``theta`` (a node
+    of radius a is used at distance d >= a / theta) and the cosine ``cone_min`` of the widest normal cone."""
+
+    cutoff: np.ndarray
+    theta: float
+    cone_min: float
+
+
+class FarFactors(NamedTuple):
+    """The near-field model's factors on far pairs (docs/physics.md eqs. (80), (88)): ``drift`` (k, 3) mm per
+    source and ``node_drift`` (nodes, 3) its power-weighted mean per node, the drift slope table ``slope`` (empty:
+    no drift) on the grid ``log0 + i log_step`` of ln(r sigma_t'), ``sigma_t`` the drifting channel's sigma_t',
+    and ``log_ratio`` (3, m) the near field's ln N(s) on the same grid (m = 0: none)."""
+
+    drift: np.ndarray
+    node_drift: np.ndarray
+    slope: np.ndarray
+    log0: float
+    log_step: float
+    sigma_t: float
+    log_ratio: np.ndarray
 
 
 # ---------------------------------------------------------------------------------------------------- geometry
@@ -85,7 +134,7 @@ def fitted_geometry(kind, kn, knp, S, srow, x0, x1, x2, nx0, nx1, nx2, y0, y1, y
     ``(n_x - n_y).(x - y)/|x - y|^2`` (docs/physics.md eq. (85); the source's ``kn`` for coincident points), and
     the source's squared twist from tr(S^2) = kn^2 + knp^2 + 2 tau^2 (S tangent; clamped at 0 against rounding);
     ``(kn, 0)`` for every other kernel."""
-    if kind != KIND_FITTED:
+    if kind != FITTED:
         return kn, 0.0
     sxx, syy, szz, sxy, sxz, syz = S[srow, 0], S[srow, 1], S[srow, 2], S[srow, 3], S[srow, 4], S[srow, 5]
     tr2 = sxx * sxx + syy * syy + szz * szz + 2.0 * (sxy * sxy + sxz * sxz + syz * syz)
@@ -95,60 +144,6 @@ def fitted_geometry(kind, kn, knp, S, srow, x0, x1, x2, nx0, nx1, nx2, y0, y1, y
     if c2 <= 0.0:
         return kn, t2
     return ((nx0 - ny0) * v0 + (nx1 - ny1) * v1 + (nx2 - ny2) * v2) / c2, t2
-
-
-# ---------------------------------------------------------------------------------------------------- kernels
-@njit(cache=True, inline="always")
-def kernel_value(kind, c, chord, s, kn, knp, t2, sph_row, st, al, mu, zr, zb, zv, a0, coef, n_int, fit, fit_coef,
-                 fit_zb, sph_tab, sph_r0):
-    """R [1/mm^2] of channel ``c`` for one pair: kind (module docstring), chord and surface distance s (mm), the
-    source's normal curvatures towards the receiver and across (1/mm) and its squared twist t2 (1/mm^2, kind 4),
-    its sphere-table row (kind 3)."""
-    sc = st[c]
-    if kind == KIND_DIPOLE_CHORD:
-        return dipole_diffuse_reflectance(chord * sc, al[c], mu[c], zr[c], zv[c]) * sc * sc
-    if kind == KIND_DIPOLE_SURFACE:
-        return dipole_diffuse_reflectance(s * sc, al[c], mu[c], zr[c], zv[c]) * sc * sc
-    if kind == KIND_FITTED:
-        rho = s * sc
-        if rho * mu[c] >= 1500.0:
-            return 0.0
-        ra, rb, ra1, rb1, g, e2 = _row_at(rho, fit_coef[c], n_int[c], mu[c], zr[c], zb[c], fit_zb[c], fit[c])
-        E = pair_exponent(kn / sc, knp / sc, t2 / (sc * sc), ra, rb, ra1, rb1, g, e2, fit[c])
-        return dipole_diffuse_reflectance(rho, al[c], mu[c], zr[c], zv[c], E) * sc * sc
-    if kind == KIND_CURVED:
-        rho = s * sc
-        k1o, k2o = kn / sc, knp / sc
-        if k1o == 0.0 and k2o == 0.0:
-            return dipole_diffuse_reflectance(rho, al[c], mu[c], zr[c], zv[c]) * sc * sc
-        u = math.sqrt(rho) * _PER_UNIT
-        if u < n_int[c]:
-            ra, rb = _table_eval(u, coef[c])
-        elif rho * mu[c] >= 1500.0:
-            return 0.0
-        else:
-            ra, rb = _ratios_direct(rho, mu[c], zr[c], zb[c])
-        delta = k1o * ra + k2o * rb
-        delta = delta / math.sqrt(1.0 + (delta * _INV_SAT) * (delta * _INV_SAT))
-        out = dipole_diffuse_reflectance(rho, al[c], mu[c], zr[c], zv[c], min(delta, _DELTA_MAX))
-        rd0 = dipole_diffuse_reflectance(0.0, al[c], mu[c], zr[c], zv[c])
-        if out > rd0:
-            d0 = max((k1o + k2o) * a0[c], 0.0)
-            d0 = d0 / math.sqrt(1.0 + (d0 * _INV_SAT) * (d0 * _INV_SAT))
-            cap = rd0 * math.exp(min(d0, _DELTA_MAX))
-            if out > cap:
-                out = cap
-        return out * sc * sc
-    # exact sphere: log-linear interpolation of log R [1/mm^2] on a uniform theta grid over [0, pi]
-    if sph_row < 0:
-        return dipole_diffuse_reflectance(chord * sc, al[c], mu[c], zr[c], zv[c]) * sc * sc
-    row = sph_row * 3 + c
-    th = min(s / sph_r0[sph_row], math.pi)
-    m = sph_tab.shape[1] - 1
-    f = th / math.pi * m
-    i = min(int(f), m - 1)
-    w = f - i
-    return math.exp((1.0 - w) * sph_tab[row, i] + w * sph_tab[row, i + 1])
 
 
 # ---------------------------------------------------------------------------------------------------- clusters
@@ -324,10 +319,11 @@ def drift_factor(u0, u1, u2, n0, n1, n2, d0, d1, d2, s, dslope, dlog0, dlogstep,
 
 # ---------------------------------------------------------------------------------------------------- traversal
 @njit(cache=True, parallel=True)
-def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo, hi, first_leaf, P, sig, nsig, ssig, nmean,
-                 cone, Smean, rad, rn, srow, cutoff, theta, cone_min, rep, st, al, mu, zr, zb, zv, a0, coef, n_int,
-                 fit, fit_coef, fit_zb, sph_tab, sph_r0, drift, ndrift, dslope, dlog0, dlogstep, dst, nlog):
-    """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in ``order``.
+def far_traverse(recv, rnrm, order, kind, tree, clusters, opening, rep, params, factors):
+    """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in ``order``, from
+    the sources of one :class:`TreeSources` (``tree``, all of kernel ``kind``) and their :class:`Clusters`, with the
+    :class:`Opening` criteria, the kernel's :class:`~meshshade.transport.kernel_evaluation.KernelParams` and the
+    near-field model's :class:`FarFactors`.
 
     A node is skipped when its sources are all beyond the cutoff (chord), used whole (sigma points, mean normal,
     mean shape operator, representative sphere row) when all its pairs are far (d - a > its largest near
@@ -344,6 +340,10 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
     multiplied by exp(nlog[c]) interpolated at ln(s sigma_t'[c]) on the same grid as ``dslope``. Returns M and
     per-receiver counts (n, 2): kernel evaluations at leaves, clusters used.
     """
+    pos, nrm, shape, power, near, sph, lo, hi, first_leaf = tree
+    P, sig, nsig, ssig, nmean, cone, Smean, rad, rn, srow = clusters
+    cutoff, theta, cone_min = opening
+    drift, ndrift, dslope, dlog0, dlogstep, dst, nlog = factors
     n = recv.shape[0]
     M = np.zeros((n, 3))
     counts = np.zeros((n, 2), np.int64)
@@ -406,10 +406,9 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                                            ndrift[node, 1], ndrift[node, 2], s, dslope, dlog0, dlogstep, dst)
                     for c in range(3):
                         if (use >> c) & 1:
-                            kv = kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], st, al, mu, zr, zb, zv, a0,
-                                              coef, n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
+                            kv = kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], params)
                             if use_n:
-                                kv *= near_factor(nlog, c, s * st[c], dlog0, dlogstep)
+                                kv *= near_factor(nlog, c, s * params.sigma_t[c], dlog0, dlogstep)
                             acc[c] += wq * kv
                 n_clu += 1
             if open_mask == 0:
@@ -431,10 +430,9 @@ def far_traverse(recv, rnrm, order, kind, pos, nrm, shape, power, near, sph, lo,
                                            dlogstep, dst)
                     for c in range(3):
                         if (open_mask >> c) & 1 and s <= cutoff[c]:
-                            kv = kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], st, al, mu, zr, zb, zv, a0, coef,
-                                              n_int, fit, fit_coef, fit_zb, sph_tab, sph_r0)
+                            kv = kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], params)
                             if use_n:
-                                kv *= near_factor(nlog, c, s * st[c], dlog0, dlogstep)
+                                kv *= near_factor(nlog, c, s * params.sigma_t[c], dlog0, dlogstep)
                             acc[c] += pj * kv
                     n_leaf += 1
                 continue

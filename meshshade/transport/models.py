@@ -1,4 +1,4 @@
-"""The bake's kernel models: the one list of their names (the CLI's choices, the benchmark's models).
+"""The bake's kernel models; their names (the CLI's choices, the benchmark's models) are in :mod:`meshshade.names`.
 
 * ``dipole``: Jensen's planar dipole of the chord distance;
 * ``curved``: the first-order k1/k2 kernel (kernels/curvature.py);
@@ -11,10 +11,28 @@
 """
 from __future__ import annotations
 
-#: the kernels ``auto`` chooses between per entry sample, in the order of its plan codes (``AutoPlan.kernel``,
-#: the NPZ's ``auto_kernel``: 0 dipole, 1 curved, 2 exact-sphere, 3 fitted)
-KERNEL_NAMES = ("dipole", "curved", "exact-sphere", "fitted")
-#: every model :func:`meshshade.transport.baking.bake` accepts
-MODELS = KERNEL_NAMES + ("auto", "volume")
-#: the default model of the bake, the CLI, batches, the Blender add-on and compare's first model
-DEFAULT_MODEL = "volume"
+from enum import IntEnum
+
+from meshshade.names import DEFAULT_MODEL, KERNEL_NAMES, MODELS  # noqa: F401 (the one list; no numpy there)
+
+
+class Kernel(IntEnum):
+    """The kernel a source's pairs take: the one enumeration of kernels, used by the auto plans
+    (``AutoPlan.kernel``, the NPZ's ``auto_kernel``), the hierarchical transport's sources and the compiled
+    evaluation (:func:`meshshade.transport.kernel_evaluation.kernel_value`)."""
+
+    #: the planar dipole of the surface distance (what ``auto`` calls "dipole")
+    DIPOLE_SURFACE = 0
+    #: the first-order k1/k2 kernel with its soft positivity policy
+    CURVED = 1
+    #: the exact sphere series of the source's local radius 2/(k1 + k2) (the chord dipole where it is not convex)
+    EXACT_SPHERE = 2
+    #: the fitted curvature model on the dipole
+    FITTED = 3
+    #: the planar dipole of the chord distance: the model "dipole"
+    DIPOLE_CHORD = 4
+
+
+#: the kernel of every source of a single-kernel model (``auto`` plans one per source; ``volume`` has none)
+MODEL_KERNEL = {"dipole": Kernel.DIPOLE_CHORD, "curved": Kernel.CURVED, "exact-sphere": Kernel.EXACT_SPHERE,
+                "fitted": Kernel.FITTED}

@@ -45,7 +45,7 @@ from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.near_field import (incidence_gain, near_field_profile, near_field_ring, near_field_sources,
                                           near_field_total)
 from meshshade.materials import Material
-from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, _disc_average
+from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, _disc_average
 
 #: what enters the medium in the bake: the kernels' own point source at z_r, or the near-field model
 NEAR_FIELDS = ("point", "beam")

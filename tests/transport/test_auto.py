@@ -18,6 +18,7 @@ from meshshade.kernels.dipole import dipole_profile
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import material_from_options
 from meshshade.transport import auto, zones
+from meshshade.transport.models import Kernel
 
 SKIN = material_from_options("skin1")
 
@@ -65,7 +66,7 @@ def test_curvature_bound_bounds_delta_of_every_pair(name, rng):
 def test_plan_flat_surface_uses_dipole_and_arc():
     k = np.zeros(5)
     plan = auto.plan_sources(k, k, k, k, SKIN, 10.0, 20.0)
-    assert np.all(plan.kernel == auto.DIPOLE) and not plan.exact_geodesic.any() and plan.far_dipole.all()
+    assert np.all(plan.kernel == Kernel.DIPOLE_SURFACE) and not plan.exact_geodesic.any() and plan.far_dipole.all()
     assert plan.counts()["auto_kernel_dipole"] == 5 and plan.counts()["auto_geodesic_arc"] == 5
 
 
@@ -78,12 +79,12 @@ def test_plan_small_sphere_uses_exact_sphere_and_saddle_uses_fitted():
     cut = transport.cutoff_radii(SKIN, 1e-4)
     kn = np.maximum(np.abs(k1), np.abs(k2))
     plan = auto.plan_sources(k1, k2, kn, kn, SKIN, cut.max(), cut)
-    assert plan.kernel.tolist() == [auto.EXACT_SPHERE, auto.FITTED, auto.FITTED]
+    assert plan.kernel.tolist() == [Kernel.EXACT_SPHERE, Kernel.FITTED, Kernel.FITTED]
     assert plan.exact_geodesic.all() and not plan.far_dipole.any()
     # the same umbilic point on a bumpy surface (larger or smaller curvatures within the cutoff): fitted
     bumpy = auto.plan_sources(k1[:1], k2[:1], kn[:1], 1.5 * kn[:1], SKIN, cut.max(), cut)
     dent = auto.plan_sources(k1[:1], k2[:1], kn[:1], kn[:1], SKIN, cut.max(), cut, kmin_far=[0.0])
-    assert bumpy.kernel[0] == auto.FITTED and dent.kernel[0] == auto.FITTED
+    assert bumpy.kernel[0] == Kernel.FITTED and dent.kernel[0] == Kernel.FITTED
 
 
 def test_plan_threshold_is_the_documented_bound():
@@ -92,7 +93,7 @@ def test_plan_threshold_is_the_documented_bound():
     W = auto.curvature_bound_mm(SKIN, radius).max()
     k = np.array([0.99, 1.01]) * 1e-2 / W
     plan = auto.plan_sources(k, k * 0.5, k, k, SKIN, radius.max(), radius)
-    assert plan.kernel.tolist() == [auto.DIPOLE, auto.CURVED]
+    assert plan.kernel.tolist() == [Kernel.DIPOLE_SURFACE, Kernel.CURVED]
     assert plan.far_dipole.tolist() == [True, False]
 
 
@@ -186,7 +187,7 @@ def test_cli_auto_reports_decisions(tmp_path, capsys):
     assert "comment meshshade auto: kernel dipole 0, curved 0, exact-sphere 1" in header
     assert trimesh.load(out, process=False).vertices.shape == V.shape
     data = np.load(npz)
-    assert data["auto_kernel"].tolist() == [auto.EXACT_SPHERE]
+    assert data["auto_kernel"].tolist() == [Kernel.EXACT_SPHERE]
     assert data["auto_exact_geodesic"].tolist() == [True]
 
 

@@ -19,6 +19,7 @@ from meshshade.materials import Material
 from meshshade.profiles import Shape, reflectance_profile
 from meshshade.transport import auto, cutoff_radii
 from meshshade.transport.baking import bake
+from meshshade.transport.models import Kernel
 
 MAT = Material(1.0, 0.01, 1.3, name="skin-like")
 R = 10.0
@@ -86,7 +87,7 @@ def test_auto_uses_the_fitted_model_out_of_first_order_range_off_spheres():
     k2 = np.array([-0.2, 0.2, 0.001, 0.05])
     kn = np.maximum(np.abs(k1), np.abs(k2))
     plan = auto.plan_sources(k1, k2, kn, kn, MAT, cut.max(), cut)
-    assert plan.kernel.tolist() == [auto.FITTED, auto.EXACT_SPHERE, auto.CURVED, auto.FITTED]
+    assert plan.kernel.tolist() == [Kernel.FITTED, Kernel.EXACT_SPHERE, Kernel.CURVED, Kernel.FITTED]
     assert "fitted 2" in plan.describe()
 
 

@@ -26,7 +26,7 @@ from meshshade.kernels.sphere import sphere_total_reflectance
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.baking import bake
-from meshshade.transport.pair_kernel import PATCH_AVERAGE_RADII, patch_average_factor
+from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
 
 _spec = importlib.util.spec_from_file_location("_sphere_reference", Path(__file__).with_name("_sphere_reference.py"))
 ref = importlib.util.module_from_spec(_spec)

@@ -10,7 +10,7 @@ from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.baking import bake
 from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.pair_kernel import patch_average_factor
+from meshshade.transport.patch_average import patch_average_factor
 
 SKIN = Material(1.0, 0.01, 1.3, name="skin-like")  # the skin test case of docs/physics.md §11
 

@@ -78,7 +78,7 @@ def _coeffs_scaled(rho, mu, z_r, z_b):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _ratios_direct(rho, mu, z_r, z_b):
+def ratios_direct(rho, mu, z_r, z_b):
     """``(a, b) = (alpha' A/R_d, alpha' B/R_d)`` by direct quadrature."""
     cA, cB, rd = _coeffs_scaled(rho, mu, z_r, z_b)
     return cA / rd, cB / rd

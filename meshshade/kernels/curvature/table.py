@@ -30,17 +30,17 @@ import numpy as np
 
 from meshshade.errors import MaterialError
 from meshshade.kernels.curvature.auxiliary import _check_nonneg_finite
-from meshshade.kernels.curvature.coefficients import VALIDITY_TOL, _ratios_direct, curvature_ratios
-from meshshade.kernels.curvature.policies import _DELTA_MAX, _INV_SAT, check_policy
+from meshshade.kernels.curvature.coefficients import VALIDITY_TOL, ratios_direct, curvature_ratios
+from meshshade.kernels.curvature.policies import CLAMP, DELTA_MAX, check_policy, entry_point_cap, policy_exponent
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
 from meshshade.kernels.optics import check_material, diffusion_params
 
-__all__ = ["CurvatureTable"]
+__all__ = ["CurvatureTable", "curved_dipole", "first_order_delta", "kernel_ratios"]
 
-# table layout: piecewise Chebyshev (degree _DEG) in u = sqrt(rho) on intervals of width 1/_PER_UNIT
+# table layout: piecewise Chebyshev (degree _DEG) in u = sqrt(rho) on intervals of width 1/PER_UNIT
 _DEG = 7
-_PER_UNIT = 16
-_MU_RHO_ZERO = 1500.0  # beyond the table and mu rho >= 1500 the kernel is 0 in float64 whatever delta is
+PER_UNIT = 16
+MU_RHO_ZERO = 1500.0  # beyond the table and mu rho >= 1500 the kernel is 0 in float64 whatever delta is
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -51,12 +51,12 @@ _MU_RHO_ZERO = 1500.0  # beyond the table and mu rho >= 1500 the kernel is 0 in 
 def _build_table(n_int, mu, z_r, z_b, cheb_t, to_mono, out):
     """out[i, 2 j + c]: coefficient of t^j (t in [-1, 1]) of a (c = 0) and b (c = 1) on interval i."""
     npt = cheb_t.size
-    du = 1.0 / _PER_UNIT
+    du = 1.0 / PER_UNIT
     vals = np.empty((npt, 2))
     for i in range(n_int):
         for q in range(npt):
             u = (i + 0.5 * (cheb_t[q] + 1.0)) * du
-            ra, rb = _ratios_direct(u * u, mu, z_r, z_b)
+            ra, rb = ratios_direct(u * u, mu, z_r, z_b)
             vals[q, 0] = ra
             vals[q, 1] = rb
         for j in range(npt):
@@ -68,7 +68,7 @@ def _build_table(n_int, mu, z_r, z_b, cheb_t, to_mono, out):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
-def _piece_pair(c, o, t, t2, t4):
+def piece_pair(c, o, t, t2, t4):
     """(a, b) of the interleaved degree-7 piece at ``c[o:o + 16]`` at t in [-1, 1] (Estrin's scheme)."""
     ra = (((c[o] + c[o + 2] * t) + t2 * (c[o + 4] + c[o + 6] * t))
           + t4 * ((c[o + 8] + c[o + 10] * t) + t2 * (c[o + 12] + c[o + 14] * t)))
@@ -83,16 +83,55 @@ def _table_eval(u, coef):
     iu = np.uint64(u)  # unsigned: no negative-index wraparound code
     t = 2.0 * (u - iu) - 1.0
     t2 = t * t
-    return _piece_pair(coef[iu], 0, t, t2, t2 * t2)
+    return piece_pair(coef[iu], 0, t, t2, t2 * t2)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def _table_ratios(rho, coef, n_int, mu, z_r, z_b):
     """Tabulated (a, b) at rho; direct quadrature beyond the table."""
-    u = math.sqrt(rho) * _PER_UNIT
+    u = math.sqrt(rho) * PER_UNIT
     if u >= n_int:
-        return _ratios_direct(rho, mu, z_r, z_b)
+        return ratios_direct(rho, mu, z_r, z_b)
     return _table_eval(u, coef)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def kernel_ratios(rho, coef, n_int, mu, z_r, z_b):
+    """(a, b) as the kernel needs them at rho (optical units): tabulated (``coef``, ``n_int`` intervals of a
+    :class:`CurvatureTable`), by direct quadrature beyond the table, and 0 where ``mu rho >= 1500`` (the kernel
+    ``R_d e^delta <= e^(700 - mu rho)`` underflows to 0 whatever they are)."""
+    u = math.sqrt(rho) * PER_UNIT
+    if u < n_int:
+        return _table_eval(u, coef)
+    if rho * mu >= MU_RHO_ZERO:
+        return 0.0, 0.0
+    return ratios_direct(rho, mu, z_r, z_b)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def first_order_delta(k_along, k_across, ra, rb):
+    """The first-order relative correction of docs/physics.md eq. (51), ``delta = k_n(phi) a + k_n(phi + pi/2) b``,
+    from the normal curvatures along and across the pair's direction (optical units) and the ratios a, b."""
+    return k_along * ra + k_across * rb
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def curved_dipole(rho, k_along, k_across, coef, n_int, alb, mu, z_r, z_b, z_v, a0, rd0, policy):
+    """The curved kernel of one pair, ``R_d(rho) f(delta)`` capped at its entry-point value (optical units): the
+    one scalar evaluation of docs/physics.md eqs. (49)-(53) with a positivity policy
+    (:mod:`~meshshade.kernels.curvature.policies`). ``k_along``, ``k_across``: the source's normal curvatures
+    towards the receiver and across (optical units); ``coef``, ``n_int``, ``a0``: a :class:`CurvatureTable`'s
+    coefficients, interval count and a(0); ``alb``, ``mu``, ``z_r``, ``z_b``, ``z_v``: the material's diffusion
+    parameters; ``rd0`` the dipole's R_d(0)."""
+    if k_along == 0.0 and k_across == 0.0:
+        return dipole_diffuse_reflectance(rho, alb, mu, z_r, z_v)
+    ra, rb = kernel_ratios(rho, coef, n_int, mu, z_r, z_b)
+    delta = first_order_delta(k_along, k_across, ra, rb)
+    if policy == CLAMP:
+        out = dipole_diffuse_reflectance(rho, alb, mu, z_r, z_v) * max(1.0 + delta, 0.0)
+    else:
+        out = dipole_diffuse_reflectance(rho, alb, mu, z_r, z_v, min(policy_exponent(delta, policy), DELTA_MAX))
+    return entry_point_cap(out, rd0, k_along + k_across, a0, policy)
 
 
 # cos(x) for the kernel's cos(2 phi): fdlibm-style reduction by pi/2 (33 + 53 bit split of pi/2, exact products
@@ -105,7 +144,7 @@ _SIN_C = tuple((-1.0) ** k / math.factorial(2 * k + 1) for k in range(1, 9))  # 
 _TWO_OVER_PI = 2.0 / math.pi
 _QUAD_COS = np.array([1.0, 0.0, -1.0, 0.0])  # cos(r + q pi/2) = QUAD_COS[q] cos r + QUAD_SIN[q] sin r
 _QUAD_SIN = np.array([0.0, -1.0, 0.0, 1.0])
-_PHI_MAX = 4.0e5  # |phi| bound of the kernel (2 phi < 2^19 pi/2); angles are meant to be in [-pi, pi]
+PHI_MAX = 4.0e5  # |phi| bound of the kernel (2 phi < 2^19 pi/2); angles are meant to be in [-pi, pi]
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always", fastmath={"contract"})
@@ -133,12 +172,12 @@ _BLOCK = 512  # pairs per block of the profile loop (its scratch arrays stay in 
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _dipole_exp_block(rho, dl, out, alb, mu, z_r, z_v):
+def dipole_exp_block(rho, dl, out, alb, mu, z_r, z_v):
     """Pass 2 of :func:`_profile_loop`, "exp" and "soft": the dipole with e^delta folded into its exponentials.
 
     A separate, non-inlined, branch-free loop over views: as lean as the bare dipole loop."""
     for j in range(rho.size):
-        out[j] = dipole_diffuse_reflectance(rho[j], alb, mu, z_r, z_v, min(dl[j], _DELTA_MAX))
+        out[j] = dipole_diffuse_reflectance(rho[j], alb, mu, z_r, z_v, min(dl[j], DELTA_MAX))
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -154,11 +193,11 @@ def _profile_loop(rho, ang, k1, k2, ang_is_cos2, policy, coef, n_int, alb, mu, z
 
     Per block of pairs: (0) the input checks and cos(2 phi) (branch- and call-free, SIMD); (1) delta from the
     table (scalar: the gathers do not vectorise), the validity mask and the rare direct evaluations beyond
-    the table; (2) :func:`_dipole_exp_block`, i.e. ``alpha'/(4 pi) sum_i z_i (mu d_i + 1) e^{delta - mu d_i}/d_i^3``
+    the table; (2) :func:`dipole_exp_block`, i.e. ``alpha'/(4 pi) sum_i z_i (mu d_i + 1) e^{delta - mu d_i}/d_i^3``
     for "exp" and "soft": no exponential more than the dipole (:func:`_dipole_clamp_block` for "clamp"); (3) the
     entry-point cap (rarely active). ``valid`` (size of rho, or 0 to skip) receives
     ``max(|k1|, |k2|) (|a| + |b| + z_r) <= tol``. Returns True (the caller raises) on a negative or non-finite
-    rho, a non-finite phi or |phi| > _PHI_MAX, or a non-finite delta (non-finite k or cos2phi).
+    rho, a non-finite phi or |phi| > PHI_MAX, or a non-finite delta (non-finite k or cos2phi).
     """
     z_v = z_r + 2.0 * z_b
     rd0 = dipole_diffuse_reflectance(0.0, alb, mu, z_r, z_v)
@@ -179,7 +218,7 @@ def _profile_loop(rho, ang, k1, k2, ang_is_cos2, policy, coef, n_int, alb, mu, z
         else:
             for j in range(m):
                 a = ang[start + j]
-                ok &= abs(a) <= _PHI_MAX
+                ok &= abs(a) <= PHI_MAX
                 cs[j] = _cos(2.0 * a)
         if not ok:
             return True
@@ -194,37 +233,23 @@ def _profile_loop(rho, ang, k1, k2, ang_is_cos2, policy, coef, n_int, alb, mu, z
                     valid[k] = True
                 continue
             r = rho[k]
-            u = math.sqrt(r) * _PER_UNIT
-            if u < n_int:
-                ra, rb = _table_eval(u, coef)
-            elif r * mu >= _MU_RHO_ZERO:
-                ra = 0.0  # R_d e^delta <= e^{700 - mu rho} underflows to 0 whatever a, b are
-                rb = 0.0
-            else:
-                ra, rb = _ratios_direct(r, mu, z_r, z_b)
-            delta = 0.5 * (c1 + c2) * (ra + rb) + 0.5 * (c1 - c2) * cs[j] * (ra - rb)
+            ra, rb = kernel_ratios(r, coef, n_int, mu, z_r, z_b)
+            h, d = 0.5 * (c1 + c2), 0.5 * (c1 - c2) * cs[j]   # Euler: k_n(phi) = H + (k1 - k2)/2 cos 2 phi
+            delta = first_order_delta(h + d, h - d, ra, rb)
             if not (abs(delta) < math.inf):
                 return True
-            if policy == 2:
-                delta = delta / math.sqrt(1.0 + (delta * _INV_SAT) * (delta * _INV_SAT))
-            dl[j] = delta
+            dl[j] = policy_exponent(delta, policy)
             if want_valid:
                 valid[k] = max(abs(c1), abs(c2)) * (abs(ra) + abs(rb) + z_r) <= tol
         # pass 2: the dipole with e^delta (or times max(1 + delta, 0))
-        if policy != 1:
-            _dipole_exp_block(rho[start:start + m], dl[:m], out[start:start + m], alb, mu, z_r, z_v)
+        if policy != CLAMP:
+            dipole_exp_block(rho[start:start + m], dl[:m], out[start:start + m], alb, mu, z_r, z_v)
         else:
             _dipole_clamp_block(rho[start:start + m], dl[:m], out[start:start + m], alb, mu, z_r, z_v)
         # pass 3: cap at the kernel's entry-point value (reachable only where delta is large)
         for j in range(m):
             k = start + j
-            if out[k] > rd0:
-                d0 = max((k1[k] + k2[k]) * a0, 0.0)
-                if policy == 2:
-                    d0 = d0 / math.sqrt(1.0 + (d0 * _INV_SAT) * (d0 * _INV_SAT))
-                cap = rd0 * (math.exp(min(d0, _DELTA_MAX)) if policy != 1 else 1.0 + d0)
-                if out[k] > cap:
-                    out[k] = cap
+            out[k] = entry_point_cap(out[k], rd0, k1[k] + k2[k], a0, policy)
     return False
 
 
@@ -232,7 +257,7 @@ def _profile_loop(rho, ang, k1, k2, ang_is_cos2, policy, coef, n_int, alb, mu, z
 # the table
 # ---------------------------------------------------------------------------------------------------------
 
-def _cheb_to_monomial(deg):
+def cheb_to_monomial(deg):
     """Chebyshev nodes of the first kind on [-1, 1] and the matrix: node values -> monomial coefficients."""
     npt = deg + 1
     k = np.arange(npt)
@@ -250,7 +275,7 @@ def _cheb_to_monomial(deg):
     return t, cheb_to_mono @ vals_to_cheb
 
 
-_CHEB_T, _TO_MONO = _cheb_to_monomial(_DEG)
+_CHEB_T, _TO_MONO = cheb_to_monomial(_DEG)
 
 
 def _material_scalars(albedo_prime, eta):
@@ -296,11 +321,11 @@ class CurvatureTable:
         if not (math.isfinite(rmax) and rmax >= 0):
             raise ValueError(f"rho_max_opt must be finite and >= 0, got {self.rho_max_opt!r}")
         alb, mu, z_r, z_b = _material_scalars(self.albedo_prime, self.eta)
-        n_int = int(math.ceil(math.sqrt(rmax) * _PER_UNIT)) + 1
+        n_int = int(math.ceil(math.sqrt(rmax) * PER_UNIT)) + 1
         coef = np.empty((n_int, 2 * (_DEG + 1)))
         _build_table(n_int, mu, z_r, z_b, _CHEB_T, _TO_MONO, coef)
         coef.flags.writeable = False
-        a0, _ = _ratios_direct(0.0, mu, z_r, z_b)
+        a0, _ = ratios_direct(0.0, mu, z_r, z_b)
         for name, val in (("albedo_prime", alb), ("eta", float(self.eta)), ("rho_max_opt", rmax), ("coef", coef),
                           ("mu", mu), ("z_r", z_r), ("z_b", z_b), ("a0", float(a0))):
             object.__setattr__(self, name, val)
@@ -347,7 +372,7 @@ class CurvatureTable:
                             self.albedo_prime, self.mu, self.z_r, self.z_b, self.a0, float(tol), valid, out)
         if bad:
             raise ValueError("rho_opt must be finite and >= 0; k1_opt, k2_opt and cos2phi must be finite; "
-                             f"phi must be finite with |phi| <= {_PHI_MAX:g} (reduce angles modulo 2 pi)")
+                             f"phi must be finite with |phi| <= {PHI_MAX:g} (reduce angles modulo 2 pi)")
         if return_validity:
             return out.reshape(shape), valid.reshape(shape)
         return out.reshape(shape)
@@ -357,7 +382,7 @@ class CurvatureTable:
         ``max(|a_tab - a|, |b_tab - b|)/(|a| + |b|)`` against direct quadrature."""
         rng = np.random.default_rng(seed)
         u = np.concatenate([rng.random(n) * math.sqrt(self.rho_max_opt),
-                            np.arange(self.n_intervals) / _PER_UNIT])
+                            np.arange(self.n_intervals) / PER_UNIT])
         rho = u * u
         ta, tb = self.ratios(rho)
         da, db = curvature_ratios(rho, albedo_prime=self.albedo_prime, eta=self.eta)
