@@ -55,10 +55,10 @@ from meshshade.kernels.near_field import near_field_cylinder_profile, near_field
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import CHANNELS, Material
 from meshshade.montecarlo.shapes import shape_mc_profile
+from meshshade.names import PROFILE_MC_PHOTONS as MC_PHOTONS, PROFILE_SHAPES as SHAPES  # the CLI's too
 from meshshade.transport.baking import RTOL_RANGE
 from meshshade.transport.near_field import check_near_field
 
-SHAPES = ("plane", "sphere", "cylinder", "saddle", "cavity", "bore", "point")
 MODELS = ("dipole", "exact", "curved", "fitted", "mc")
 #: the shapes with an exact Monte Carlo (meshshade.montecarlo.shapes)
 MC_SHAPES = ("plane", "sphere", "cylinder", "cavity", "bore")
@@ -170,10 +170,6 @@ def profile_distances(max_distance_mm=20.0, samples=41) -> np.ndarray:
     if not ok or not 2 <= int(samples) <= MAX_PROFILE_SAMPLES:
         raise ParameterError(f"samples must be an integer in [2, {MAX_PROFILE_SAMPLES}], got {samples!r}")
     return np.linspace(0.0, top, int(samples))
-
-
-#: Monte Carlo photons per channel of a profile (the ring stderr near the source is then ~1 %)
-MC_PHOTONS = 1_000_000
 
 
 def _mc(material, s, shape, azimuth_deg, photons, seed):

@@ -17,6 +17,10 @@ Rules (the issue "One package per stage"):
     ``meshshade/transport/x.py`` may not import ``meshshade.kernels.curvature.policies._INV_SAT``): a name shared
     across packages is public, named without the underscore and documented. Exceptions: :data:`PRIVATE_ALLOWED`,
     each with its reason, and an entry that is no longer needed fails too;
+(g) a module is imported by a name computed at run time (``importlib.import_module(name)``) only in the functions
+    of :data:`LAZY_IMPORTS`, each with its reason and the modules it may import (edges of the import graph like
+    any other; rule (e) lets these functions import at function level): the root package's public names on first
+    use, and a command's modules once its arguments are parsed (``meshshade --help`` imports no numba);
 (h) no function takes more than :data:`MAX_PARAMS` parameters (positional and keyword-only alike; ``self`` and
     ``cls``, ``*args`` and ``**kwargs`` not counted), except numba's compiled loops (decorated with ``njit``,
     ``jit``, ``vectorize``... or passed to one, ``njit(parallel=True)(_walk)``: their interface is numba's, arrays
@@ -53,6 +57,39 @@ FILE_FUNCTIONS = {"open", "io.open", "codecs.open", "os.open", "os.replace", "os
 FILE_MODULES = ("shutil.", "tempfile.")
 CTYPES_LOADERS = ("ctypes.CDLL", "ctypes.PyDLL", "ctypes.WinDLL", "ctypes.OleDLL", "ctypes.LibraryLoader",
                   "ctypes.cdll", "ctypes.pydll", "ctypes.windll", "ctypes.util.find_library")
+
+
+def _table_values(module: str, table: str):
+    """Resolver of :data:`LAZY_IMPORTS`: the string values of the dict literal ``table`` in ``module``."""
+    def resolve(mods) -> set[str]:
+        for node in mods[module].tree.body:
+            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == table for t in node.targets):
+                return {v for v in ast.literal_eval(node.value).values() if isinstance(v, str)}
+        return set()
+    return resolve
+
+
+def _command_modules(mods) -> set[str]:
+    """Resolver of :data:`LAZY_IMPORTS`: ``meshshade.cli.<name>`` for every ``meshshade.cli.arguments.<name>``."""
+    prefix = f"{PACKAGE}.cli.arguments."
+    names = {m[len(prefix):] for m in mods if m.startswith(prefix) and "." not in m[len(prefix):]}
+    return {f"{PACKAGE}.cli.{n}" for n in names if f"{PACKAGE}.cli.{n}" in mods}
+
+
+#: (g) (module, function) -> (why it imports modules by names computed at run time, the resolver of the modules it
+#: may so import: a function of the collected modules)
+LAZY_IMPORTS = {
+    (PACKAGE, "__getattr__"): ("PEP 562: the public names of `import meshshade` that need numba (Material, ...) "
+                               "are imported on first use; the modules of its _LAZY table",
+                               _table_values(PACKAGE, "_LAZY")),
+    (f"{PACKAGE}.cli.main", "load_command"): ("a command's modules (numpy, numba, scipy: a second) are imported "
+                                              "once its arguments are parsed and the signal handling is in place; "
+                                              "meshshade.cli.<name> of each meshshade.cli.arguments.<name>",
+                                              _command_modules),
+    (f"{PACKAGE}.batch.runner", "versions"): ("the versions of the libraries a job's results depend on (numpy, "
+                                              "dask...), imported by name when not yet imported: no meshshade module",
+                                              lambda mods: set()),
+}
 
 #: why the kernels' private helpers are still shared across packages (issue 32 gives each kernel one implementation)
 KERNEL_UNIFICATION = "being unified under issue 32 (kernel implementation)"
@@ -118,6 +155,7 @@ class Module:
     is_package: bool
     tree: ast.Module
     imports: list[Import] = field(default_factory=list)
+    computed_imports: list[Import] = field(default_factory=list)  # import_module(<not a literal>): target ""
     aliases: dict[str, str] = field(default_factory=dict)  # local name -> dotted name (all imports)
 
 
@@ -207,6 +245,8 @@ class _ImportCollector(_Scoped):
         if fn in ("importlib.import_module", "__import__") and node.args and isinstance(node.args[0], ast.Constant) \
                 and isinstance(node.args[0].value, str):
             self._add(node.args[0].value, node.lineno)
+        elif fn in ("importlib.import_module", "__import__"):  # a name computed at run time: rule (g)
+            self.mod.computed_imports.append(Import("", node.lineno, self.scope))
         self.generic_visit(node)
 
 
@@ -313,14 +353,18 @@ def check_embree_confinement(root: Path, package: str = PACKAGE) -> list[Violati
     return out
 
 
-def import_graph(root: Path, package: str = PACKAGE) -> dict[str, set[str]]:
-    """module -> the meshshade modules it imports (module- and function-level; no implicit parent packages)."""
+def import_graph(root: Path, package: str = PACKAGE, lazy=LAZY_IMPORTS) -> dict[str, set[str]]:
+    """module -> the meshshade modules it imports (module- and function-level, and what the functions of ``lazy``
+    import by computed names; no implicit parent packages)."""
     mods = collect_modules(root, package)
     graph = {name: set() for name in mods}
     for mod in mods.values():
         for imp in mod.imports:
             if imp.target in mods and imp.target != mod.name:
                 graph[mod.name].add(imp.target)
+        for imp in mod.computed_imports:
+            if (mod.name, imp.scope) in lazy:
+                graph[mod.name] |= {t for t in lazy[mod.name, imp.scope][1](mods) if t in mods and t != mod.name}
     return graph
 
 
@@ -391,12 +435,12 @@ def stage_cycles(root: Path, package: str = PACKAGE) -> list[list[str]]:
     return sorted(c for c in strongly_connected_components(stage_graph(root, package)) if len(c) > 1)
 
 
-def check_function_level_imports(root: Path, package: str = PACKAGE) -> list[Violation]:
-    """(e) meshshade modules are imported at module level only."""
+def check_function_level_imports(root: Path, package: str = PACKAGE, lazy=LAZY_IMPORTS) -> list[Violation]:
+    """(e) meshshade modules are imported at module level only (but in the lazy importers of ``lazy``)."""
     out = []
     for mod in collect_modules(root, package).values():
         for imp in mod.imports:
-            if imp.scope is not None and _in(imp.target, package):
+            if imp.scope is not None and _in(imp.target, package) and (mod.name, imp.scope) not in lazy:
                 out.append(Violation("function-import", mod.rel, imp.line, f"imports {imp.target} inside {imp.scope}"))
     return out
 
@@ -525,6 +569,27 @@ def check_long_signatures(root: Path, package: str = PACKAGE, allowed=PARAMS_ALL
     return [v for v in long_signatures(root, package) if (v.path, _qualname(v)) not in allowed]
 
 
+def check_computed_imports(root: Path, package: str = PACKAGE, lazy=LAZY_IMPORTS) -> list[Violation]:
+    """(g) imports of names computed at run time only in the functions of ``lazy``; each of those resolves to
+    modules of the tree (an entry whose function imports nothing, or that names a module not in the tree, is a
+    violation too)."""
+    mods = collect_modules(root, package)
+    out, used = [], set()
+    for mod in mods.values():
+        for imp in mod.computed_imports:
+            if (mod.name, imp.scope) in lazy:
+                used.add((mod.name, imp.scope))
+            else:
+                out.append(Violation("computed-import", mod.rel, imp.line,
+                                     f"imports a module named at run time in {imp.scope or '<module>'}"))
+    for (name, function), (_why, resolve) in lazy.items():
+        targets = resolve(mods) if name in mods else set()
+        if (name, function) not in used or not targets <= set(mods):
+            out.append(Violation("computed-import", name, 0, f"LAZY_IMPORTS entry {name}.{function} is stale: it "
+                                 f"resolves to {sorted(targets)}"))
+    return out
+
+
 def _report(violations) -> str:
     return "\n".join(str(v) for v in violations)
 
@@ -560,6 +625,14 @@ def test_no_import_cycles_between_stages():
 def test_no_function_level_meshshade_imports():
     violations = check_function_level_imports(ROOT)
     assert not violations, "\n" + _report(violations)
+
+
+def test_modules_named_at_run_time_only_in_the_lazy_importers():
+    violations = check_computed_imports(ROOT)
+    assert not violations, "\n" + _report(violations)
+    graph = import_graph(ROOT)
+    assert {"meshshade.cli.bake", "meshshade.cli.blender"} <= graph["meshshade.cli.main"]  # resolved edges
+    assert "meshshade.materials" in graph["meshshade"]
 
 
 def test_no_private_names_used_across_packages():
@@ -806,6 +879,29 @@ def test_checker_flags_long_signatures_outside_compiled_loops(tmp_path):
 def test_checker_flags_function_level_meshshade_imports(fake_root):
     assert [(v.path, v.line) for v in check_function_level_imports(fake_root)] == [
         ("meshshade/c.py", _planted_line("c.py"))]
+
+
+def test_checker_confines_computed_imports_to_the_lazy_importers(fake_root):
+    """A computed-name import is allowed only in a LAZY_IMPORTS function, whose targets are graph edges (a cycle
+    through one is found) and whose literal function-level imports rule (e) accepts."""
+    pkg = fake_root / "meshshade"
+    (pkg / "lazy.py").write_text("import importlib\n\nTABLE = {'x': 'meshshade.a'}\n\n\n"
+                                 "def load(name):\n    importlib.import_module('meshshade.errors')\n"
+                                 "    return importlib.import_module(TABLE[name])\n\n\n"
+                                 "def other(name):\n    return importlib.import_module(name)  # PLANTED (g)\n")
+    (pkg / "a.py").write_text("import meshshade.lazy\n")
+    lazy = {("meshshade.lazy", "load"): ("test", _table_values("meshshade.lazy", "TABLE"))}
+    assert [(v.path, v.line) for v in check_computed_imports(fake_root, lazy=lazy)] == [("meshshade/lazy.py", 12)]
+    assert "meshshade/lazy.py" not in {v.path for v in check_function_level_imports(fake_root, lazy=lazy)}
+    assert ["meshshade.a", "meshshade.lazy"] in import_cycles_with(fake_root, lazy)
+    stale = {**lazy, ("meshshade.lazy", "gone"): ("test", lambda mods: {"meshshade.a"})}
+    assert [v.message for v in check_computed_imports(fake_root, lazy=stale) if v.line == 0] == [
+        "LAZY_IMPORTS entry meshshade.lazy.gone is stale: it resolves to ['meshshade.a']"]
+    assert len(check_computed_imports(fake_root, lazy={})) == 2  # without the entry both are flagged
+
+
+def import_cycles_with(root, lazy):
+    return sorted(c for c in strongly_connected_components(import_graph(root, lazy=lazy)) if len(c) > 1)
 
 
 def test_relative_imports_are_resolved(tmp_path):

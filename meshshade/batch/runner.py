@@ -43,11 +43,11 @@ from meshshade.batch.jobs import Job, JobFileError
 from meshshade.errors import MeshshadeError
 from meshshade.io import (detached, file_sha256, folder_files, job_folder, output_dir, output_transaction, read_json,
                           read_json_lines, remove_stale_parts, write_json, write_json_lines, write_text)
+from meshshade.names import BATCH_MANIFEST as MANIFEST  # the manifest's file name
 from meshshade.progress import Progress
 
 __all__ = ["BatchResult", "MANIFEST", "RECORD", "run_batch", "run_job", "job_status", "versions"]
 
-MANIFEST = "manifest.jsonl"
 RECORD = "job.json"
 #: seconds between two rewrites of the manifest while jobs finish
 MANIFEST_INTERVAL = 1.0

@@ -13,6 +13,8 @@ properties. Modules: :mod:`meshshade.blender.convert` (units and lights, no bpy)
 """
 from __future__ import annotations
 
+from meshshade.names import ADDON_MODULE  # the module name of the add-on file addon_source writes
+
 __all__ = ["bl_info", "register", "unregister", "addon_source", "ADDON_MODULE"]
 
 bl_info = {
@@ -25,9 +27,6 @@ bl_info = {
     "doc_url": "https://github.com/meshshade/meshshade/blob/main/docs/blender.md",
     "category": "Object",
 }
-
-#: the module name of the add-on file :func:`addon_source` writes
-ADDON_MODULE = "meshshade_addon"
 
 
 def _needs_blender(*_args, **_kwargs):

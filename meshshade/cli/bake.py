@@ -1,13 +1,12 @@
 """``meshshade bake``: per-vertex radiance of a translucent mesh, written as a coloured PLY, glTF or USD, and/or a
 texture of its UV map (thin layer over :func:`meshshade.transport.baking.bake`,
-:func:`meshshade.output.texture.bake_texture` and :mod:`meshshade.output.bake_file`)."""
+:func:`meshshade.output.texture.bake_texture` and :mod:`meshshade.output.bake_file`).
+
+Its help and arguments are in :mod:`meshshade.cli.arguments.bake`; :mod:`meshshade.cli.main` imports this module
+only once they are parsed."""
 from __future__ import annotations
 
-import argparse
-
-from meshshade.cli.options import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args, add_mesh_args,
-                                   add_model_arg, add_near_field_arg, add_transport_arg, lights_from_args,
-                                   mesh_and_material, number)
+from meshshade.cli.options import lights_from_args, mesh_and_material
 from meshshade.asset_cache import AssetCache
 from meshshade.errors import ParameterError
 from meshshade.io import check_output_path, read_uv_map
@@ -15,40 +14,6 @@ from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, texture_
 from meshshade.output.texture import bake_texture, check_texture_options
 from meshshade.transport import bake, describe_result
 from meshshade.transport.baking import check_bake_options
-
-HELP = "per-vertex radiance of a translucent mesh, written as a coloured PLY, glTF/GLB or USD"
-
-
-def add_bake_args(p: argparse.ArgumentParser) -> None:
-    add_mesh_args(p)
-    add_material_args(p)
-    add_light_arg(p)
-    add_model_arg(p)
-    p.add_argument("--cutoff-tol", type=number, default=1e-4,
-                   help="neighbourhood radius: reflectance beyond it below this fraction (default 1e-4)")
-    p.add_argument("--curvature-radius", type=number, default=None, metavar="MM",
-                   help="neighbourhood for the curvature fit [mm] (default 2 mean edge lengths)")
-    add_geodesic_arg(p)
-    add_far_field_arg(p)
-    add_transport_arg(p)
-    add_near_field_arg(p)
-    p.add_argument("--out", metavar="OUT.ply|.glb|.gltf|.usd|.usda|.usdc",
-                   help="the baked mesh, format from the extension: PLY with radiance_r/g/b (W/mm^2) and tone-mapped "
-                        "red/green/blue; glTF/GLB with COLOR_0 and _RADIANCE (with --texture: the texture bound as "
-                        "emissive); USD with displayColor and primvars:meshshade:radiance")
-    p.add_argument("--npz", metavar="OUT.npz", help="also save radiance, k1, k2, d1, d2, beam distance")
-    p.add_argument("--texture", metavar="OUT.exr",
-                   help="also (or instead of --out) bake into a texture of the mesh's UV map (OBJ vt, glTF TEXCOORD_0, "
-                        "PLY s/t or u/v; an automatic atlas when it has none, written as OUT.obj): linear exitance "
-                        "W/mm^2 as float OpenEXR and tone-mapped as OUT.png")
-    p.add_argument("--texture-size", type=int, default=2048, metavar="N",
-                   help="texels per side of the texture (default 2048)")
-    p.add_argument("--padding", type=int, default=16, metavar="N",
-                   help="texels around each UV island filled from its border, against bleeding in filtering and "
-                        "mipmaps (default 16)")
-    p.add_argument("--texture-refine", default="auto", metavar="auto|N",
-                   help="segments per edge of the surface the texture bake solves on (default auto: the mesh split "
-                        "until its edges are about what the material resolves; 1: the mesh as it is)")
 
 
 def _refine(text):

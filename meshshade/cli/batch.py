@@ -4,25 +4,15 @@
 Exit codes: 0 when every job is done, 1 when some jobs failed (each is one line on stderr and in the manifest;
 re-running the command retries them), 2 when the batch could not run at all (a bad job file or option, an output
 folder that cannot be made, an unreachable scheduler).
-"""
+
+
+Its help and arguments are in :mod:`meshshade.cli.arguments.batch`; :mod:`meshshade.cli.main` imports this module
+only once they are parsed."""
 from __future__ import annotations
 
-import argparse
-
 from meshshade.batch import runner
-from meshshade.batch.runner import MANIFEST, job_status
+from meshshade.batch.runner import job_status
 from meshshade.cli.jobs import read_jobs
-from meshshade.cli.options import add_cluster_args
-
-HELP = "run a TOML file of bakes, renders, compares, Monte Carlo runs and sweeps on Dask (local or a cluster)"
-
-
-def add_batch_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("jobs", metavar="JOBS.toml", help="job file: [[job]] and [[sweep]] entries (docs/batch.md)")
-    p.add_argument("--out", required=True, metavar="DIR",
-                   help=f"output folder: one folder per job and {MANIFEST}; a re-run skips finished jobs")
-    add_cluster_args(p)
-    p.add_argument("--dry-run", action="store_true", help="list the jobs and whether each is done; run nothing")
 
 
 def run_batch(args) -> int:

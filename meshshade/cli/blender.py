@@ -1,18 +1,12 @@
 """``meshshade blender``: write the Blender add-on file that Preferences > Add-ons > Install from Disk
-takes (thin layer over :func:`meshshade.blender.addon_source`)."""
+takes (thin layer over :func:`meshshade.blender.addon_source`).
+
+Its help and arguments are in :mod:`meshshade.cli.arguments.blender`; :mod:`meshshade.cli.main` imports this module
+only once they are parsed."""
 from __future__ import annotations
 
-import argparse
-
-from meshshade.blender import ADDON_MODULE, addon_source
+from meshshade.blender import addon_source
 from meshshade.io import check_output_path, write_text
-
-HELP = "write the Blender add-on file (install it from Blender's preferences; see docs/blender.md)"
-
-
-def add_blender_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("out", nargs="?", default=f"{ADDON_MODULE}.py", metavar="OUT.py",
-                   help=f"the add-on file (default {ADDON_MODULE}.py; its name is the add-on's module name)")
 
 
 def run_blender(args) -> int:

@@ -2,28 +2,19 @@
 
 A thin layer over :func:`meshshade.check.check_mesh` (meshio pattern): load (mesh defects go into the report
 instead of warning lines), optional material, report on stdout, ``--json FILE`` for the full report.
-"""
+
+
+Its help and arguments are in :mod:`meshshade.cli.arguments.check`; :mod:`meshshade.cli.main` imports this module
+only once they are parsed."""
 from __future__ import annotations
 
-import argparse
 import warnings
 
 from meshshade.check import check_mesh, format_check, report_to_json
-from meshshade.cli.options import add_material_args, add_mesh_args, material_from_args, material_given, number
+from meshshade.cli.options import material_from_args, material_given
 from meshshade.errors import MeshshadeError
 from meshshade.geometry.mesh import MeshDefectWarning
 from meshshade.io import check_output_path, load_mesh, write_text
-
-HELP = ("what the pipeline will make of a mesh: size in mm and transport lengths, defects, curvature, "
-        "resolution, where first-order theory holds")
-
-
-def add_check_args(p: argparse.ArgumentParser) -> None:
-    add_mesh_args(p)
-    add_material_args(p)
-    p.add_argument("--curvature-radius", type=number, default=None, metavar="MM",
-                   help="neighbourhood for the curvature fit [mm] (default 2 mean edge lengths, as bake)")
-    p.add_argument("--json", metavar="FILE", help="also write the full report as JSON")
 
 
 def run_check(args) -> int:

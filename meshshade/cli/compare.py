@@ -1,35 +1,19 @@
 """``meshshade compare``: two models, same camera and lights: split image, relative-difference heat map and
 statistics (thin layer over :func:`meshshade.output.compare.run_comparison` and
-:func:`meshshade.output.compare.save_comparison`)."""
+:func:`meshshade.output.compare.save_comparison`).
+
+Its help and arguments are in :mod:`meshshade.cli.arguments.compare`; :mod:`meshshade.cli.main` imports this module
+only once they are parsed."""
 from __future__ import annotations
 
-import argparse
 import json
 
-from meshshade.cli.options import add_image_args, image_scene_from_args, integer, number
+from meshshade.cli.options import image_scene_from_args
 from meshshade.asset_cache import AssetCache
 from meshshade.io import output_dir
 from meshshade.output.compare import check_floor, check_models, run_comparison, save_comparison
 from meshshade.output.render import check_image_size
 from meshshade.output.tonemap import check_tonemap_options
-from meshshade.transport import MODELS
-from meshshade.transport.models import DEFAULT_MODEL
-
-HELP = "two models, same camera and lights: split image, relative-difference heat map, stats.json"
-
-
-def add_compare_args(p: argparse.ArgumentParser) -> None:
-    add_image_args(p)
-    p.add_argument("--models", default=f"{DEFAULT_MODEL},dipole",
-                   help=f"two models A,B among {', '.join((*MODELS, 'mc'))} (default {DEFAULT_MODEL},dipole)")
-    p.add_argument("--near-field", default=None, metavar="NF[,NF]",
-                   help="what enters the medium, for both models or per model A,B (default: beam for volume, point "
-                        "for the others): point (each surface model's point source at z_r) or beam (single "
-                        "scattering plus the fitted beam sources, docs/physics.md §13); e.g. --models "
-                        "curved,curved --near-field point,beam")
-    p.add_argument("--floor", type=number, default=1e-3, help="relative radiance floor for the ratios")
-    p.add_argument("--photons", type=integer(16), default=100_000, help="photons when one model is mc (default 1e5)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
 
 
 def run_compare(args) -> int:

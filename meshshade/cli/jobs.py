@@ -4,7 +4,8 @@ values), run by :func:`meshshade.batch.runner.run_batch`.
 A job here is exactly one ``meshshade bake | render | compare | mc | profile`` invocation: its options are the
 command's long options without the dashes (``cutoff-tol`` or ``cutoff_tol``), ``mesh`` for the input mesh, and
 output options (``out``, ``npz``, ``texture``, ``summary``, ``csv``, ``plot``) as plain file names, which are
-written inside the job's own folder (a texture's PNG and atlas beside it). A job therefore produces the same files as the command run by hand.
+written inside the job's own folder (a texture's PNG and atlas beside it). A job therefore produces the same files
+as the command run by hand.
 
 Job file (TOML)::
 
@@ -42,19 +43,19 @@ import re
 from pathlib import Path
 
 from meshshade.batch.jobs import NAME_PATTERN, Job, JobFileError
-from meshshade.cli import bake, compare, mc, profile, render
+from meshshade.cli import arguments, bake, compare, mc, profile, render
 from meshshade.io import output_transaction, read_toml
 
 __all__ = ["COMMANDS", "OUTPUTS", "expand", "read_jobs", "check_job", "command_parser", "command_job", "job_argv",
            "run_command"]
 
-#: commands a batch can run -> (add_<cmd>_args, run_<cmd>)
+#: commands a batch can run -> (their arguments' add_arguments, run_<cmd>)
 COMMANDS = {
-    "bake": (bake.add_bake_args, bake.run_bake),
-    "render": (render.add_render_args, render.run_render),
-    "compare": (compare.add_compare_args, compare.run_compare),
-    "mc": (mc.add_mc_args, mc.run_mc),
-    "profile": (profile.add_profile_args, profile.run_profile),
+    "bake": (arguments.bake.add_arguments, bake.run_bake),
+    "render": (arguments.render.add_arguments, render.run_render),
+    "compare": (arguments.compare.add_arguments, compare.run_compare),
+    "mc": (arguments.mc.add_arguments, mc.run_mc),
+    "profile": (arguments.profile.add_arguments, profile.run_profile),
 }
 #: output options per command (file names inside the job's folder) and the default of the required one
 OUTPUTS = {

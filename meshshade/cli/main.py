@@ -1,7 +1,16 @@
 """Command-line interface: a thin layer over the Python API (meshio pattern).
 
-``main(argv=None) -> int``; one module per subcommand with an ``add_<cmd>_args`` / ``run_<cmd>`` pair and its
-one-line ``HELP`` (:data:`COMMANDS`), shared options in :mod:`meshshade.cli.options`.
+``main(argv=None) -> int``. Each subcommand has two modules: its one-line ``HELP`` and ``add_arguments`` in
+``meshshade.cli.arguments.<cmd>`` (:data:`COMMANDS`; the options they share in
+:mod:`meshshade.cli.arguments.common`), and what it does, ``run_<cmd>``, in ``meshshade.cli.<cmd>`` (the shared
+options' meaning in :mod:`meshshade.cli.options`).
+
+Start-up: this module imports only the first half, which imports neither numpy nor numba, so ``meshshade --help``,
+``meshshade <cmd> --help`` and argument errors answer in about 0.1 s (``tools/benchmarks/bench_startup.py``).
+:func:`main` installs its signal handling first, parses, and only then imports the command's module
+(:func:`load_command`: numpy, numba, scipy, trimesh, about a second), so a Ctrl-C or SIGTERM at any moment from
+the call of ``main`` on, that import included, ends the run as described below. (Before it, in the first
+twentieth of a second while Python starts and imports this module, Python's own handling applies.)
 
 What a user sees when something goes wrong, and the exit codes:
 
@@ -22,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import logging
 import os
 import re
@@ -31,24 +41,8 @@ import threading
 import warnings
 
 from meshshade import __version__
-from meshshade.cli import bake, batch, bench, blender, check, compare, demo, materials, mc, profile, render
+from meshshade.cli.arguments import COMMANDS  # subcommand -> its arguments module (HELP, add_arguments)
 from meshshade.errors import MeshshadeError
-from meshshade.io import discard_stdout, output_transaction
-
-#: subcommand name -> (add_<cmd>_args, run_<cmd>, one-line help), in the order ``meshshade --help`` lists them
-COMMANDS = {
-    "mc": (mc.add_mc_args, mc.run_mc, mc.HELP),
-    "bake": (bake.add_bake_args, bake.run_bake, bake.HELP),
-    "profile": (profile.add_profile_args, profile.run_profile, profile.HELP),
-    "check": (check.add_check_args, check.run_check, check.HELP),
-    "materials": (materials.add_materials_args, materials.run_materials, materials.HELP),
-    "render": (render.add_render_args, render.run_render, render.HELP),
-    "compare": (compare.add_compare_args, compare.run_compare, compare.HELP),
-    "demo": (demo.add_demo_args, demo.run_demo, demo.HELP),
-    "bench": (bench.add_bench_args, bench.run_bench, bench.HELP),
-    "batch": (batch.add_batch_args, batch.run_batch, batch.HELP),
-    "blender": (blender.add_blender_args, blender.run_blender, blender.HELP),
-}
 
 #: signals that stop a run like Ctrl-C does (temporary files removed, exit code 128 + number)
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
@@ -78,11 +72,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--verbose", "-v", action="store_true", help="log what is computed and chosen")
     parser.add_argument("--version", action="version", version="meshshade " + __version__)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name, (add, _run, help_) in COMMANDS.items():
-        sp = sub.add_parser(name, help=help_, description=help_)
+    for name, arguments in COMMANDS.items():
+        sp = sub.add_parser(name, help=arguments.HELP, description=arguments.HELP)
         sp.add_argument("--quiet", "-q", action="store_true", help="no progress bars or notes")
-        add(sp)
+        arguments.add_arguments(sp)
     return parser
+
+
+def load_command(name: str):
+    """``(run_<name>, meshshade.io)``: the function that runs ``meshshade <name>``, from ``meshshade.cli.<name>``,
+    and the io package that holds the output transaction, imported now. They import numpy, numba, scipy and
+    trimesh (about a second), so :func:`main` calls this once the arguments are parsed and its signal handling is
+    in place. The package's only import of a module named at run time (tests/test_architecture.py, rule (f))."""
+    io = importlib.import_module("meshshade.io")
+    module = importlib.import_module(f"{__package__}.{name}")
+    return getattr(module, f"run_{name}"), io
 
 
 _NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
@@ -128,7 +132,9 @@ def _late_signal(signum, frame):
 
 def say_late_signals() -> None:
     """From now until the process ends, a stop signal (:data:`STOP_SIGNALS`) says that the outputs were already
-    written and ends the process with 128 + its number (a command has finished: nothing is left to clean up)."""
+    written and ends the process with 128 + its number (a command has finished: nothing is left to clean up).
+    :func:`main` run as the program installs it as the command ends, with no moment between its own handlers and
+    these."""
     if threading.current_thread() is threading.main_thread():
         for sig in STOP_SIGNALS:
             signal.signal(sig, _late_signal)
@@ -154,9 +160,10 @@ def _interrupt_in_chain(exc):
 
 
 @contextlib.contextmanager
-def _stop_signals_interrupt():
-    """While a command runs, SIGTERM and SIGHUP raise :class:`Interrupted` as Ctrl-C raises KeyboardInterrupt
-    (only in the main thread, where Python delivers signals; the previous handlers are restored)."""
+def _stop_signals_interrupt(late: bool = False):
+    """While a command is parsed, imported and run, SIGTERM and SIGHUP raise :class:`Interrupted` as Ctrl-C raises
+    KeyboardInterrupt (only in the main thread, where Python delivers signals). At the end the previous handlers
+    are restored, or with ``late`` those of :func:`say_late_signals` installed."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -167,8 +174,11 @@ def _stop_signals_interrupt():
     try:
         yield
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        if late:
+            say_late_signals()
+        else:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
 
 
 class StdoutError(MeshshadeError):
@@ -213,40 +223,19 @@ def _guarded_stdout():
 def main(argv=None) -> int:
     """Run ``meshshade ARGV`` (``argv`` None: the program's own arguments, and then a signal after the command's
     outputs are written is reported as such: :func:`say_late_signals`); returns the exit code."""
-    code = _main(argv)
-    if argv is None:
-        say_late_signals()
-    return code
+    return _main(argv, late=argv is None)
 
 
-def _main(argv=None) -> int:
-    parser = build_parser()
-    argv = list(sys.argv[1:] if argv is None else argv)
-    try:
-        args = parser.parse_args(join_negative_values(parser, argv))
-    except SystemExit as exc:  # --help, --version, or the one-line error of Parser.error: a code, not an exit
-        return exc.code if isinstance(exc.code, int) else 2
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="meshshade: %(message)s")
-    if args.command is None:
-        parser.print_help()
-        return 2
-    _add, run, _help = COMMANDS[args.command]
-    with warnings.catch_warnings():
-        warnings.showwarning = _one_line_warning
+def _main(argv, late: bool) -> int:
+    # the signal handling first: a stop signal is one line and exit 128 + its number whether it lands while the
+    # arguments are parsed, while the command's modules are imported (numba, scipy: a second) or while it runs
+    with _stop_signals_interrupt(late=late):
         try:
-            with _stop_signals_interrupt(), _guarded_stdout():
-                with output_transaction():
-                    code = run(args)
-                sys.stdout.flush()  # a full device or a closed pipe fails here, inside the handlers below
-            return code
-        except MeshshadeError as exc:
-            if isinstance(exc, StdoutError):
-                discard_stdout()
-            print(f"meshshade: error: {exc}", file=sys.stderr)
-            return 2
+            return _parse_and_run(argv)
         except Interrupted as exc:
             return _report_interrupted(exc)
-        except SystemError as exc:   # a signal raised inside a C call back into Python (numba loading a kernel)
+        except (SystemError, ImportError) as exc:
+            # a signal raised inside a C call back into Python (numba loading a kernel) or inside an import
             cause = _interrupt_in_chain(exc)
             if cause is None:
                 raise
@@ -257,8 +246,37 @@ def _main(argv=None) -> int:
         except KeyboardInterrupt:
             print("meshshade: interrupted; no partial output was left", file=sys.stderr)
             return 130
+
+
+def _parse_and_run(argv) -> int:
+    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = parser.parse_args(join_negative_values(parser, argv))
+    except SystemExit as exc:  # --help, --version, or the one-line error of Parser.error: a code, not an exit
+        return exc.code if isinstance(exc.code, int) else 2
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="meshshade: %(message)s")
+    if args.command is None:
+        parser.print_help()
+        return 2
+    with warnings.catch_warnings():
+        warnings.showwarning = _one_line_warning
+        io = None
+        try:
+            with _guarded_stdout():
+                run, io = load_command(args.command)
+                with io.output_transaction():
+                    code = run(args)
+                sys.stdout.flush()  # a full device or a closed pipe fails here, inside the handlers below
+            return code
+        except MeshshadeError as exc:
+            if isinstance(exc, StdoutError) and io is not None:
+                io.discard_stdout()
+            print(f"meshshade: error: {exc}", file=sys.stderr)
+            return 2
         except BrokenPipeError:  # the reader of stdout went away (| head): stop quietly, as `cat` would
-            discard_stdout()
+            if io is not None:
+                io.discard_stdout()
             return 141
         except MemoryError as exc:
             detail = str(exc).strip() or "the job needs more memory than the machine has"

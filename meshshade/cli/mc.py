@@ -1,41 +1,20 @@
 """``meshshade mc``: Monte Carlo reference random walk inside a mesh (thin layer over
 :func:`meshshade.montecarlo.simulation.simulate` and :func:`meshshade.output.mc_file.write_mc`); with
-``--workers N`` or ``--scheduler ADDRESS`` the photons are split across Dask workers (the same result)."""
+``--workers N`` or ``--scheduler ADDRESS`` the photons are split across Dask workers (the same result).
+
+Its help and arguments are in :mod:`meshshade.cli.arguments.mc`; :mod:`meshshade.cli.main` imports this module
+only once they are parsed."""
 from __future__ import annotations
 
-import argparse
 import contextlib
 
 from meshshade.batch.cluster import check_cluster_options, open_client
-from meshshade.cli.options import (add_cluster_args, add_light_arg, add_material_args, add_mesh_args, integer,
-                                   lights_from_args, mesh_and_material, number)
+from meshshade.cli.options import lights_from_args, mesh_and_material
 from meshshade.errors import MeshshadeError
 from meshshade.io import check_output_path
 from meshshade.montecarlo import describe_mc, simulate
 from meshshade.montecarlo.simulation import check_mc_options
 from meshshade.output.mc_file import write_mc
-
-HELP = "Monte Carlo reference: random walk inside the mesh, exitance with standard errors"
-
-
-def add_mc_args(p: argparse.ArgumentParser) -> None:
-    add_mesh_args(p)
-    add_material_args(p, with_g=True)
-    add_light_arg(p)
-    p.add_argument("--photons", type=integer(16), default=None, metavar="N",
-                   help="photons per channel (default 100000; 1e5 or 100_000 notation accepted)")
-    p.add_argument("--time-budget", type=number, default=None, metavar="SECONDS",
-                   help="wall-clock budget (with --photons: whichever comes first): emission stops when the photons "
-                        "in flight are predicted to finish in time; at 1.25x the budget the rest are cut off and "
-                        "reported as 'lost'")
-    p.add_argument("--pool", type=integer(1), default=None, metavar="N",
-                   help="photons walked together (default 262144; results do not depend on it beyond rounding)")
-    p.add_argument("--seed", type=integer(0), default=0, help="random seed (same seed, same result)")
-    p.add_argument("--out", required=True, metavar="OUT.ply",
-                   help="PLY with radiance_r/g/b (W/mm^2), stderr_r/g/b and tone-mapped red/green/blue")
-    p.add_argument("--npz", metavar="OUT.npz", help="also save face/vertex powers, stderrs, beam distance")
-    p.add_argument("--summary", metavar="OUT.json", help="totals with standard errors, photons, events, seconds")
-    add_cluster_args(p)
 
 
 def run_mc(args) -> int:

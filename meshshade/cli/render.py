@@ -4,16 +4,17 @@ over :func:`meshshade.transport.baking.bake` and :mod:`meshshade.output.render`)
 A PLY written by ``meshshade bake`` (vertex radiance ``radiance_r/g/b``, :func:`meshshade.io.read_baked_ply`) is
 rendered as it is: its radiance, its recorded units and the eta of its recorded material; no material, light or
 model option is needed, and those given are reported as ignored (one warning line). ``--per-pixel`` needs the bake
-itself (its entry points) and is refused for such a file."""
+itself (its entry points) and is refused for such a file.
+
+Its help and arguments are in :mod:`meshshade.cli.arguments.render`; :mod:`meshshade.cli.main` imports this module
+only once they are parsed."""
 from __future__ import annotations
 
-import argparse
 import os
 import warnings
 from pathlib import Path
 
-from meshshade.cli.options import (add_image_args, add_model_arg, add_near_field_arg, background_from_args, image_scene_from_args,
-                                   material_given)
+from meshshade.cli.options import background_from_args, image_scene_from_args, material_given
 from meshshade.errors import MaterialError, MeshshadeError, MeshValidationError, OutputError
 from meshshade.asset_cache import AssetCache
 from meshshade.io import check_output_path, read_baked_ply, write_exr, write_png
@@ -25,19 +26,6 @@ from meshshade.output.tonemap import check_tonemap_options
 from meshshade.transport import bake, describe_result
 from meshshade.transport.baking import check_bake_options
 from meshshade.units import mm_per_unit
-
-HELP = "render a mesh's shading: linear EXR (with metadata) and tone-mapped PNG"
-BAKED_EPILOG = ("A PLY written by 'meshshade bake' is rendered as it is (its radiance, units and material's eta): "
-                "no --material or --light is needed, and material, light and model options are ignored. Any other "
-                "mesh is baked first, with the material, lights and model given.")
-
-
-def add_render_args(p: argparse.ArgumentParser) -> None:
-    add_image_args(p)
-    add_model_arg(p)
-    add_near_field_arg(p)
-    p.add_argument("--out", required=True, metavar="OUT[.exr|.png]", help="writes OUT.exr (linear) and OUT.png")
-    p.epilog = BAKED_EPILOG
 
 
 def image_outputs(out: str, inputs=()) -> tuple[Path, Path]:

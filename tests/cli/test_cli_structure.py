@@ -1,4 +1,5 @@
-"""The CLI's structure: one module per subcommand, shared options, no import cycles, files written through io."""
+"""The CLI's structure: two modules per subcommand (its arguments, light; what it does), shared options, no import
+cycles, files written through io."""
 from __future__ import annotations
 
 import ast
@@ -9,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from meshshade.cli import bake, batch, bench, blender, check, compare, demo, materials, mc, options, profile, render
-from meshshade.cli.main import COMMANDS, build_parser, main
+from meshshade.cli import arguments, bake, batch, bench, blender, check, compare, demo, materials, mc, profile, render
+from meshshade.cli.main import COMMANDS, build_parser, load_command, main
 from meshshade.errors import OutputError
 from meshshade.geometry.procedural import icosphere
 from meshshade import io
@@ -25,11 +26,17 @@ MODULES = {"bake": bake, "batch": batch, "blender": blender, "bench": bench, "ch
 
 
 def test_commands_are_the_subcommand_modules():
+    """Each command: HELP and add_arguments in meshshade.cli.arguments.<name>, run_<name> in meshshade.cli.<name>
+    (what load_command imports), and no module of either kind without a command."""
     assert set(COMMANDS) == set(MODULES)
+    assert {p.stem for p in (CLI / "arguments").glob("*.py")} - {"__init__", "common"} == set(MODULES)
     for name, module in MODULES.items():
-        add, run, help_ = COMMANDS[name]
-        assert add is getattr(module, f"add_{name}_args") and run is getattr(module, f"run_{name}")
-        assert help_ == module.HELP and "\n" not in help_
+        arguments_module = COMMANDS[name]
+        assert arguments_module is getattr(arguments, name) and arguments_module.__name__.endswith(f".{name}")
+        assert callable(arguments_module.add_arguments)
+        assert isinstance(arguments_module.HELP, str) and "\n" not in arguments_module.HELP
+        run, io_package = load_command(name)
+        assert run is getattr(module, f"run_{name}") and io_package is io
 
 
 def _choices(parser, command, dest):
@@ -54,15 +61,15 @@ def _meshshade_imports(path: Path) -> set[str]:
     return found
 
 
-@pytest.mark.parametrize("path", sorted(CLI.glob("*.py")), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", sorted(CLI.rglob("*.py")), ids=lambda p: p.relative_to(CLI).as_posix())
 def test_subcommand_modules_do_not_import_main(path):
-    """Only __init__.py (re-export) and __main__.py import cli.main; the subcommand and option modules never do
-    (no import cycle)."""
-    if path.name not in ("__init__.py", "__main__.py"):
+    """Only __main__.py imports cli.main; the subcommand, argument and option modules never do (no import
+    cycle)."""
+    if path.relative_to(CLI).as_posix() != "__main__.py":
         assert "meshshade.cli.main" not in _meshshade_imports(path)
 
 
-@pytest.mark.parametrize("path", sorted(CLI.glob("*.py")) + sorted(BENCH.glob("*.py")),
+@pytest.mark.parametrize("path", sorted(CLI.rglob("*.py")) + sorted(BENCH.glob("*.py")),
                          ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_meshshade_imports_at_module_top_level(path):
     tree = ast.parse(path.read_text())
@@ -79,7 +86,7 @@ def test_meshshade_imports_at_module_top_level(path):
 WRITES = re.compile(r"\bopen\(|\.write_text\(|\.write_bytes\(|\.mkdir\(|savefig\(|np\.save")
 
 
-@pytest.mark.parametrize("path", sorted(CLI.glob("*.py")) + sorted(BENCH.glob("*.py")),
+@pytest.mark.parametrize("path", sorted(CLI.rglob("*.py")) + sorted(BENCH.glob("*.py")),
                          ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_files_are_written_only_through_io(path):
     """Files and directories only through meshshade.io (io.output_dir for the output folder)."""
