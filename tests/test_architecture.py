@@ -12,7 +12,7 @@ Rules (the issue "One package per stage"):
 (d) no import cycles among meshshade modules (graph of all imports, module- and function-level);
 (e) no function-level imports of meshshade modules (they hide the dependency graph);
 (f) no module uses another package's private names: an underscore name (``_INV_SAT``, ``_row_at``) or an
-    underscore module (``_window_kernels``) is imported, or reached as an attribute of an imported module, only
+    underscore module (``_window_loops``) is imported, or reached as an attribute of an imported module, only
     from within the directory that holds it (``meshshade/io/meshes.py`` may import ``meshshade/io/_reading.py``;
     ``meshshade/transport/x.py`` may not import ``meshshade.kernels.curvature.policies._INV_SAT``): a name shared
     across packages is public, named without the underscore and documented. Exceptions: :data:`PRIVATE_ALLOWED`,
@@ -98,7 +98,7 @@ PRIVATE_ALLOWED = {
     **{("meshshade/kernels/fitted_curvature.py", f"meshshade.kernels.curvature.{name}"): KERNEL_UNIFICATION
        for name in ("coefficients._ratios_direct", "table._MU_RHO_ZERO", "table._PER_UNIT", "table._PHI_MAX",
                     "table._cheb_to_monomial", "table._dipole_exp_block", "table._piece_pair")},
-    **{("meshshade/transport/hierarchy_kernels.py", name): KERNEL_UNIFICATION
+    **{("meshshade/transport/hierarchy_loops.py", name): KERNEL_UNIFICATION
        for name in ("meshshade.kernels.curvature.coefficients._ratios_direct",
                     "meshshade.kernels.curvature.policies._DELTA_MAX", "meshshade.kernels.curvature.policies._INV_SAT",
                     "meshshade.kernels.curvature.table._PER_UNIT", "meshshade.kernels.curvature.table._table_eval",
@@ -122,7 +122,7 @@ PARAMS_ALLOWED = {
                                 "transport/gather.py, hierarchical.py and baking.py, which are " + KERNEL_UNIFICATION
                                 + "; a record of the sources (positions, faces, bary, vertex, normals) is the fix")
        for path, cls in (("meshshade/geometry/geodesics/neighbourhoods.py", "GeodesicNeighbourhoods"),
-                         ("meshshade/geometry/geodesics/arc.py", "FastGeodesicNeighbourhoods"))},
+                         ("meshshade/geometry/geodesics/arc.py", "ArcGeodesicNeighbourhoods"))},
     ("meshshade/transport/baking.py", "_direct"): (
         "17 positional: the options of bake passed on; " + KERNEL_UNIFICATION + ", whose owner gives it a record"),
 }
@@ -453,7 +453,7 @@ def _is_private(name: str) -> bool:
 def _used_names(mod: Module, package: str):
     """``(line, [component, ...])`` of every dotted meshshade name the module imports (``from a.b import c``:
     ``[meshshade, a, b, c]``; relative imports resolved) or reaches as a private attribute of an imported name
-    (``K._OPTS`` after ``from meshshade.montecarlo import kernels as K``)."""
+    (``K._OPTS`` after ``from meshshade.montecarlo import loops as K``)."""
     for node in ast.walk(mod.tree):
         if isinstance(node, ast.ImportFrom):
             base = _absolute(mod, node.level, node.module)

@@ -20,6 +20,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial import QhullError
@@ -212,6 +213,8 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     core, why, built = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
                                    direct_options=direct_options, near_field=near_field,
                                    cutoff_tol=cutoff_tol, auto_options=auto_options, rtol=rtol, progress=progress)
+    opts = SumOptions(model, far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol, auto_options, progress,
+                      near_field)
     verified = None
     if core is not None:
         pv = vertex_power(samples, mesh.n_vertices)
@@ -231,9 +234,7 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
                 log.info("meshshade: %s; using the direct sum", why)
                 core = None
     if core is None:
-        M, beam_distance, stats, plan, kstats = _direct(mesh, material, lights, samples, curv, cut, model, clock,
-                                                        far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol,
-                                                        auto_options, progress, near_field)
+        M, beam_distance, stats, plan, kstats = _direct(mesh, material, lights, samples, curv, cut, clock, opts)
         stats["transport"] = "direct" + (f" ({why})" if why else "")
     else:
         if built:  # built by this bake (not passed in or reused): its stages count here
@@ -245,9 +246,8 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
         plan, beam_distance, kstats = core.sample_plan(samples), None, {}
         if np.any(point):  # beams: few samples, the direct sum over their whole neighbourhoods
             sub = subset_samples(samples, point)
-            Mb, beam_distance, bstats, bplan, kstats = _direct(mesh, material, lights, sub, curv, cut, model, clock,
-                                                               "off", far_tol, far_rel_tol, far_geodesic, geodesic,
-                                                               rtol, auto_options, progress, near_field)
+            Mb, beam_distance, bstats, bplan, kstats = _direct(mesh, material, lights, sub, curv, cut, clock,
+                                                               opts._replace(far_field="off"))
             M = M + Mb
             stats.update({f"beam_{k}": v for k, v in bstats.items() if k in ("pairs_found", "pairs_evaluated")})
             if plan is not None and bplan is not None:
@@ -313,9 +313,24 @@ def _volume_bake(vt, mesh, material, lights, samples, curv, clock) -> BakeResult
                       "volume", material, clock.timings, stats, None, vt)
 
 
-def _direct(mesh, material, lights, samples, curv, cut, model, clock, far_field, far_tol, far_rel_tol, far_geodesic,
-            geodesic, rtol, auto_options, progress, near_field="point"):
+class SumOptions(NamedTuple):
+    """The options of :func:`bake` that its direct sum uses (their meanings there)."""
+
+    model: str
+    far_field: str
+    far_tol: float
+    far_rel_tol: float
+    far_geodesic: str
+    geodesic: str
+    rtol: float
+    auto_options: dict | None
+    progress: bool | str
+    near_field: str = "point"
+
+
+def _direct(mesh, material, lights, samples, curv, cut, clock, opts: SumOptions):
     """The direct sum of :func:`bake` over ``samples``: (M, beam distance, stats, AutoPlan or None, kernel stats)."""
+    model, far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol, auto_options, progress, near_field = opts
     frames = source_frames(samples, curv, mesh.faces)
     far_field, near = _near_radius(mesh, material, samples, cut, far_field, far_tol)
     plan = None

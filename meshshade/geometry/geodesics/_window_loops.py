@@ -11,7 +11,7 @@ Pseudo-sources are emitted at boundary and non-manifold vertices (all around) an
 theta > 2 pi) only into the sector [alpha + pi, alpha + theta - pi] opposite the arrival direction alpha, where a
 path through the vertex can be shortest (MMP's rule; it halves the window count on scanned meshes).  Every
 distance is the length of an actual path on the mesh, so results never fall below the exact polyhedral distance
-(up to rounding).  Block structure, stamps and bucket queue: :mod:`._queue_kernels`.
+(up to rounding).  Block structure, stamps and bucket queue: :mod:`._queue_loops`.
 
 ``_window_block`` (the driver) runs one source after the other:
 
@@ -23,7 +23,7 @@ distance is the length of an actual path on the mesh, so results never fall belo
    exit edge (``_exit_edge``, ``_unfold_across_edge``, ``_cone_on_line``) as a pending window;
 4. a popped saddle/boundary vertex is a pseudo-source: paths to the other corners of its faces and pending
    windows on their far edges, a saddle's only inside its sector (``_arrival_angle``, ``_sector_on_edge`` in
-   :mod:`._saddle_kernels`);
+   :mod:`._saddle_loops`);
 5. the vertices within the cutoff are collected (``_append_results``).
 
 Numba note: the per-event helpers are inlined (``inline="always"``), and those that take arrays are straight-line
@@ -61,9 +61,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from meshshade.geometry.geodesics._queue_kernels import (_IMPROVE, _append_results, _bq_pop, _bq_push, _grow_f,
+from meshshade.geometry.geodesics._queue_loops import (_IMPROVE, _append_results, _bq_pop, _bq_push, _grow_f,
                                                          _reserve_events)
-from meshshade.geometry.geodesics._saddle_kernels import _arrival_angle, _sector_on_edge
+from meshshade.geometry.geodesics._saddle_loops import _arrival_angle, _sector_on_edge
 
 #: pending windows at once (one per face around a pseudo-source vertex; further faces get no window)
 _MAX_CHILDREN = 64

@@ -1,6 +1,6 @@
 """Numba machinery shared by the geodesic kernels (private): bucket queue, growable arrays, result collection.
 
-The propagations in :mod:`._window_kernels` and :mod:`._graph_kernels` process a *block* of sources sequentially
+The propagations in :mod:`._window_loops` and :mod:`._graph_loops` process a *block* of sources sequentially
 with reused, stamp-reset work arrays (no O(n) clearing per source), so that a block costs O(sum of neighbourhood
 sizes).  Events are ordered by a bucket queue: ``nb`` circular buckets of width ``1/inv_delta`` (mm) spanning the
 largest key jump, each a LIFO linked list threaded through the event arrays ``ek`` (key, mm), ``ei`` (item) and

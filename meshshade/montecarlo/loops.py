@@ -18,7 +18,7 @@ Physics is that of :mod:`meshshade.montecarlo.simulation` (MCML conventions); th
 repeats the float64 ray-triangle reconstruction of :meth:`meshshade.raycast.scene._SceneBase._hits_on_faces`
 (Moller & Trumbore 1997, barycentrics clipped onto the triangle) and the ray offsets of
 :meth:`~meshshade.raycast.scene._SceneBase.offset_epsilon`. The fused kernel of the ``direct`` mode, which calls
-Embree from these threads, is :mod:`meshshade.montecarlo.direct_walk`.
+Embree from these threads, is :mod:`meshshade.montecarlo.fused_walk`.
 """
 from __future__ import annotations
 

@@ -3,8 +3,8 @@
 Icospheres R = 60 mm of ~10k / 40k / 160k vertices, vertex sources, cutoff 28 mm; the window method only on the
 smallest (it is ~100x slower).  Pairs per second = neighbour pairs returned / wall time of ``query``.
 
-    python tools/benchmarks/bench_fast_neighbourhood.py                    # levels 5 6 7, 4000 sources each
-    python tools/benchmarks/bench_fast_neighbourhood.py --sources 20000 --threads 2
+    python tools/benchmarks/bench_arc_neighbourhood.py                    # levels 5 6 7, 4000 sources each
+    python tools/benchmarks/bench_arc_neighbourhood.py --sources 20000 --threads 2
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from meshshade.geometry.geodesics.arc import FastGeodesicNeighbourhoods  # noqa: E402
+from meshshade.geometry.geodesics.arc import ArcGeodesicNeighbourhoods  # noqa: E402
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods  # noqa: E402
 from meshshade.geometry.procedural import icosphere  # noqa: E402
 
@@ -48,7 +48,7 @@ def main(argv=None):
         n = len(V)
         src = np.sort(np.random.default_rng(level).choice(n, min(n, a.sources), replace=False))
         row = {"mesh": f"icosphere R=60 mm level {level}", "n_vertices": n, "cutoff_mm": a.cutoff}
-        fast = FastGeodesicNeighbourhoods(V, F, N, n_threads=a.threads)
+        fast = ArcGeodesicNeighbourhoods(V, F, N, n_threads=a.threads)
         nb, dt = _time(fast, src, a.cutoff)
         row["arc"] = {"sources": int(src.size), "mean_neighbours": float(nb.counts.mean()),
                       "pairs_per_second": nb.n_pairs / dt, "projected_all_vertices_seconds": n * dt / src.size,

@@ -2,7 +2,7 @@
 the far-field traversal with every model's kernel.
 
 Everything is float64 on plain arrays, lengths in mm. A source cluster (a node of the k-d tree over vertex
-sources, farfield_kernels.node_ranges / kd_permutation) stands for its sources by four *sigma points*: with P the
+sources, farfield_loops.node_ranges / kd_permutation) stands for its sources by four *sigma points*: with P the
 node's power, c its power-weighted centroid and lambda_1 >= lambda_2 the two largest eigenvalues (axes e_1, e_2)
 of its power-weighted covariance, the points ``c +- sqrt(2 lambda_k) e_k`` with power P/4 each reproduce the
 cluster's zeroth, first and second moments exactly (docs/physics.md §9.1, eq. (72)), so the sum over the cluster is
@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from meshshade.transport.farfield_kernels import log_grid_interp, near_factor
+from meshshade.transport.farfield_loops import log_grid_interp, near_factor
 from meshshade.transport.kernel_evaluation import FITTED, kernel_value
 
 STACK_SIZE = 256

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from meshshade.geometry.geodesics.arc import FastGeodesicNeighbourhoods
+from meshshade.geometry.geodesics.arc import ArcGeodesicNeighbourhoods
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods, Neighbourhoods
 from meshshade.geometry.procedural import icosphere, torus
@@ -26,7 +26,7 @@ def _pairs(nb):
 def _compare(V, F, N, sources, cut, tol=5e-3, **kw):
     """Fast vs exact: relative error beyond 2 mean edges and vertex sets (up to the 0.5 % cutoff band)."""
     exact = GeodesicNeighbourhoods(V, F, N).query(None, None, None, sources, None, cut, **kw)
-    fast_s = FastGeodesicNeighbourhoods(V, F, N)
+    fast_s = ArcGeodesicNeighbourhoods(V, F, N)
     fast = fast_s.query(None, None, None, sources, None, cut, **kw)
     h = fast_s.mean_edge_length
     pe, pf = _pairs(exact), _pairs(fast)
@@ -76,7 +76,7 @@ def test_fast_csr_layout_and_phi_match_exact():
     d2 = np.cross(N[src], d1)
     kw = dict(d1=d1, d2=d2, tangent=True)
     exact = GeodesicNeighbourhoods(V, F, N).query(None, None, None, src, None, 4.0, **kw)
-    fast = FastGeodesicNeighbourhoods(V, F, N).query(None, None, None, src, None, 4.0, **kw)
+    fast = ArcGeodesicNeighbourhoods(V, F, N).query(None, None, None, src, None, 4.0, **kw)
     for name in ("indptr", "vertex", "distance", "chord", "tangent", "phi", "cutoff"):
         e, f = getattr(exact, name), getattr(fast, name)
         assert e.dtype == f.dtype and e.ndim == f.ndim, name
@@ -91,7 +91,7 @@ def test_fast_csr_layout_and_phi_match_exact():
     # each row: the source itself at distance 0, chord <= distance <= cutoff
     assert np.all(fast.chord <= fast.distance + 1e-12) and np.all(fast.distance <= 4.0)
     with pytest.raises(ValueError):
-        FastGeodesicNeighbourhoods(V, F, N).query(None, None, None, [len(V)], None, 4.0)
+        ArcGeodesicNeighbourhoods(V, F, N).query(None, None, None, [len(V)], None, 4.0)
 
 
 def test_fast_face_sources_match_exact():
@@ -102,7 +102,7 @@ def test_fast_face_sources_match_exact():
     bary = rng.dirichlet([2, 2, 2], 20)
     kw = dict(source_faces=faces, source_bary=bary, source_vertex=None)
     exact = GeodesicNeighbourhoods(V, F, N).query(None, faces, bary, None, None, 5.0)
-    fast = FastGeodesicNeighbourhoods(V, F, N).query(None, faces, bary, None, None, 5.0)
+    fast = ArcGeodesicNeighbourhoods(V, F, N).query(None, faces, bary, None, None, 5.0)
     pe, pf = _pairs(exact), _pairs(fast)
     common = pe.keys() & pf.keys()
     de, df = np.array([pe[p] for p in common]), np.array([pf[p] for p in common])
@@ -134,7 +134,7 @@ def test_fast_no_leak_u_strip_far_from_fold():
     r, arm, width = 0.5, 30.0, 4.0
     src = int(np.argmin(np.linalg.norm(V - [arm / 2, -r, width / 2], axis=1)))
     other = np.flatnonzero(V[:, 1] > 0.99 * r)
-    fast = FastGeodesicNeighbourhoods(V, F, _normals(V, F)).query(None, None, None, [src], None, 10.0)
+    fast = ArcGeodesicNeighbourhoods(V, F, _normals(V, F)).query(None, None, None, [src], None, 10.0)
     assert np.intersect1d(fast.vertex, other).size == 0 and fast.n_pairs > 100
 
 
@@ -156,7 +156,7 @@ def test_fast_no_leak_between_touching_spheres():
     Vb = Va + [10.0 + 1e-6, 0.0, 0.0]
     V, F = np.concatenate([Va, Vb]), np.concatenate([Fa, Fa + len(Va)])
     s = int(np.argmax(Va[:, 0]))
-    nb = FastGeodesicNeighbourhoods(V, F, _normals(V, F)).query(None, None, None, [s], None, 4.0)
+    nb = ArcGeodesicNeighbourhoods(V, F, _normals(V, F)).query(None, None, None, [s], None, 4.0)
     assert nb.vertex.max() < len(Va) and nb.n_pairs > 10
 
 
@@ -165,7 +165,7 @@ def test_fast_overflow_rerun_and_blocks_consistent():
     N = V / np.linalg.norm(V, axis=1, keepdims=True)
     src = np.arange(0, len(V), 5)
     cut = np.where(np.arange(src.size) % 3 == 0, 8.0, 2.0)
-    s = FastGeodesicNeighbourhoods(V, F, N)
+    s = ArcGeodesicNeighbourhoods(V, F, N)
     a = s.query(None, None, None, src, None, cut, block_size=50)
     s._cap = 16  # force the capacity re-run path
     b = s.query(None, None, None, src, None, cut)

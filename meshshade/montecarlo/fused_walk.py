@@ -3,8 +3,8 @@
 One ``prange`` kernel over the live slots walks every live photon for up to ``max_steps`` events: free paths
 certified by the safe-distance grid (:mod:`meshshade.montecarlo.interior`) need no ray, the others are traced from
 the photon's own thread through :func:`meshshade.raycast.embree_direct.trace` (no GIL) and resolved in float64 by
-:func:`meshshade.montecarlo.kernels.surface_s`. Physics and random streams are those of
-:mod:`meshshade.montecarlo.kernels`, so a photon walks the same path as in the ``batched`` mode.
+:func:`meshshade.montecarlo.loops.surface_s`. Physics and random streams are those of
+:mod:`meshshade.montecarlo.loops`, so a photon walks the same path as in the ``batched`` mode.
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import math
 
 from numba import njit, prange
 
-from meshshade.montecarlo import kernels as K
+from meshshade.montecarlo import loops as K
 from meshshade.raycast.embree_direct import rayhit_buffer, trace
 
 __all__ = ["walk_parallel"]

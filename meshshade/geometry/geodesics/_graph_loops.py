@@ -7,15 +7,15 @@
 ``_vertex_queue_block(..., use_triangles=False)``
     Plain Dijkstra on the edge graph (the baseline: zig-zag paths overestimate by 8-15 % on average).
 
-Same block structure, stamps and bucket queue (:mod:`._queue_kernels`) and half-edge frames as
-:mod:`._window_kernels`.
+Same block structure, stamps and bucket queue (:mod:`._queue_loops`) and half-edge frames as
+:mod:`._window_loops`.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from meshshade.geometry.geodesics._queue_kernels import _IMPROVE, _append_results, _bq_pop, _bq_push, _grow_f
+from meshshade.geometry.geodesics._queue_loops import _IMPROVE, _append_results, _bq_pop, _bq_push, _grow_f
 
 
 @njit(cache=True, nogil=True)

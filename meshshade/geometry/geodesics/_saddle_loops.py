@@ -1,10 +1,10 @@
-"""Numba kernels for pseudo-sources at saddle vertices (private; used by :mod:`._window_kernels`).
+"""Numba kernels for pseudo-sources at saddle vertices (private; used by :mod:`._window_loops`).
 
 A shortest path through a saddle vertex (cone angle theta > 2 pi) turns by at least pi on both sides (Mitchell,
 Mount & Papadimitriou 1987), so a pseudo-source there only lights the sector [alpha + pi, alpha + theta - pi] of
 the vertex's fan, opposite the direction alpha the path arrived from.  Angles are measured around the vertex,
 counter-clockwise, across its unfolded fan of faces (radians); lengths in mm.  Half-edge frames as in
-:mod:`._window_kernels`.
+:mod:`._window_loops`.
 """
 from __future__ import annotations
 
