@@ -44,6 +44,13 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "meshshade"
 
 KERNEL_ALLOWED_ROOTS = {"numpy", "scipy", "numba", "math", "__future__", "typing", "dataclasses", "functools"}
+#: kernel modules that may also import the standard library's file readers, and why
+KERNEL_TABLE_READERS = {
+    "meshshade/kernels/table_files.py": ({"csv", "pathlib"}, "reads the kernels' own tables (meshshade/kernels/data/"
+                                         "*.csv, shipped with the package) once at import: constants stored as "
+                                         "data with their provenance, never a user's file"),
+    "meshshade/kernels/fitted_curvature_table.py": ({"json"}, "parses the JSON fields of its table's header"),
+}
 #: (module, function qualname) allowed to touch files; None: the whole module, or the whole package (the package
 #: and every module under it: meshshade.io is the package meshshade/io/)
 FILE_IO_ALLOWED = {("meshshade.io", None), ("meshshade.compiled_cache", None), ("meshshade.asset_cache", None)}
@@ -91,19 +98,8 @@ LAZY_IMPORTS = {
                                               lambda mods: set()),
 }
 
-#: why the kernels' private helpers are still shared across packages (issue 32 gives each kernel one implementation)
-KERNEL_UNIFICATION = "being unified under issue 32 (kernel implementation)"
 #: (importing module's path, the private name it uses, dotted) -> why it may, until its owner removes the entry
-PRIVATE_ALLOWED = {
-    **{("meshshade/kernels/fitted_curvature.py", f"meshshade.kernels.curvature.{name}"): KERNEL_UNIFICATION
-       for name in ("coefficients._ratios_direct", "table._MU_RHO_ZERO", "table._PER_UNIT", "table._PHI_MAX",
-                    "table._cheb_to_monomial", "table._dipole_exp_block", "table._piece_pair")},
-    **{("meshshade/transport/hierarchy_loops.py", name): KERNEL_UNIFICATION
-       for name in ("meshshade.kernels.curvature.coefficients._ratios_direct",
-                    "meshshade.kernels.curvature.policies._DELTA_MAX", "meshshade.kernels.curvature.policies._INV_SAT",
-                    "meshshade.kernels.curvature.table._PER_UNIT", "meshshade.kernels.curvature.table._table_eval",
-                    "meshshade.kernels.fitted_curvature._row_at")},
-}
+PRIVATE_ALLOWED: dict = {}
 
 #: the most parameters a function takes (rule (h))
 MAX_PARAMS = 12
@@ -117,14 +113,12 @@ PARAMS_ALLOWED = {
     ("meshshade/transport/baking.py", "check_bake_options"): PUBLIC_OPTIONS + "; the options of bake, checked",
     ("meshshade/output/compare.py", "run_comparison"): PUBLIC_OPTIONS,
     ("meshshade/montecarlo/simulation.py", "simulate"): PUBLIC_OPTIONS,
-    ("meshshade/transport/hierarchical.py", "SurfaceTransport.build"): PUBLIC_OPTIONS + "; " + KERNEL_UNIFICATION,
-    **{(path, f"{cls}.query"): ("the geodesic query (6 source arrays, 8 keyword-only options), called by "
-                                "transport/gather.py, hierarchical.py and baking.py, which are " + KERNEL_UNIFICATION
-                                + "; a record of the sources (positions, faces, bary, vertex, normals) is the fix")
+    ("meshshade/transport/hierarchical.py", "SurfaceTransport.build"): PUBLIC_OPTIONS,
+    **{(path, f"{cls}.query"): ("the geodesic query: the sources' columns (positions, faces, barycentrics, vertex, "
+                                "normals, radius) and keyword-only frame options (d1, d2, k1, k2, progress...), "
+                                "named at every call")
        for path, cls in (("meshshade/geometry/geodesics/neighbourhoods.py", "GeodesicNeighbourhoods"),
                          ("meshshade/geometry/geodesics/arc.py", "ArcGeodesicNeighbourhoods"))},
-    ("meshshade/transport/baking.py", "_direct"): (
-        "17 positional: the options of bake passed on; " + KERNEL_UNIFICATION + ", whose owner gives it a record"),
 }
 
 
@@ -275,8 +269,10 @@ def check_kernel_imports(root: Path, package: str = PACKAGE) -> list[Violation]:
         if not _in(mod.name, f"{package}.kernels"):
             continue
         for imp in mod.imports:
-            ok = (imp.target.split(".")[0] in KERNEL_ALLOWED_ROOTS or _in(imp.target, f"{package}.errors")
-                  or _in(imp.target, f"{package}.kernels"))
+            root_name = imp.target.split(".")[0]
+            ok = (root_name in KERNEL_ALLOWED_ROOTS or _in(imp.target, f"{package}.errors")
+                  or _in(imp.target, f"{package}.kernels")
+                  or root_name in KERNEL_TABLE_READERS.get(mod.rel, (set(), ""))[0])
             if not ok:
                 out.append(Violation("kernels", mod.rel, imp.line, f"kernel module imports {imp.target}"))
     return out
