@@ -1,4 +1,4 @@
-"""Where numba keeps meshshade's compiled kernels: a folder named after a hash of the package's sources.
+"""Where numba keeps meshshade's compiled code: a folder named after a hash of the package's sources.
 
 Why: numba's on-disk cache (``cache=True``) checks only the source file of the function it caches (its
 modification time and size). A compiled function keeps the machine code of every helper it calls or inlines

@@ -1,6 +1,6 @@
 """Pacing: long kernel work cut into calls of about 0.2 s on worker threads, so that Ctrl-C acts between calls.
 
-Python acts on Ctrl-C (and SIGTERM, SIGHUP) only between bytecodes, never inside a numba kernel, so a kernel that
+Python acts on Ctrl-C (and SIGTERM, SIGHUP) only between bytecodes, never inside a compiled loop, so a kernel that
 runs over many sources (the geodesic neighbourhood queries, :mod:`meshshade.geometry.geodesics`) is called on
 consecutive blocks of sources instead, each of about :data:`BLOCK_SECONDS` of work:
 
@@ -27,7 +27,7 @@ from meshshade.progress import kernel_interrupts, polled_interrupts
 __all__ = ["BLOCK_SECONDS", "POLL_SECONDS", "Pacer", "default_threads", "pace_rate", "run_paced"]
 
 #: seconds of work per kernel call: Python acts on Ctrl-C (and SIGTERM, SIGHUP) only between calls, never inside
-#: a numba kernel, so this bounds how long an interrupt waits (see :func:`run_paced`)
+#: a compiled loop, so this bounds how long an interrupt waits (see :func:`run_paced`)
 BLOCK_SECONDS = 0.2
 #: seconds between two looks for an interrupt while run_paced waits on its worker threads
 POLL_SECONDS = 0.02

@@ -22,7 +22,7 @@ Time comes from ``clock`` (default :func:`time.monotonic`), so tests drive it wi
 
 Ctrl-C: Python acts on a signal only between bytecodes, so long computations are cut into calls of a few
 tenths of a second (:func:`meshshade.pacing.run_paced`). A signal that arrives while
-a numba kernel runs in the main thread is acted upon when numba converts the kernel's results, which numba
+a compiled loop runs in the main thread is acted upon when numba converts the loop's results, which numba
 reports as a ``SystemError``; :func:`kernel_interrupts` (around such calls) and :func:`interrupt_in` (for a
 command-line front end) recover the KeyboardInterrupt.
 """
@@ -230,7 +230,7 @@ def interrupt_in(exc: BaseException | None) -> KeyboardInterrupt | None:
 
 @contextlib.contextmanager
 def kernel_interrupts():
-    """Around numba kernel calls made in the main thread: an interrupt that numba reports as a SystemError
+    """Around compiled loop calls made in the main thread: an interrupt that numba reports as a SystemError
     (:func:`interrupt_in`) is raised as the KeyboardInterrupt it is; any other error as it is."""
     try:
         yield

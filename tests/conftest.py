@@ -171,7 +171,7 @@ def mc_work_clock(monkeypatch):
 def dask_client():
     """A real local Dask cluster of 2 worker processes (one task thread and one numba thread each), shared by the
     tests that only submit work to it. A test that kills workers starts its own cluster."""
-    from meshshade.batch.cluster import open_client
+    from meshshade.batch.dask_cluster import open_client
 
     with open_client(workers=2, quiet=True) as client:
         yield client

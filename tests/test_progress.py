@@ -2,7 +2,7 @@
 
 * meshshade.progress: the lines written when stderr is not a terminal (estimate, periodic, 25/50/75 %), quiet,
   the terminal bar, driven by a fake clock (no sleeps); bake and mc report through it;
-* interrupts: a signal during a numba kernel in the main thread is the KeyboardInterrupt it is, not numba's
+* interrupts: a signal during a compiled loop in the main thread is the KeyboardInterrupt it is, not numba's
   SystemError (a real kernel and a real signal, synchronised on the kernel's own flag); the geodesic queries
   run in paced blocks (meshshade.pacing.run_paced) whose queued part an interrupt
   cancels, and whose boundaries never change a result.
@@ -22,7 +22,7 @@ from numba import njit
 
 from meshshade import progress as P
 from meshshade.geometry.geodesics import neighbourhoods as NB
-from meshshade.geometry.geodesics.arc import FastGeodesicNeighbourhoods
+from meshshade.geometry.geodesics.arc import ArcGeodesicNeighbourhoods
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
@@ -164,7 +164,7 @@ class _Stop(KeyboardInterrupt):
 
 @njit(nogil=True)
 def _busy_kernel(started, n):
-    """A kernel of ~0.1-0.3 s that returns arrays, as the geodesic kernels do (numba converts each with a call
+    """A kernel of ~0.1-0.3 s that returns arrays, as the geodesic loops do (numba converts each with a call
     into Python)."""
     started[0] = 1.0
     acc = 0.0
@@ -207,7 +207,7 @@ def _guarded(kernel):
 
 
 def test_signal_during_a_numba_kernel_is_raised_as_the_interrupt():
-    """A Ctrl-C that arrives while a numba kernel runs in the main thread is acted upon when numba boxes the
+    """A Ctrl-C that arrives while a compiled loop runs in the main thread is acted upon when numba boxes the
     result, and numba reports it as a SystemError caused by the KeyboardInterrupt; kernel_interrupts() raises
     the interrupt itself (so the CLI says "interrupted", exit 130, instead of a traceback and exit 1)."""
     raw = _signal_during_a_kernel()
@@ -283,7 +283,7 @@ def test_blocks_never_change_a_neighbourhood(method):
     """Paced blocks (sized by time), one source per call and all in one call give bitwise the same result."""
     V, F = icosphere(30.0, 3)
     src = np.arange(0, len(V), 5)
-    make = (lambda: FastGeodesicNeighbourhoods(V, F, n_threads=2)) if method == "arc" else (
+    make = (lambda: ArcGeodesicNeighbourhoods(V, F, n_threads=2)) if method == "arc" else (
         lambda: GeodesicNeighbourhoods(V, F, method=method, n_threads=2))
     ref = make().query(None, None, None, src, None, 12.0, block_size=len(src))
     for bs in (None, 1):

@@ -4,11 +4,11 @@
   TOML job files of meshshade commands and sweeps are read by :func:`meshshade.cli.jobs.read_jobs`;
 * :mod:`meshshade.batch.runner`: :func:`run_batch` (one Dask task and one folder per job, the manifest, skip on
   re-run) and :func:`run_job` (the task);
-* :mod:`meshshade.batch.cluster`: the :class:`distributed.Client` (a local cluster or an existing scheduler).
+* :mod:`meshshade.batch.dask_cluster`: the :class:`distributed.Client` (a local cluster or an existing scheduler).
 
 Monte Carlo runs split across workers live with the walk: :mod:`meshshade.montecarlo.distributed`.
 """
-from meshshade.batch.cluster import open_client
+from meshshade.batch.dask_cluster import open_client
 from meshshade.batch.jobs import Job, JobFileError
 from meshshade.batch.runner import BatchResult, run_batch, run_job
 

@@ -8,7 +8,7 @@ and moves them. :func:`open_client` gives one:
   --scheduler-file``): connect to a running cluster (started by hand, by dask-jobqueue on SLURM/PBS, by the Dask
   Kubernetes operator, ...). Its workers must be able to import meshshade and read the input paths.
 * otherwise a :class:`distributed.LocalCluster` of ``workers`` processes (default: one per core), one task
-  thread each; each process's numba kernels get ``cores // workers`` threads (at least 1), so the machine is
+  thread each; each process's compiled loops get ``cores // workers`` threads (at least 1), so the machine is
   not oversubscribed, and glibc's default memory trimming (Dask's own setting made bakes 20-50 % slower).
 
 Inside a task, :func:`task_threads` sets the numba thread count for the worker it runs on (``MESHSHADE_TASK_THREADS``

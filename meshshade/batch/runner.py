@@ -1,7 +1,7 @@
 """Run a batch of jobs on Dask distributed: one task per job, one folder per job, a manifest of them all.
 
 :func:`run_batch` submits every job that is not already done to a :class:`distributed.Client` (a local cluster
-sized to the machine unless one is given, :mod:`meshshade.batch.cluster`) and collects the outcomes as they
+sized to the machine unless one is given, :mod:`meshshade.batch.dask_cluster`) and collects the outcomes as they
 arrive. Dask places the tasks, moves them between workers and re-runs a task whose worker died; meshshade only
 says what a job is and where its files go:
 
@@ -38,7 +38,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from meshshade import __version__, memo
-from meshshade.batch.cluster import open_client, task_threads
+from meshshade.batch.dask_cluster import open_client, task_threads
 from meshshade.batch.jobs import Job, JobFileError
 from meshshade.errors import MeshshadeError
 from meshshade.io import (detached, file_sha256, folder_files, job_folder, output_dir, output_transaction, read_json,

@@ -53,7 +53,7 @@ class BenchResult:
 
 
 def _warm_up(models, log):
-    """Compile (or load from cache) every numba kernel on a tiny scene, so no timed call pays for it."""
+    """Compile (or load from cache) every compiled loop on a tiny scene, so no timed call pays for it."""
     t = time.perf_counter()
     mesh = Mesh.from_arrays(*icosphere(5.0, 2))
     beam = BeamLight((0.06, 0.04, 15.0), (0, 0, -1))

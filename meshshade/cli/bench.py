@@ -7,7 +7,7 @@ from __future__ import annotations
 import contextlib
 import sys
 
-from meshshade.batch.cluster import check_cluster_options, open_client
+from meshshade.batch.dask_cluster import check_cluster_options, open_client
 from meshshade.bench.plan import bench_plan
 from meshshade.bench.report import write_bench
 from meshshade.bench.runner import run_bench as run_benchmark

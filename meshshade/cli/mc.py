@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import contextlib
 
-from meshshade.batch.cluster import check_cluster_options, open_client
+from meshshade.batch.dask_cluster import check_cluster_options, open_client
 from meshshade.cli.options import lights_from_args, mesh_and_material
 from meshshade.errors import MeshshadeError
 from meshshade.io import check_output_path

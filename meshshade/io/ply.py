@@ -155,7 +155,7 @@ def _ply_ascii_element(block, props, name: str, path: Path) -> dict:
 
 
 def _ply_scan_rows(buf, pos, count, kinds, sizes, csizes, csigned, big):
-    """Start of every row of a binary PLY element with list properties (sizes vary per row): numba kernel.
+    """Start of every row of a binary PLY element with list properties (sizes vary per row): compiled loop.
 
     kinds[p]: 0 scalar of sizes[p] bytes, 1 list (count of csizes[p] bytes, signed if csigned[p], then items of
     sizes[p] bytes). Returns (starts (count + 1,), list lengths (count, lists), rows read, status): status 0 ok,

@@ -22,7 +22,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from meshshade.batch.cluster import task_threads
+from meshshade.batch.dask_cluster import task_threads
 from meshshade.montecarlo.engine import ENTRY_CHUNK
 from meshshade.montecarlo.walks import GroupTally, channel_groups, prepare_walks, walk_group
 

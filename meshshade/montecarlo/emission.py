@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit, prange
 
 from meshshade.light import BeamLight, DirectionalLight, PointLight
-from meshshade.montecarlo import kernels as K
+from meshshade.montecarlo import loops as K
 from meshshade.raycast.embree_direct import rayhit_buffer, trace
 
 __all__ = ["EmitterKernel", "emission_base", "fresnel_in", "spot_falloff", "sample_entries", "cast_direct",

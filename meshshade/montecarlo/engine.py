@@ -10,19 +10,19 @@ A pool of ``pool`` photon slots is advanced in rounds; every step that touches p
    :class:`~meshshade.montecarlo.interior.SafeDistanceGrid` (shorter than the conservative distance to the surface,
    or both ends inside a half-space certificate); otherwise Embree selects the first face hit within the free path
    (float32), the distance is recomputed in float64 on that face, and the photon scatters before the surface, is
-   Fresnel-reflected or leaves (:func:`~meshshade.montecarlo.kernels.surface_s`). At most ``MAX_STEPS`` events per
+   Fresnel-reflected or leaves (:func:`~meshshade.montecarlo.loops.surface_s`). At most ``MAX_STEPS`` events per
    photon and round.
 
    * ``direct`` (default): every thread calls Embree's ``rtcIntersect1`` itself
-     (:mod:`meshshade.montecarlo.direct_walk` through :mod:`meshshade.raycast.embree_direct`), so the boundary
+     (:mod:`meshshade.montecarlo.fused_walk` through :mod:`meshshade.raycast.embree_direct`), so the boundary
      tests run on all cores;
-   * ``batched``: the interior kernel stops every photon at its first uncertified free path, ONE embreex call
-     traces all of them (embreex holds the GIL: one core), a second kernel resolves them.
+   * ``batched``: the interior loop stops every photon at its first uncertified free path, ONE embreex call
+     traces all of them (embreex holds the GIL: one core), a second loop resolves them.
 3. ``reduce_round`` adds the round's absorbed/lost/exit weights to the per-batch tallies, in parallel over
    batches (slot order within a batch).
 
 Every random number of photon ``i`` (its entry and its walk) comes from its own counter-based stream keyed by
-(seed, group, i) (:mod:`meshshade.montecarlo.kernels`), and every sum runs in a fixed order: the result is bitwise
+(seed, group, i) (:mod:`meshshade.montecarlo.loops`), and every sum runs in a fixed order: the result is bitwise
 identical for any number of numba threads, and photon ``i``'s path is the same for any pool size and either Embree
 mode (the tallies then differ only by the floating-point summation order).
 
@@ -45,8 +45,8 @@ import numba
 import numpy as np
 
 from meshshade.light import BeamLight
-from meshshade.montecarlo import kernels as K
-from meshshade.montecarlo.direct_walk import walk_parallel
+from meshshade.montecarlo import loops as K
+from meshshade.montecarlo.fused_walk import walk_parallel
 from meshshade.montecarlo.emission import EmitterKernel, emission_base
 from meshshade.montecarlo.sampling import ROULETTE_BOOST as K_BOOST, ROULETTE_THRESHOLD as K_THRESH, GroupMedium
 from meshshade.raycast.embree_direct import TFAR_MARGIN_REL

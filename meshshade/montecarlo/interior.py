@@ -5,7 +5,7 @@ to the nearest triangle from below: voxels touched by a triangle's bounding box 
 distance transform gives the distance ``e`` from a voxel's centre to the nearest marked centre, and for a point
 x in voxel v and a surface point y in marked voxel w, |x - y| >= |c_v - c_w| - |x - c_v| - |y - c_w|
 >= e - sqrt(3) h. While a sampled free path is shorter than that bound the photon scatters without Embree
-(:func:`meshshade.montecarlo.kernels.interior_run`); otherwise the free path is kept (``pending``) and handed to
+(:func:`meshshade.montecarlo.loops.interior_run`); otherwise the free path is kept (``pending``) and handed to
 the boundary test, so every free path is drawn exactly once from the exponential law (no bias).
 
 Half-space certificates (``planes``): near the surface the distance bound fails for most free paths, although
@@ -15,7 +15,7 @@ outward normal of the triangles registered in the 3^3 voxels around v, and c the
 of every triangle registered in the (2 PLANE_K + 1)^3 voxels (a triangle meeting B is registered there). Every
 surface point y in B lies on a triangle whose vertices all have n . vertex >= c, hence n . y >= c: the convex set
 B n {n . y < c} holds no surface point. A free path from x to e = x + s d with both ends in that set therefore
-cannot reach the surface and needs no ray (:func:`meshshade.montecarlo.kernels.certified`). Embree still finds
+cannot reach the surface and needs no ray (:func:`meshshade.montecarlo.loops.certified`). Embree still finds
 every boundary hit; the certificates only prove the absence of one, like the distance bound.
 
 Surfaces that do not bound a volume (``open_surface_warning``, emitted once when the grid is built): the walk

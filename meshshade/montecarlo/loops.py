@@ -1,7 +1,7 @@
-"""Numba kernels of the pooled Monte Carlo engine (:mod:`meshshade.montecarlo.engine`).
+"""Compiled loops of the pooled Monte Carlo engine (:mod:`meshshade.montecarlo.engine`).
 
 Every photon owns a counter-based random stream (below), so its path depends only on (seed, channel group,
-photon index): never on the thread count, the scheduling or the pool size. Kernels that run over the pool in
+photon index): never on the thread count, the scheduling or the pool size. Loops that run over the pool in
 parallel (``prange``) write only to their own photon's slot; every sum over photons is done afterwards by
 :func:`reduce_round`, in parallel over batches and in slot order within a batch, so the tallies are also bitwise
 independent of the thread count.
@@ -17,7 +17,7 @@ only as an uncorrelated-looking reuse of numbers at different points of two diff
 Physics is that of :mod:`meshshade.montecarlo.simulation` (MCML conventions); the resolution of a boundary test
 repeats the float64 ray-triangle reconstruction of :meth:`meshshade.raycast.scene._SceneBase._hits_on_faces`
 (Moller & Trumbore 1997, barycentrics clipped onto the triangle) and the ray offsets of
-:meth:`~meshshade.raycast.scene._SceneBase.offset_epsilon`. The fused kernel of the ``direct`` mode, which calls
+:meth:`~meshshade.raycast.scene._SceneBase.offset_epsilon`. The fused walk of the ``direct`` mode, which calls
 Embree from these threads, is :mod:`meshshade.montecarlo.fused_walk`.
 """
 from __future__ import annotations

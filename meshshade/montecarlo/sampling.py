@@ -1,7 +1,7 @@
 """Sampling of the Monte Carlo random walk: Russian roulette constants, Henyey-Greenstein scattering, refraction.
 
 Pure array functions on float64 unit directions (n, 3); random numbers come from a ``numpy.random.Generator``.
-The pooled engine's numba kernels (:mod:`meshshade.montecarlo.kernels`) implement the same physics per photon.
+The pooled engine's compiled loops (:mod:`meshshade.montecarlo.loops`) implement the same physics per photon.
 """
 from __future__ import annotations
 

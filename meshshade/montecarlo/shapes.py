@@ -2,7 +2,7 @@
 spherical cavity and a cylindrical bore: the medium outside a ball or a cylinder), with exact exit distances.
 
 The reference for reflectance *profiles* (``meshshade profile --models mc``). A pencil beam enters at normal
-incidence; the walk is that of the mesh engine (MCML conventions, :mod:`meshshade.montecarlo.kernels`: free paths
+incidence; the walk is that of the mesh engine (MCML conventions, :mod:`meshshade.montecarlo.loops`: free paths
 with the full sigma_t = sigma_s + sigma_a, sigma_s = sigma_s' / (1 - g), Henyey-Greenstein scattering, implicit
 absorption with Russian roulette, Fresnel reflection at the boundary chosen by a random draw), but the boundary is
 the exact surface, found in closed form, and every exit point's geodesic distance from the entry point is exact:
@@ -36,7 +36,7 @@ from numba import njit, prange
 
 from meshshade.errors import ParameterError
 from meshshade.materials import Material
-from meshshade.montecarlo.kernels import _OPTS, _uniform, fresnel_out, photon_key, scatter_s, stream_base
+from meshshade.montecarlo.loops import _OPTS, _uniform, fresnel_out, photon_key, scatter_s, stream_base
 from meshshade.montecarlo.sampling import ROULETTE_BOOST, ROULETTE_THRESHOLD
 from meshshade.montecarlo.simulation import DEFAULT_BATCHES, batch_stats
 

@@ -27,7 +27,7 @@ Where: in this process, or split across the workers of a Dask client (``client=`
 channel group over a range of photons are :mod:`meshshade.montecarlo.walks`, shared by both.
 
 Engines: the default pooled engine (:mod:`meshshade.montecarlo.engine`) walks a regenerating pool of photons
-with numba kernels, certifies short free flights with a safe-distance grid and asks Embree only for the others;
+with compiled loops, certifies short free flights with a safe-distance grid and asks Embree only for the others;
 ``fast_interior=False`` selects the baseline numpy wavefront (:mod:`meshshade.montecarlo.wavefront_oracle`, one Embree
 query per photon and step; kept as the oracle of the tests and benchmarks). Both follow the physics above and give
 the same distributions. Photons enter through :class:`meshshade.montecarlo.emitter.Emitter`; the sampling

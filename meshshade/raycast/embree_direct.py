@@ -3,13 +3,13 @@
 embreex's ``run`` holds the GIL, so one process gets at most one core of Embree (measured ~3-7 M rays/s), while
 the near-surface walks of the benchmarks need a boundary test for ~35-40 % of their scattering events. Here the
 Embree 4 library that ships inside the embreex wheel is bound with ctypes (``rtcNewDevice`` ... ``rtcIntersect1``)
-and ``rtcIntersect1`` is called from a ``prange`` kernel (no GIL; the walk kernel
-:func:`meshshade.montecarlo.direct_walk.walk_parallel` calls :func:`trace`), so every core traces its own photons'
+and ``rtcIntersect1`` is called from a ``prange`` loop (no GIL; the walk loop
+:func:`meshshade.montecarlo.fused_walk.walk_parallel` calls :func:`trace`), so every core traces its own photons'
 rays.
 
 Conventions are those of :class:`meshshade.raycast.embree.EmbreeScene`: the scene is built in float32 relative to
 the bounding-box centre, in Embree's robust (watertight) mode; Embree only *selects* the face, the distance and the
-barycentrics are recomputed in float64 on that face (:func:`meshshade.montecarlo.kernels.surface_event`). Each ray
+barycentrics are recomputed in float64 on that face (:func:`meshshade.montecarlo.loops.surface_event`). Each ray
 is limited to ``tfar = free path + margin`` (margin ``TFAR_MARGIN_REL * scale``, far above the ~1e-7 scale float32
 error), which lets Embree stop early; a miss within tfar is an interior event.
 

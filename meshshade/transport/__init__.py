@@ -5,8 +5,8 @@ Modules: :mod:`~meshshade.transport.baking` (``bake``, ``BakeResult``: the stage
 kernel of each model for (source, vertex) pairs), :mod:`~meshshade.transport.gather` (cutoff radii, the chunked
 pair iteration and the sum per vertex), :mod:`~meshshade.transport.zones` (how each sample's pairs are found),
 :mod:`~meshshade.transport.auto` (which kernel and geodesics each sample needs),
-:mod:`~meshshade.transport.clusters` (far-zone geodesics shared between samples),
-:mod:`~meshshade.transport.farfield` with :mod:`~meshshade.transport.farfield_kernels` (the far tail of flat
+:mod:`~meshshade.transport.sample_groups` (far-zone geodesics shared between samples),
+:mod:`~meshshade.transport.farfield` with :mod:`~meshshade.transport.farfield_loops` (the far tail of flat
 surroundings by a bounded Taylor expansion). The bake's files are written by
 :func:`meshshade.output.bake_file.write_bake` (tone-mapped colours are an output concern).
 """

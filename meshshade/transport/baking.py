@@ -46,7 +46,7 @@ from meshshade.transport.models import DEFAULT_MODEL, MODELS
 from meshshade.transport.near_field import check_near_field, drift_angles, near_field_factors, refracted_drift
 from meshshade.transport.pair_kernel import PairKernel, source_frames
 from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
-from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, clusters_pay, neighbourhood_solver
+from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay, neighbourhood_solver
 from meshshade.volume.transport import NORMAL_SPACING, VolumeTransport, grading
 
 log = logging.getLogger("meshshade")
@@ -150,8 +150,8 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     exactly, for validation). Pairs whose chord is within r_near but whose geodesic distance is not (across a
     fold) are dropped, as the geodesic neighbourhood drops them without the far field.
     ``far_geodesic`` ("cluster" or "arc"): how ``auto`` finds the far-zone geodesics of curved vertex samples:
-    one exact query per cluster of nearby samples, each member's distance from the centre's by the law of
-    cosines in the tangent plane (clusters.py), or the arc method.
+    one exact query per group of nearby samples, each member's distance from the centre's by the law of
+    cosines in the tangent plane (sample_groups.py), or the arc method.
 
     ``transport``: how the vertex samples of directional and point lights are summed: "direct" (every pair
     within the cutoff, the reference; the options above), "hierarchical" (transport/hierarchical.py: a
@@ -337,7 +337,7 @@ def _direct(mesh, material, lights, samples, curv, cut, clock, opts: SumOptions)
     if model == "auto":
         plan = _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, auto_options)
         clock.lap("auto")
-    if plan is not None and far_geodesic == "cluster" and not clusters_pay(mesh, cut):
+    if plan is not None and far_geodesic == "cluster" and not groups_pay(mesh, cut):
         far_geodesic = "none"  # small mesh or short cutoff: shared far-zone geodesics would not save work
     zone = assign_zones(len(samples), samples.vertex >= 0, far_field, geodesic, plan, far_geodesic)
     clustered, src_cut, chord_cut = _gather_radii(zone, cut, near)

@@ -1,4 +1,5 @@
-"""Numba kernels of the clustered far-field sum (meshshade/transport/farfield.py): k-d tree build, node moments, traversal.
+"""Compiled loops of the clustered far-field sum (meshshade/transport/farfield.py): k-d tree build, node moments,
+traversal.
 
 Everything here is float64 on plain arrays. Distances are in mm; the dipole is evaluated in optical units per
 channel (``r_opt = r_mm * sigma_t'``, z_r = 1) and rescaled by ``sigma_t'**2`` to 1/mm^2, exactly as

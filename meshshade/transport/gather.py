@@ -16,10 +16,10 @@ import numpy as np
 from meshshade.kernels.dipole import dipole_cutoff_radius
 from meshshade.materials import Material
 from meshshade.progress import kernel_interrupts
-from meshshade.transport.clusters import cluster_sources, expand_far_pairs
+from meshshade.transport.sample_groups import group_samples, expand_far_pairs
 from meshshade.transport.pair_kernel import PairKernel, SourceFrames
 from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
-from meshshade.transport.zones import NEAR_MARGIN, ZONES, cluster_geometry
+from meshshade.transport.zones import NEAR_MARGIN, ZONES, group_geometry
 
 #: pairs evaluated per chunk (memory ~ 100 bytes per pair)
 PAIRS_PER_CHUNK = 4_000_000
@@ -143,8 +143,8 @@ class PairStream:
     def pairs(self, groups):
         """Pairs of every ``(zone index, source indices)`` group, in order."""
         for z, idx in groups:
-            if ZONES[z].outer_method == "exact-cluster":
-                yield from self._cluster_pairs(idx)
+            if ZONES[z].outer_method == "exact-shared":
+                yield from self._group_pairs(idx)
             else:
                 yield from self._zone_pairs(ZONES[z], idx)
 
@@ -195,11 +195,11 @@ class PairStream:
                 n_geo = pi[0].size + po[0].size
             yield from self._emit(p, n_geo, sel.size)
 
-    def _cluster_pairs(self, idx):
-        """Zone exact_near_cluster_far: exact near pairs per sample, far pairs from cluster centres."""
+    def _group_pairs(self, idx):
+        """Zone exact_near_shared_far: exact near pairs per sample, far pairs from sample-group centres."""
         samples, mesh, cut = self.samples, self.mesh, self.cut
-        size, near_c = cluster_geometry(mesh, cut)
-        order, ptr = cluster_sources(samples.positions[idx], self.frames.normals[idx], size)
+        size, near_c = group_geometry(mesh, cut)
+        order, ptr = group_samples(samples.positions[idx], self.frames.normals[idx], size)
         order = idx[order]
         centre_rows = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
         centre_of = order[ptr[:-1]][centre_rows]  # the centre sample of each entry of ``order``

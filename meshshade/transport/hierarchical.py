@@ -10,7 +10,7 @@ distance of each pair (docs/physics.md §9.1, eq. (71)):
   across a fold are dropped): the model's own kernel (PairKernel, exact or arc geodesics, the patch average of
   eq. (58)), computed once per mesh and material into a sparse matrix per channel, ``M_near = W Phi``;
 * **far field** — every other pair within the cutoff: a k-d tree of the lit sources per kernel kind, traversed
-  per receiver (transport/hierarchy_kernels.py). A cluster of radius a at distance d >= a/theta is replaced by
+  per receiver (transport/hierarchy_loops.py). A cluster of radius a at distance d >= a/theta is replaced by
   four sigma points carrying its zeroth to second moments, with its mean normal and mean shape operator (the
   kernel stays expanded at the source, as in the direct sum); closer clusters are opened, and leaves are summed
   pair by pair. Surface distances of far pairs are arcs from the chord and the two normals (eq. (59)).
@@ -38,9 +38,9 @@ from meshshade.materials import Material
 from meshshade.progress import Progress, kernel_interrupts
 from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
 from meshshade.transport.farfield import _receiver_order
-from meshshade.transport.farfield_kernels import kd_permutation, node_ranges, tree_depth
+from meshshade.transport.farfield_loops import kd_permutation, node_ranges, tree_depth
 from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.hierarchy_kernels import (Clusters, FarFactors, Opening, TreeSources, cluster_geometry,
+from meshshade.transport.hierarchy_loops import (Clusters, FarFactors, Opening, TreeSources, cluster_geometry,
                                                    far_traverse)
 from meshshade.transport.kernel_evaluation import SphereTables, kernel_params
 from meshshade.transport.models import MODEL_KERNEL, MODELS, Kernel
@@ -93,7 +93,7 @@ class FarFieldUnsupported(MeshshadeError):
 
 
 def arc_distances(chord, k_chord):
-    """Array twin of :func:`~meshshade.transport.hierarchy_kernels.arc_length` (the far field's surface distance)."""
+    """Array twin of :func:`~meshshade.transport.hierarchy_loops.arc_length` (the far field's surface distance)."""
     w = np.minimum(np.abs(k_chord), 1.0)
     return np.where(w < 1e-4, chord * (1.0 + w * w / 6.0), chord * np.arcsin(w) / np.maximum(w, 1e-300))
 

@@ -1,4 +1,4 @@
-"""Numba kernels of the hierarchical transport (meshshade/transport/hierarchical.py): cluster geometry per light and
+"""Compiled loops of the hierarchical transport (meshshade/transport/hierarchical.py): cluster geometry per light and
 the far-field traversal with every model's kernel.
 
 Everything is float64 on plain arrays, lengths in mm. A source cluster (a node of the k-d tree over vertex

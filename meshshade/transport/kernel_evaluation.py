@@ -2,7 +2,7 @@
 
 Every path of the bake evaluates its kernel through :func:`kernel_value`: the direct sum and the hierarchical near
 field through :class:`~meshshade.transport.pair_kernel.PairKernel` (:func:`kernel_values`, a loop over arrays of
-pairs), the hierarchical far field inside its traversal (transport/hierarchy_kernels.py, per pair). The physics
+pairs), the hierarchical far field inside its traversal (transport/hierarchy_loops.py, per pair). The physics
 lives in meshshade.kernels, each equation in one compiled scalar function:
 
 ==========================  ===================================================================================
@@ -31,10 +31,10 @@ import numpy as np
 
 from meshshade.kernels.curvature import CurvatureTable
 from meshshade.kernels.curvature.policies import SOFT
-from meshshade.kernels.curvature.table import curved_dipole
+from meshshade.kernels.curvature.table import curved_dipole, kernel_ratios
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
-from meshshade.kernels.fitted_curvature import (effective_coefficients, fitted_dipole, fitted_row_table,
-                                                matched_table, shipped_coefficients)
+from meshshade.kernels.fitted_curvature import (effective_coefficients, euler_curvatures, fitted_dipole,
+                                                fitted_row_table, matched_table, shipped_coefficients)
 from meshshade.kernels.optics import diffusion_params
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
@@ -230,3 +230,23 @@ def kernel_values(kind, c, chord, s, kn, knp, t2, sph_row, p, out):
     else:
         for j in range(s.size):
             out[j] = kernel_value(EXACT_SPHERE, c, chord[j], s[j], kn[j], knp[j], t2[j], sph_row[j], p)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def curved_values(c, s, phi, k1, k2, p, tol, out):
+    """The CURVED kernel over arrays of pairs whose sources' principal curvatures ``k1``, ``k2`` (1/mm) and the
+    pairs' azimuths ``phi`` from the first principal direction are given (the normal curvatures by Euler's formula,
+    :func:`~meshshade.kernels.fitted_curvature.euler_curvatures`), into ``out``; one pass, no temporaries. Returns
+    the number of pairs outside the first-order range, ``max(|k1|, |k2|) (|a| + |b| + z_r) > tol`` (optical
+    units; :func:`~meshshade.kernels.curvature.coefficients.curvature_validity`)."""
+    sc = p.sigma_t[c]
+    n_out = 0
+    for j in range(s.size):
+        ka, kc, _ = euler_curvatures(phi[j], k1[j], k2[j])
+        out[j] = kernel_value(CURVED, c, s[j], s[j], ka, kc, 0.0, -1, p)
+        kmax = max(abs(k1[j]), abs(k2[j])) / sc
+        if kmax > 0.0:
+            ra, rb = kernel_ratios(s[j] * sc, p.curv_coef[c], p.curv_n[c], p.mu[c], p.z_r[c], p.z_b[c])
+            if not kmax * (abs(ra) + abs(rb) + p.z_r[c]) <= tol:
+                n_out += 1
+    return n_out

@@ -1,10 +1,10 @@
 """How the bake finds each entry sample's pairs: zones of geodesic methods and far-field treatment.
 
 A :class:`Zone` names the geodesic method within the gather radius, the method beyond r_near (or None) and
-whether the far field is summed by clusters of the dipole. ``exact`` and ``arc`` gather the whole neighbourhood
-with one geodesic method; ``exact_near_arc_far`` and ``exact_near_cluster_far`` use exact geodesics near the
-sample and arc geodesics, or geodesics shared by clusters of samples (clusters.py), beyond;
-``exact_near``/``arc_near`` gather only to r_near and leave the rest to the clustered dipole (farfield.py).
+whether the far zone goes to the far-field sum (source clusters of the dipole). ``exact`` and ``arc`` gather the
+whole neighbourhood with one geodesic method; ``exact_near_arc_far`` and ``exact_near_shared_far`` use exact
+geodesics in the near zone and, beyond, arc geodesics or geodesics shared by groups of samples (sample_groups.py);
+``exact_near``/``arc_near`` gather only to r_near and leave the rest to the far-field sum (farfield.py).
 transport.baking assigns the zones (:func:`assign_zones`), transport.gather runs them.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from meshshade.geometry.geodesics.arc import FastGeodesicNeighbourhoods
+from meshshade.geometry.geodesics.arc import ArcGeodesicNeighbourhoods
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 
 
@@ -23,8 +23,9 @@ class Zone(NamedTuple):
     name : the zone's name (``stats["zone_<name>"]`` counts its samples)
     inner_method : geodesic method within the gather radius, "exact" or "arc"
     outer_method : method beyond r_near: None (``inner_method`` covers the whole gather radius), "arc", or
-        "exact-cluster" (one exact far query per cluster of samples, clusters.py)
-    far_field : pairs beyond r_near are summed by clusters of the dipole (the zone gathers only to r_near)
+        "exact-shared" (one exact far query per group of samples, sample_groups.py)
+    far_field : pairs beyond r_near go to the far-field sum (source clusters of the dipole; the zone gathers only
+        to r_near)
     """
 
     name: str
@@ -35,21 +36,21 @@ class Zone(NamedTuple):
     @property
     def solver_methods(self) -> tuple[str, ...]:
         """The geodesic neighbourhood solvers ("exact", "arc") the zone queries."""
-        outer = () if self.outer_method is None else (self.outer_method.replace("-cluster", ""),)
+        outer = () if self.outer_method is None else (self.outer_method.replace("-shared", ""),)
         return (self.inner_method,) + outer
 
 
 #: the zones in the order of their index (the values :func:`assign_zones` returns)
 ZONES = (Zone("exact", "exact", None, False), Zone("arc", "arc", None, False),
          Zone("exact_near_arc_far", "exact", "arc", False), Zone("exact_near", "exact", None, True),
-         Zone("arc_near", "arc", None, True), Zone("exact_near_cluster_far", "exact", "exact-cluster", False))
-EXACT, ARC, EXACT_NEAR_ARC_FAR, EXACT_NEAR, ARC_NEAR, EXACT_NEAR_CLUSTER_FAR = range(len(ZONES))
+         Zone("arc_near", "arc", None, True), Zone("exact_near_shared_far", "exact", "exact-shared", False))
+EXACT, ARC, EXACT_NEAR_ARC_FAR, EXACT_NEAR, ARC_NEAR, EXACT_NEAR_SHARED_FAR = range(len(ZONES))
 #: geodesic search radius of the near zone, in units of r_near (pairs are kept by chord <= r_near)
 NEAR_MARGIN = 1.1
-#: cluster size of the exact-cluster far zone, in mean edge lengths (capped at cutoff / 12)
-CLUSTER_EDGES = 4.0
-#: exact per-sample geodesics within this many cluster sizes (the law of cosines is used only beyond)
-CLUSTER_NEAR = 3.0
+#: size of a sample group of the exact_near_shared_far zone, in mean edge lengths (capped at cutoff / 12)
+GROUP_EDGES = 4.0
+#: exact per-sample geodesics within this many group sizes (the law of cosines is used only beyond)
+GROUP_NEAR = 3.0
 
 
 def assign_zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic: str = "cluster") -> np.ndarray:
@@ -59,7 +60,7 @@ def assign_zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic
     With the auto plan: exact or arc per sample (only arc when ``geodesic`` is "arc"); vertex samples whose
     surroundings are flat to the cutoff (``plan.far_dipole``) gather to r_near and leave the rest to the clustered
     dipole; the other vertex samples keep their kernel over the whole neighbourhood, with exact geodesics in the
-    near zone and, beyond it, geodesics shared by clusters of samples (``far_geodesic="cluster"``) or arc
+    near zone and, beyond it, geodesics shared by groups of samples (``far_geodesic="cluster"``) or arc
     geodesics ("arc"). ``area`` : (k,) bool, the vertex samples (directional and point lights).
     """
     far = area & (far_field != "off")
@@ -72,24 +73,24 @@ def assign_zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic
         far_geodesic = "arc"
     zone = np.where(ex, EXACT, ARC).astype(np.int64)
     if far_geodesic != "none":
-        split = EXACT_NEAR_CLUSTER_FAR if far_geodesic == "cluster" else EXACT_NEAR_ARC_FAR
+        split = EXACT_NEAR_SHARED_FAR if far_geodesic == "cluster" else EXACT_NEAR_ARC_FAR
         zone[far & ex & ~plan.far_dipole] = split
     zone[far & plan.far_dipole] = np.where(ex[far & plan.far_dipole], EXACT_NEAR, ARC_NEAR)
     return zone
 
 
-def cluster_geometry(mesh, cut):
-    """(cluster size, exact near radius) of the exact_near_cluster_far zone, mm: clusters of CLUSTER_EDGES mean
-    edges (at most 1/12 of the cutoff ``cut`` (3,) mm), exact per-sample geodesics within CLUSTER_NEAR cluster
+def group_geometry(mesh, cut):
+    """(group size, exact near radius) of the exact_near_shared_far zone, mm: sample groups of GROUP_EDGES mean
+    edges (at most 1/12 of the cutoff ``cut`` (3,) mm), exact per-sample geodesics within GROUP_NEAR group
     sizes."""
-    size = min(CLUSTER_EDGES * mesh.mean_edge_length, float(np.max(cut)) / 12.0)
-    return size, CLUSTER_NEAR * size
+    size = min(GROUP_EDGES * mesh.mean_edge_length, float(np.max(cut)) / 12.0)
+    return size, GROUP_NEAR * size
 
 
-def clusters_pay(mesh, cut) -> bool:
-    """Whether sharing far-zone geodesics within clusters saves at least 30 % of the geodesic pairs (estimated
+def groups_pay(mesh, cut) -> bool:
+    """Whether sharing far-zone geodesics within sample groups saves at least 30 % of the geodesic pairs (estimated
     from disc areas capped by the mesh's area: members x A(near) + centres x A(cutoff) vs members x A(cutoff))."""
-    size, near_c = cluster_geometry(mesh, cut)
+    size, near_c = group_geometry(mesh, cut)
     per_vertex = mesh.total_area / max(mesh.n_vertices, 1)
     members = max(1.0, size * size / per_vertex)  # samples per cubic cell of a surface (order of magnitude)
 
@@ -103,4 +104,4 @@ def neighbourhood_solver(method: str, mesh):
     """The geodesic neighbourhood solver of ``method`` ("exact" or "arc") for ``mesh``."""
     if method == "exact":
         return GeodesicNeighbourhoods(mesh.vertices, mesh.faces, mesh.vertex_normals)  # skips degenerate faces
-    return FastGeodesicNeighbourhoods(mesh.vertices, mesh.faces, mesh.vertex_normals)
+    return ArcGeodesicNeighbourhoods(mesh.vertices, mesh.faces, mesh.vertex_normals)

@@ -90,7 +90,7 @@ def test_ctrl_c_during_a_bake_acts_within_a_second_or_so(big_sphere, tmp_path, c
 
 
 def test_ctrl_c_during_an_arc_bake_is_an_interrupt_not_a_numba_error(big_sphere, tmp_path, cli):
-    """Arc geodesics run their numba kernel in the main thread: a signal during it used to surface as numba's
+    """Arc geodesics run their compiled loop in the main thread: a signal during it used to surface as numba's
     SystemError ("returned a result with an exception set") with a traceback and exit code 1."""
     before = cli.snapshot(tmp_path)
     _assert_prompt_clean_interrupt(cli, tmp_path, before, ["bake", big_sphere, *JOB, "--geodesic", "arc",

@@ -1,4 +1,4 @@
-"""Fast "arc" geodesic neighbourhoods (meshshade.geometry.geodesics.arc) against the exact window solver.
+"""The "arc" geodesic neighbourhoods (meshshade.geometry.geodesics.arc) against the exact window solver.
 
 References: exact polyhedral geodesics (``GeodesicNeighbourhoods(..., rel_tol=0)``) and great circles on
 icospheres; a torus; a folded strip and two touching spheres for leaks across gaps.
@@ -24,12 +24,12 @@ def _pairs(nb):
 
 
 def _compare(V, F, N, sources, cut, tol=5e-3, **kw):
-    """Fast vs exact: relative error beyond 2 mean edges and vertex sets (up to the 0.5 % cutoff band)."""
+    """Arc vs exact: relative error beyond 2 mean edges and vertex sets (up to the 0.5 % cutoff band)."""
     exact = GeodesicNeighbourhoods(V, F, N).query(None, None, None, sources, None, cut, **kw)
-    fast_s = ArcGeodesicNeighbourhoods(V, F, N)
-    fast = fast_s.query(None, None, None, sources, None, cut, **kw)
-    h = fast_s.mean_edge_length
-    pe, pf = _pairs(exact), _pairs(fast)
+    arc_s = ArcGeodesicNeighbourhoods(V, F, N)
+    arc = arc_s.query(None, None, None, sources, None, cut, **kw)
+    h = arc_s.mean_edge_length
+    pe, pf = _pairs(exact), _pairs(arc)
     common = pe.keys() & pf.keys()
     de = np.array([pe[p] for p in common])
     df = np.array([pf[p] for p in common])
@@ -40,33 +40,33 @@ def _compare(V, F, N, sources, cut, tol=5e-3, **kw):
     only_f = np.array([pf[p] for p in pf.keys() - pe.keys()])
     assert np.all(only_e >= (1 - tol) * cut), only_e.min(initial=np.inf)
     assert np.all(only_f >= (1 - tol) * cut), only_f.min(initial=np.inf)
-    return exact, fast, rel
+    return exact, arc, rel
 
 
-def test_fast_icosphere_matches_exact_and_great_circle():
+def test_arc_icosphere_matches_exact_and_great_circle():
     R = 10.0
     V, F = icosphere(R, 4)
     N = V / np.linalg.norm(V, axis=1, keepdims=True)
     src = np.arange(0, len(V), 37)
-    exact, fast, rel = _compare(V, F, N, src, 5.0)
-    x, y = V[src[fast.source_index()]], V[fast.vertex]
+    exact, arc, rel = _compare(V, F, N, src, 5.0)
+    x, y = V[src[arc.source_index()]], V[arc.vertex]
     gc = R * np.arctan2(np.linalg.norm(np.cross(x, y), axis=1), np.einsum("ij,ij->i", x, y))
-    assert np.abs(fast.distance - gc).max() < 1e-9  # exact normals: the arc is the great circle
-    assert fast.method == "arc" and isinstance(fast, Neighbourhoods)
+    assert np.abs(arc.distance - gc).max() < 1e-9  # exact normals: the arc is the great circle
+    assert arc.method == "arc" and isinstance(arc, Neighbourhoods)
 
 
-def test_fast_icosphere_mesh_normals_within_half_percent():
+def test_arc_icosphere_mesh_normals_within_half_percent():
     V, F = icosphere(60.0, 5)
     _compare(V, F, _normals(V, F), np.arange(0, len(V), 211), 28.0)
 
 
-def test_fast_torus_matches_exact():
+def test_arc_torus_matches_exact():
     V, F = torus(40.0, 15.0, 160, 64)
     _, _, rel = _compare(V, F, _normals(V, F), np.arange(0, len(V), 97), 14.0)
     assert rel.mean() < 1e-3
 
 
-def test_fast_csr_layout_and_phi_match_exact():
+def test_arc_csr_layout_and_phi_match_exact():
     V, F = icosphere(10.0, 3)
     N = V / np.linalg.norm(V, axis=1, keepdims=True)
     src = np.arange(0, len(V), 7)
@@ -76,25 +76,25 @@ def test_fast_csr_layout_and_phi_match_exact():
     d2 = np.cross(N[src], d1)
     kw = dict(d1=d1, d2=d2, tangent=True)
     exact = GeodesicNeighbourhoods(V, F, N).query(None, None, None, src, None, 4.0, **kw)
-    fast = ArcGeodesicNeighbourhoods(V, F, N).query(None, None, None, src, None, 4.0, **kw)
+    arc = ArcGeodesicNeighbourhoods(V, F, N).query(None, None, None, src, None, 4.0, **kw)
     for name in ("indptr", "vertex", "distance", "chord", "tangent", "phi", "cutoff"):
-        e, f = getattr(exact, name), getattr(fast, name)
+        e, f = getattr(exact, name), getattr(arc, name)
         assert e.dtype == f.dtype and e.ndim == f.ndim, name
-    assert fast.indptr.shape == (src.size + 1,) and fast.indptr[0] == 0
-    assert np.all(np.diff(fast.indptr) >= 1)
+    assert arc.indptr.shape == (src.size + 1,) and arc.indptr[0] == 0
+    assert np.all(np.diff(arc.indptr) >= 1)
     ke = {p: i for i, p in enumerate(zip(exact.source_index().tolist(), exact.vertex.tolist()))}
-    kf = {p: i for i, p in enumerate(zip(fast.source_index().tolist(), fast.vertex.tolist()))}
+    kf = {p: i for i, p in enumerate(zip(arc.source_index().tolist(), arc.vertex.tolist()))}
     common = sorted(ke.keys() & kf.keys())
     ie, jf = np.array([ke[p] for p in common]), np.array([kf[p] for p in common])
-    assert np.allclose(exact.phi[ie], fast.phi[jf], atol=1e-12)
-    assert np.allclose(exact.chord[ie], fast.chord[jf], atol=1e-12)
+    assert np.allclose(exact.phi[ie], arc.phi[jf], atol=1e-12)
+    assert np.allclose(exact.chord[ie], arc.chord[jf], atol=1e-12)
     # each row: the source itself at distance 0, chord <= distance <= cutoff
-    assert np.all(fast.chord <= fast.distance + 1e-12) and np.all(fast.distance <= 4.0)
+    assert np.all(arc.chord <= arc.distance + 1e-12) and np.all(arc.distance <= 4.0)
     with pytest.raises(ValueError):
         ArcGeodesicNeighbourhoods(V, F, N).query(None, None, None, [len(V)], None, 4.0)
 
 
-def test_fast_face_sources_match_exact():
+def test_arc_face_sources_match_exact():
     V, F = icosphere(10.0, 4)
     N = V / np.linalg.norm(V, axis=1, keepdims=True)
     rng = np.random.default_rng(3)
@@ -102,8 +102,8 @@ def test_fast_face_sources_match_exact():
     bary = rng.dirichlet([2, 2, 2], 20)
     kw = dict(source_faces=faces, source_bary=bary, source_vertex=None)
     exact = GeodesicNeighbourhoods(V, F, N).query(None, faces, bary, None, None, 5.0)
-    fast = ArcGeodesicNeighbourhoods(V, F, N).query(None, faces, bary, None, None, 5.0)
-    pe, pf = _pairs(exact), _pairs(fast)
+    arc = ArcGeodesicNeighbourhoods(V, F, N).query(None, faces, bary, None, None, 5.0)
+    pe, pf = _pairs(exact), _pairs(arc)
     common = pe.keys() & pf.keys()
     de, df = np.array([pe[p] for p in common]), np.array([pf[p] for p in common])
     far = de > 1.0
@@ -128,30 +128,30 @@ def _u_strip(r=0.5, arm=30.0, width=4.0, n_s=260, n_w=9):
     return V, F
 
 
-def test_fast_no_leak_u_strip_far_from_fold():
+def test_arc_no_leak_u_strip_far_from_fold():
     """The other arm is 1 mm away in space but > 20 mm along the surface."""
     V, F = _u_strip()
     r, arm, width = 0.5, 30.0, 4.0
     src = int(np.argmin(np.linalg.norm(V - [arm / 2, -r, width / 2], axis=1)))
     other = np.flatnonzero(V[:, 1] > 0.99 * r)
-    fast = ArcGeodesicNeighbourhoods(V, F, _normals(V, F)).query(None, None, None, [src], None, 10.0)
-    assert np.intersect1d(fast.vertex, other).size == 0 and fast.n_pairs > 100
+    arc = ArcGeodesicNeighbourhoods(V, F, _normals(V, F)).query(None, None, None, [src], None, 10.0)
+    assert np.intersect1d(arc.vertex, other).size == 0 and arc.n_pairs > 100
 
 
 @pytest.mark.xfail(strict=True, reason="known limitation: within ~6 mm of a 0.5 mm-radius fold the arc/graph "
                    "ratio test (r_max=1.6) accepts the chord across the fold, so distances on the other arm "
                    "undershoot (up to 37 %) and extra vertices are included")
-def test_fast_u_strip_around_the_fold_matches_exact():
+def test_arc_u_strip_around_the_fold_matches_exact():
     """Source 3 mm before the fold: the other arm is reached only around the bend (fallback path)."""
     V, F = _u_strip()
     N = _normals(V, F)
     srcs = [int(np.argmin(np.linalg.norm(V - [x, -0.5, 2.0], axis=1))) for x in (1.0, 3.0, 6.0)]
-    exact, fast, rel = _compare(V, F, N, srcs, 10.0, tol=1e-2)
+    exact, arc, rel = _compare(V, F, N, srcs, 10.0, tol=1e-2)
     other = np.flatnonzero(V[:, 1] > 0.49)
-    assert np.intersect1d(fast.vertex, other).size > 0
+    assert np.intersect1d(arc.vertex, other).size > 0
 
 
-def test_fast_no_leak_between_touching_spheres():
+def test_arc_no_leak_between_touching_spheres():
     Va, Fa = icosphere(5.0, 3)
     Vb = Va + [10.0 + 1e-6, 0.0, 0.0]
     V, F = np.concatenate([Va, Vb]), np.concatenate([Fa, Fa + len(Va)])
@@ -160,7 +160,7 @@ def test_fast_no_leak_between_touching_spheres():
     assert nb.vertex.max() < len(Va) and nb.n_pairs > 10
 
 
-def test_fast_overflow_rerun_and_blocks_consistent():
+def test_arc_overflow_rerun_and_blocks_consistent():
     V, F = icosphere(10.0, 4)
     N = V / np.linalg.norm(V, axis=1, keepdims=True)
     src = np.arange(0, len(V), 5)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from meshshade.batch import cluster, open_client
+from meshshade.batch import dask_cluster, open_client
 from meshshade.errors import MeshshadeError
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
@@ -117,7 +117,7 @@ def test_mc_command_with_workers_writes_what_mc_writes(tmp_path, capsys, monkeyp
                           (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "not allowed with"),
                           (["--workers", "0"], "--workers"),
                           (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler")):
-        monkeypatch.setattr(cluster, "CONNECT_TIMEOUT", 1)
+        monkeypatch.setattr(dask_cluster, "CONNECT_TIMEOUT", 1)
         rc = main([str(a) for a in [*base, "--out", tmp_path / "c.ply", *extra]])
         err = capsys.readouterr().err
         assert rc == 2 and "Traceback" not in err, err

@@ -22,7 +22,7 @@ from meshshade.materials import Material
 from meshshade.montecarlo import TOTAL_KEYS, simulate
 from meshshade.montecarlo import engine
 from meshshade.montecarlo import interior as montecarlo_interior
-from meshshade.montecarlo import kernels as K
+from meshshade.montecarlo import loops as K
 from meshshade.montecarlo.sampling import ROULETTE_BOOST, ROULETTE_THRESHOLD
 from meshshade.raycast import embree_direct as montecarlo_embree
 from meshshade.raycast import make_scene

@@ -118,18 +118,18 @@ def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     got = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_field="off", transport="direct")
     assert got.stats["auto_kernel_curved"] == got.stats["entry_samples"]
     np.testing.assert_allclose(got.radiance, ref.radiance, rtol=1e-12, atol=0)
-    # far zone on geodesics shared by clusters of samples (default) or on arc geodesics, exact within r_near.
-    # Clusters: the law of cosines on the centre's constant-curvature triangle (test_source_clusters: ~1e-3 mm
+    # far zone on geodesics shared by groups of samples (default) or on arc geodesics, exact within r_near.
+    # Groups: the law of cosines on the centre's constant-curvature triangle (test_sample_groups: ~1e-3 mm
     # mean). Arcs follow the smooth sphere's great circles, while the polyhedral geodesics of this coarse sphere
     # (1.3 mm edges) are shorter by O(h^2), ~0.3 % (test_neighbourhood); at s ~ 20 mm the red kernel falls by
     # d ln R/ds ~ -(sigma_tr + 2/s) ~ -0.37/mm, so the dim far side may move by up to 0.3 % * 20 mm * 0.37/mm ~ 2.2 %
     lit = ref.radiance > 1e-3 * ref.radiance.max(axis=0)
-    assert zones.clusters_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
-    for far_geodesic, zone, max_tol, median_tol in (("cluster", "zone_exact_near_cluster_far", 0.01, 2e-4),
+    assert zones.groups_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
+    for far_geodesic, zone, max_tol, median_tol in (("cluster", "zone_exact_near_shared_far", 0.01, 2e-4),
                                                    ("arc", "zone_exact_near_arc_far", 0.025, 2e-3)):
         split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic, transport="direct")
         assert split.stats[zone] == split.stats["entry_samples"]
-        if far_geodesic == "cluster":  # one exact far query per cluster instead of per sample
+        if far_geodesic == "cluster":  # one exact far query per group instead of per sample
             assert split.stats["geodesic_pairs_computed"] < 0.6 * ref.stats["geodesic_pairs_computed"]
         rel = np.abs(split.radiance - ref.radiance)[lit] / ref.radiance[lit]
         assert rel.max() < max_tol and np.median(rel) < median_tol, (far_geodesic, rel.max(), np.median(rel))
@@ -164,13 +164,13 @@ def test_auto_flat_forced_dipole_equals_geodesic_dipole(sphere10):
         np.testing.assert_allclose(got.radiance[ok, c][keep], want[keep], rtol=1e-10)
 
 
-def test_clusters_pay_on_a_fine_large_mesh():
-    """The cost estimate: a 60 mm sphere with 0.6 mm edges in skin (cutoff 28 mm, clusters of 2.4 mm)
+def test_groups_pay_on_a_fine_large_mesh():
+    """The cost estimate: a 60 mm sphere with 0.6 mm edges in skin (cutoff 28 mm, groups of 2.4 mm)
     saves most geodesic pairs; a 4 mm sphere with 1.3 mm edges (near zone = the whole sphere) saves nothing."""
     cut = transport.cutoff_radii(SKIN, 1e-4)
     big = Mesh.from_arrays(*icosphere(60.0, 6))
     small = Mesh.from_arrays(*icosphere(4.0, 2))
-    assert zones.clusters_pay(big, cut) and not zones.clusters_pay(small, cut)
+    assert zones.groups_pay(big, cut) and not zones.groups_pay(small, cut)
 
 
 # ------------------------------------------------------------------------------------------- CLI

@@ -22,7 +22,7 @@ from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.montecarlo.simulation import simulate
 from meshshade.transport.baking import bake
-from meshshade.transport.hierarchy_kernels import bessel_i0e, drift_factor
+from meshshade.transport.hierarchy_loops import bessel_i0e, drift_factor
 from meshshade.transport.near_field import drift_angles, near_field_factors, refracted_drift
 
 SKIN = Material.preset("skin1")

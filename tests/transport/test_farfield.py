@@ -1,4 +1,4 @@
-"""Clustered far-field dipole sum (meshshade/transport/farfield.py, transport/farfield_kernels.py).
+"""Clustered far-field dipole sum (meshshade/transport/farfield.py, transport/farfield_loops.py).
 
 References: the dipole and its t-derivatives from an mpmath implementation of Jensen's formula (docs/physics.md eq. (15))
 differentiated by mpmath; the far-field sums from a brute-force numpy double loop over all pairs with
@@ -12,7 +12,7 @@ import mpmath as mp
 import numpy as np
 import pytest
 
-from meshshade.transport import farfield_kernels as fk
+from meshshade.transport import farfield_loops as fk
 from meshshade.errors import MeshshadeError
 from meshshade.transport.farfield import SourceTree, far_field_exitance, far_field_exitance_direct, far_field_radius
 from meshshade.geometry.procedural import box, icosphere

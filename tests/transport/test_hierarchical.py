@@ -19,9 +19,9 @@ from meshshade.io import write_ply
 from meshshade.light import BeamLight, DirectionalLight, entry_samples
 from meshshade.materials import material_from_options
 from meshshade.transport.baking import bake
-from meshshade.transport.farfield_kernels import kd_permutation, node_ranges, tree_depth
+from meshshade.transport.farfield_loops import kd_permutation, node_ranges, tree_depth
 from meshshade.transport.hierarchical import VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field, vertex_power
-from meshshade.transport.hierarchy_kernels import cluster_geometry
+from meshshade.transport.hierarchy_loops import cluster_geometry
 
 SKIN = material_from_options("skin1")
 MARBLE = material_from_options("marble")

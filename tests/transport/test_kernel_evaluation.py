@@ -21,7 +21,7 @@ from meshshade.kernels.curvature import CurvatureTable
 from meshshade.kernels.optics import diffusion_params
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
-from meshshade.transport import hierarchy_kernels
+from meshshade.transport import hierarchy_loops
 from meshshade.transport.auto import AutoPlan
 from meshshade.transport.kernel_evaluation import SphereTables, kernel_params, kernel_values
 from meshshade.transport.models import KERNEL_NAMES, MODEL_KERNEL, Kernel
@@ -156,5 +156,5 @@ def test_pair_kernel_takes_each_sources_kernel_from_the_auto_plan():
 
 
 def test_the_far_traversal_takes_records_not_positional_tuples():
-    params = inspect.signature(hierarchy_kernels.far_traverse.py_func).parameters
+    params = inspect.signature(hierarchy_loops.far_traverse.py_func).parameters
     assert len(params) <= 12, list(params)

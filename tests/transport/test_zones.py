@@ -8,13 +8,13 @@ from meshshade.transport.zones import ZONES, assign_zones
 
 def test_zones_are_named_and_indexed_by_their_constants():
     names = [z.name for z in ZONES]
-    assert names == ["exact", "arc", "exact_near_arc_far", "exact_near", "arc_near", "exact_near_cluster_far"]
+    assert names == ["exact", "arc", "exact_near_arc_far", "exact_near", "arc_near", "exact_near_shared_far"]
     for name, z in zip(names, ZONES):
         assert getattr(zones, name.upper()) == names.index(name)
         assert z.inner_method in ("exact", "arc")
-        assert z.outer_method in (None, "arc", "exact-cluster")
+        assert z.outer_method in (None, "arc", "exact-shared")
         assert not (z.far_field and z.outer_method is not None)  # far-field zones gather only to r_near
-    assert ZONES[zones.EXACT_NEAR_CLUSTER_FAR].solver_methods == ("exact", "exact")
+    assert ZONES[zones.EXACT_NEAR_SHARED_FAR].solver_methods == ("exact", "exact")
     assert ZONES[zones.EXACT_NEAR_ARC_FAR].solver_methods == ("exact", "arc")
     assert ZONES[zones.ARC_NEAR].solver_methods == ("arc",)
 
@@ -34,7 +34,7 @@ def test_assign_zones_with_plan():
     plan = AutoPlan(kernel=np.zeros(5, np.int8), exact_geodesic=np.array([True, True, True, False, False]),
                     far_dipole=np.array([False, False, True, True, False]))
     got = assign_zones(5, area, "clustered", "exact", plan, "cluster")
-    np.testing.assert_array_equal(got, [zones.EXACT, zones.EXACT_NEAR_CLUSTER_FAR, zones.EXACT_NEAR, zones.ARC_NEAR,
+    np.testing.assert_array_equal(got, [zones.EXACT, zones.EXACT_NEAR_SHARED_FAR, zones.EXACT_NEAR, zones.ARC_NEAR,
                                         zones.ARC])
     got = assign_zones(5, area, "clustered", "exact", plan, "arc")
     assert got[1] == zones.EXACT_NEAR_ARC_FAR

@@ -1,4 +1,4 @@
-"""Speed of the fast "arc" geodesic neighbourhoods vs the exact window solver (same run); prints JSON.
+"""Speed of the "arc" geodesic neighbourhoods vs the exact window solver (same run); prints JSON.
 
 Icospheres R = 60 mm of ~10k / 40k / 160k vertices, vertex sources, cutoff 28 mm; the window method only on the
 smallest (it is ~100x slower).  Pairs per second = neighbour pairs returned / wall time of ``query``.
@@ -48,11 +48,11 @@ def main(argv=None):
         n = len(V)
         src = np.sort(np.random.default_rng(level).choice(n, min(n, a.sources), replace=False))
         row = {"mesh": f"icosphere R=60 mm level {level}", "n_vertices": n, "cutoff_mm": a.cutoff}
-        fast = ArcGeodesicNeighbourhoods(V, F, N, n_threads=a.threads)
-        nb, dt = _time(fast, src, a.cutoff)
+        arc = ArcGeodesicNeighbourhoods(V, F, N, n_threads=a.threads)
+        nb, dt = _time(arc, src, a.cutoff)
         row["arc"] = {"sources": int(src.size), "mean_neighbours": float(nb.counts.mean()),
                       "pairs_per_second": nb.n_pairs / dt, "projected_all_vertices_seconds": n * dt / src.size,
-                      "fallback_fraction": fast.stats["fallback_fraction"]}
+                      "fallback_fraction": arc.stats["fallback_fraction"]}
         if j == 0:
             ws = src[:a.window_sources]
             nbw, dtw = _time(GeodesicNeighbourhoods(V, F, N, n_threads=a.threads), ws, a.cutoff)

@@ -51,7 +51,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     material = Material.preset("skin1")
     light = DirectionalLight((0.3, -0.4, -1.0), 1.0)
-    bake(Mesh(*icosphere(10.0, 2)), material, [light], model="curved")  # compile numba kernels first
+    bake(Mesh(*icosphere(10.0, 2)), material, [light], model="curved")  # compile the numba loops first
     rows = []
     for name, mesh in scenes(args.quick):
         base = None

@@ -147,7 +147,7 @@ def main(argv=None):
         return
     if args.quick:
         args.max_level, args.direct_max_level = 4, 4
-    bake(Mesh(*icosphere(10.0, 2)), LOW_ABSORPTION, [SUN], model=args.model)  # compile the numba kernels
+    bake(Mesh(*icosphere(10.0, 2)), LOW_ABSORPTION, [SUN], model=args.model)  # compile the numba loops
     scaling(args)
     if not args.quick:
         mc_ratio(args)

@@ -117,7 +117,7 @@ def add_transport_arg(p: argparse.ArgumentParser) -> None:
 
 
 def add_cluster_args(p: argparse.ArgumentParser) -> None:
-    """``--scheduler ADDRESS`` / ``--workers N``: run on Dask distributed (:mod:`meshshade.batch.cluster`)."""
+    """``--scheduler ADDRESS`` / ``--workers N``: run on Dask distributed (:mod:`meshshade.batch.dask_cluster`)."""
     g = p.add_mutually_exclusive_group()
     g.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on an existing Dask scheduler (tcp://host:8786, or a scheduler file)")

@@ -1,2 +1,2 @@
-"""Geodesic neighbourhoods: exact polyhedral windows (``neighbourhoods``) and the fast curvature-corrected arc
+"""Geodesic neighbourhoods: exact polyhedral windows (``neighbourhoods``) and the approximate curvature-corrected arcs
 (``arc``); both return CSR ``Neighbourhoods``."""

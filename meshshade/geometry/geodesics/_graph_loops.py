@@ -1,4 +1,4 @@
-"""Vertex-based numba kernels behind :mod:`meshshade.geometry.geodesics.neighbourhoods`: fast marching and Dijkstra.
+"""Vertex-based compiled loops behind :mod:`meshshade.geometry.geodesics.neighbourhoods`: fast marching and Dijkstra.
 
 ``_vertex_queue_block(..., use_triangles=True)``
     First-order fast marching (Kimmel & Sethian 1998) with the point-source ("circle intersection") triangle

@@ -1,4 +1,4 @@
-"""Numba machinery shared by the geodesic kernels (private): bucket queue, growable arrays, result collection.
+"""Numba machinery shared by the geodesic loops (private): bucket queue, growable arrays, result collection.
 
 The propagations in :mod:`._window_loops` and :mod:`._graph_loops` process a *block* of sources sequentially
 with reused, stamp-reset work arrays (no O(n) clearing per source), so that a block costs O(sum of neighbourhood

@@ -1,4 +1,4 @@
-"""Numba kernels for pseudo-sources at saddle vertices (private; used by :mod:`._window_loops`).
+"""Compiled loops for pseudo-sources at saddle vertices (private; used by :mod:`._window_loops`).
 
 A shortest path through a saddle vertex (cone angle theta > 2 pi) turns by at least pi on both sides (Mitchell,
 Mount & Papadimitriou 1987), so a pseudo-source there only lights the sector [alpha + pi, alpha + theta - pi] of

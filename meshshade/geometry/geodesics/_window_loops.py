@@ -1,4 +1,4 @@
-"""Numba kernels of the exact ("window") method of :mod:`meshshade.geometry.geodesics.neighbourhoods` (private).
+"""Compiled loops of the exact ("window") method of :mod:`meshshade.geometry.geodesics.neighbourhoods` (private).
 
 Exact polyhedral geodesics by continuous-Dijkstra *window* propagation (Mitchell-Mount-Papadimitriou 1987 windows,
 processed in the order and with the pruning of Xin & Wang 2009, "Improving Chen and Han's algorithm on the

@@ -1,4 +1,4 @@
-"""Fast approximate geodesic neighbourhoods ("arc" method): ball-restricted Dijkstra + curvature-corrected chord.
+"""Arc geodesic neighbourhoods (approximate, method "arc"): ball-restricted Dijkstra + curvature-corrected chord.
 
 Same query and result (:class:`~meshshade.geometry.geodesics.neighbourhoods.Neighbourhoods`) as
 :class:`~meshshade.geometry.geodesics.neighbourhoods.GeodesicNeighbourhoods`, about 4-5x faster per pair in bakes
@@ -47,7 +47,7 @@ exact ones except within 0.02 % of the cutoff.  Known failure: the far arm of a 
 radius) seen from within ~6 mm of the fold passes the ratio test (the chord is short but the edge path only
 1.2-1.5x longer); no leaks occur across gaps (touching spheres, folds seen from further away).
 
-Speed: ``tools/benchmarks/bench_fast_neighbourhood.py`` (see the commit message for figures on this machine).
+Speed: ``tools/benchmarks/bench_arc_neighbourhood.py`` (see the commit message for figures on this machine).
 """
 from __future__ import annotations
 
@@ -59,9 +59,9 @@ from meshshade.geometry.geodesics.neighbourhoods import (PRIOR_SECONDS_PER_PAIR,
 from meshshade.geometry.mesh import face_normals
 from meshshade.pacing import Pacer, default_threads, pace_rate, run_paced
 
-__all__ = ["FastGeodesicNeighbourhoods", "ACCURACY"]
+__all__ = ["ArcGeodesicNeighbourhoods", "ACCURACY"]
 
-#: measured accuracy table (filled from tools/benchmarks/bench_fast_neighbourhood.py --accuracy); see the docstring
+#: measured accuracy table (filled from tools/benchmarks/bench_arc_neighbourhood.py --accuracy); see the docstring
 ACCURACY: dict = {}
 
 _ANCESTORS = 48       # string-pulling depth of the fallback
@@ -256,8 +256,8 @@ def _arc_block(src_v, src_corner, src_pt, src_n, cut, X, N, e_ptr, e_nbr, e_len,
     return counts, out_v, out_d, nfall
 
 
-class FastGeodesicNeighbourhoods:
-    """Fast geodesic-neighbourhood solver (method "arc"); same :meth:`query` as ``GeodesicNeighbourhoods``.
+class ArcGeodesicNeighbourhoods:
+    """Arc geodesic-neighbourhood solver (method "arc", approximate); same :meth:`query` as ``GeodesicNeighbourhoods``.
 
     Parameters
     ----------
@@ -305,7 +305,7 @@ class FastGeodesicNeighbourhoods:
         return self._base.mean_edge_length
 
     def __repr__(self) -> str:
-        return (f"FastGeodesicNeighbourhoods({self.n_vertices} vertices, {self.faces.shape[0]} faces, "
+        return (f"ArcGeodesicNeighbourhoods({self.n_vertices} vertices, {self.faces.shape[0]} faces, "
                 f"r_max={self.r_max:g}, threads={self.n_threads})")
 
     def _run(self, sv, corners, pts, nrm, cut):

@@ -39,9 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshshade.geometry.geodesics import _graph_kernels as _g
-from meshshade.geometry.geodesics import _window_kernels as _k
-from meshshade.geometry.geodesics._saddle_kernels import _build_fans
+from meshshade.geometry.geodesics import _graph_loops as _g
+from meshshade.geometry.geodesics import _window_loops as _k
+from meshshade.geometry.geodesics._saddle_loops import _build_fans
 from meshshade.geometry.mesh import face_geometry, face_normals
 from meshshade.geometry.topology import vertex_adjacency
 from meshshade.pacing import Pacer, default_threads, pace_rate, run_paced
@@ -455,7 +455,7 @@ class GeodesicNeighbourhoods:
         else:
             work = expected_work(cut, self.n_vertices, self._area_per_vertex)
             pacer = Pacer(work, pace_rate(self._pace, work), prior=PRIOR_SECONDS_PER_PAIR, max_block=most)
-        stop = np.zeros(1, np.int64)  # set by run_paced when interrupted: running window kernels return early
+        stop = np.zeros(1, np.int64)  # set by run_paced when interrupted: running window loops return early
         results = run_paced(lambda a, b: self._run_block(sv[a:b], sf[a:b], bary[a:b], cut[a:b], stop), pacer, k,
                             n_threads=nthreads, progress=progress, stop=stop)
         counts = np.concatenate([r[0] for r in results]) if results else np.zeros(0, np.int64)

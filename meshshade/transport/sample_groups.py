@@ -1,18 +1,18 @@
-"""Far-zone geodesics shared by clusters of nearby entry samples (the bake's ``exact_near_cluster_far`` zone).
+"""Far-zone geodesics shared by groups of nearby entry samples (the bake's ``exact_near_shared_far`` zone).
 
 A directional or point light makes an entry sample at every lit vertex, and each needs geodesic distances to
 every vertex within the cutoff (exact polyhedral geodesics cost ~2 us per pair). Far from a source the distance
 field of one sample predicts its neighbours' to second order, so the bake runs one exact geodesic query per
-*cluster* of samples for the far zone and derives each member's distances from it:
+*group* of samples (a *sample group*) for the far zone and derives each member's distances from it:
 
     s_i = third side of the geodesic triangle (centre c, member i, receiver o) with sides s_c and d = |x_i - x_c|
           meeting at c at the angle gamma between t_c and the tangential part of x_i - x_c,
 
 by the law of cosines of the constant Gaussian curvature K = k1 k2 of the centre (spherical for K > 0, planar,
-hyperbolic for K < 0; planar: s_i^2 = s_c^2 - 2 s_c d cos gamma + d^2). s_c is the cluster centre's geodesic
+hyperbolic for K < 0; planar: s_i^2 = s_c^2 - 2 s_c d cos gamma + d^2). s_c is the group centre's geodesic
 distance to the receiver and t_c the unit initial direction of that geodesic at the centre (from the pair's
 azimuth phi_c: t_c = cos phi_c d1 + sin phi_c d2). Exact on planes and spheres; otherwise the error comes from
-the variation of K across the triangle and from t_c (tests: ~1e-3 mm mean on spheres, 2-5 mm clusters).
+the variation of K across the triangle and from t_c (tests: ~1e-3 mm mean on spheres, 2-5 mm groups).
 Near pairs (within NEAR_MARGIN r_near) are found exactly per sample; a far pair is used only if the sample's own
 near query did not find it, so every (sample, vertex) pair is counted once. Chords and azimuths are the member's
 own (chord = |x_o - x_i|; phi from the projection of the chord on the member's tangent plane with the leading
@@ -29,17 +29,17 @@ from numba import njit, prange
 
 from meshshade.geometry.geodesics.neighbourhoods import tangent_azimuth
 
-#: members whose normal deviates more than this (cosine) from the centre's form their own cluster
+#: members whose normal deviates more than this (cosine) from the centre's form their own group
 NORMAL_COS = 0.9
 
 
-def cluster_sources(positions, normals, size_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """Group entry samples into clusters of diameter <= sqrt(3) ``size_mm`` (voxel cells of that size).
+def group_samples(positions, normals, size_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Group entry samples into sample groups of diameter <= sqrt(3) ``size_mm`` (voxel cells of that size).
 
     Within a cell the centre is the member nearest to the cell's mean; members whose normal is more than
-    acos(NORMAL_COS) from the centre's (another sheet of a thin part, a sharp crease) become their own cluster.
+    acos(NORMAL_COS) from the centre's (another sheet of a thin part, a sharp crease) become their own group.
 
-    Returns ``(order, indptr)``: sample indices grouped by cluster (CSR, the centre first in each row).
+    Returns ``(order, indptr)``: sample indices grouped by group (CSR, the centre first in each row).
     """
     P = np.asarray(positions, dtype=np.float64)
     N = np.asarray(normals, dtype=np.float64)
@@ -60,13 +60,13 @@ def cluster_sources(positions, normals, size_mm: float) -> tuple[np.ndarray, np.
     centre_of_cell = order[first]  # cell ids are 0..n_cells-1 in sorted order
     centre = centre_of_cell[label]
     lone = np.einsum("ij,ij->i", N, N[centre]) < NORMAL_COS
-    # each lone sample is a cluster of its own: give it a fresh label
+    # each lone sample is a group of its own: give it a fresh label
     label = label.copy()
     label[lone] = n_cells + np.arange(int(lone.sum()))
     centre = centre.copy()
     centre[lone] = np.flatnonzero(lone)
     is_centre = centre == np.arange(k)
-    order = np.lexsort((~is_centre, label))  # by cluster, the centre first
+    order = np.lexsort((~is_centre, label))  # by group, the centre first
     counts = np.bincount(label)
     counts = counts[counts > 0]
     return order.astype(np.int64), np.r_[0, np.cumsum(counts)].astype(np.int64)
@@ -93,7 +93,7 @@ def _law_of_cosines(sc, d, t_dot_dx, dx_len, K):
 
 def expand_far_pairs_reference(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
                                max_distance: float = np.inf):
-    """Member pairs from their cluster centre's geodesic pairs (module docstring), in numpy: the test oracle of
+    """Member pairs from their group centre's geodesic pairs (module docstring), in numpy: the test oracle of
     :func:`expand_far_pairs` (same pairs, same order; the bake uses the numba version only).
 
     centre_pairs : (src_c, vertex, s_c, chord_c, phi_c) arrays of the centres' far query (src_c are sample ids
@@ -162,7 +162,7 @@ def _centre_rows(src_c, centres):
 
 def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
                      max_distance: float = np.inf):
-    """Member pairs from their cluster centre's geodesic pairs (module docstring): the numba version of
+    """Member pairs from their group centre's geodesic pairs (module docstring): the numba version of
     :func:`expand_far_pairs_reference` (same arguments, same pairs in the same order), parallel over members, with
     no intermediate arrays of all member x centre-pair candidates."""
     src_c, vtx, s_c, _, phi_c = centre_pairs

@@ -1,4 +1,4 @@
-"""Far-zone geodesics shared by clusters of entry samples (meshshade/transport/clusters.py)."""
+"""Far-zone geodesics shared by groups of entry samples (meshshade/transport/sample_groups.py)."""
 import numpy as np
 import pytest
 from hypothesis import given
@@ -8,7 +8,7 @@ from meshshade.geometry.curvature import principal_curvatures
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 from meshshade.geometry.procedural import icosphere, saddle_patch
-from meshshade.transport.clusters import (NORMAL_COS, _law_of_cosines, cluster_sources, expand_far_pairs,
+from meshshade.transport.sample_groups import (NORMAL_COS, _law_of_cosines, group_samples, expand_far_pairs,
                                           expand_far_pairs_reference)
 from meshshade.transport.pair_kernel import source_frames
 
@@ -37,21 +37,21 @@ def _setup(mesh):
     return frames, query
 
 
-def test_cluster_sources_partitions_samples(rng):
+def test_group_samples_partitions_the_samples(rng):
     V, F = icosphere(20.0, 4)
     mesh = Mesh.from_arrays(V, F)
-    order, ptr = cluster_sources(V, mesh.vertex_normals, 4.0)
+    order, ptr = group_samples(V, mesh.vertex_normals, 4.0)
     assert np.array_equal(np.sort(order), np.arange(len(V)))  # every sample exactly once
     centre = order[ptr[:-1]]
     rows = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
     d = np.linalg.norm(V[order] - V[centre[rows]], axis=1)
     assert d.max() <= np.sqrt(3) * 4.0  # within one voxel cell
     assert np.all(np.einsum("ij,ij->i", mesh.vertex_normals[order], mesh.vertex_normals[centre[rows]]) >= NORMAL_COS)
-    assert 3 < len(V) / (ptr.size - 1) < 30  # real clusters, not singletons
-    # opposite sheets of a thin plate never share a cluster
+    assert 3 < len(V) / (ptr.size - 1) < 30  # real groups, not singletons
+    # opposite sheets of a thin plate never share a group
     P = np.array([[0, 0, 0], [0, 0, 0.1]], float)
     Nrm = np.array([[0, 0, -1], [0, 0, 1.0]])
-    o, p = cluster_sources(P, Nrm, 1.0)
+    o, p = group_samples(P, Nrm, 1.0)
     assert p.size == 3
 
 
@@ -103,7 +103,7 @@ def test_expanded_pairs_of_the_centre_reproduce_the_solver():
 @pytest.mark.parametrize("shape", ["plane", "sphere"])
 def test_member_distances_match_their_own_exact_geodesics(shape):
     """Far pairs from the centre's geodesics by the law of cosines vs each member's own exact query: exact on the
-    plane (to rounding); on a 20 mm sphere (1.2 mm edges, 2 mm clusters) the polyhedral geodesics differ from the
+    plane (to rounding); on a 20 mm sphere (1.2 mm edges, 2 mm groups) the polyhedral geodesics differ from the
     constant-curvature triangle by the facets' O(h^2) (measured max 0.013 mm, mean 5e-4 mm at s > 10 mm)."""
     if shape == "plane":
         mesh = Mesh.from_arrays(*saddle_patch(0.0, 30.0, 41))  # an open flat patch (warns: open boundary)
@@ -111,7 +111,7 @@ def test_member_distances_match_their_own_exact_geodesics(shape):
         mesh = Mesh.from_arrays(*icosphere(20.0, 4))
     frames, query = _setup(mesh)
     V = mesh.vertices
-    order, ptr = cluster_sources(V, frames.normals, 2.0 if shape == "sphere" else 3.0)
+    order, ptr = group_samples(V, frames.normals, 2.0 if shape == "sphere" else 3.0)
     rows = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
     centre_of = order[ptr[:-1]][rows]
     pick = np.flatnonzero(np.linalg.norm(V[order], axis=1) < 8) if shape == "plane" else np.arange(300)
@@ -146,7 +146,7 @@ def test_numba_expansion_equals_the_numpy_reference():
     mesh = Mesh.from_arrays(*icosphere(20.0, 3))
     frames, query = _setup(mesh)
     V, n = mesh.vertices, mesh.n_vertices
-    order, ptr = cluster_sources(V, frames.normals, 4.0)
+    order, ptr = group_samples(V, frames.normals, 4.0)
     rows = np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
     centre_of = order[ptr[:-1]][rows]
     mem, cen_of = order[:200], centre_of[:200]
