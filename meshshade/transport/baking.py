@@ -155,7 +155,7 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
 
     ``transport``: how the vertex samples of directional and point lights are summed: "direct" (every pair
     within the cutoff, the reference; the options above), "hierarchical" (transport/hierarchical.py: a
-    near field within a few patch radii and clusters beyond, cost near-linear in the vertex count), "auto"
+    near zone of a few patch radii and source clusters beyond, cost near-linear in the vertex count), "auto"
     (default: hierarchical where its distance check passes on this mesh, else direct; ``stats["transport"]``
     says which and why), or a :class:`~meshshade.transport.hierarchical.SurfaceTransport` built for this
     mesh, material and model (reused across lights and frames). Beam samples always use the direct sum.
@@ -554,7 +554,7 @@ def _zone_groups(zone) -> list:
 
 
 def _gather_near(kernel, stream: PairStream, groups, chord_cut, progress) -> tuple[np.ndarray, dict]:
-    """The geodesic gather of every zone (the near field of clustered sources): M (n, 3) W/mm^2 and counts.
+    """The geodesic gather of every zone (the near zone of clustered sources): M (n, 3) W/mm^2 and counts.
 
     ``progress``: False, True or the task named in the progress lines (default "bake"); the sources done are
     counted in :class:`~meshshade.progress.Progress` (a bar on a terminal, periodic lines otherwise)."""
@@ -627,7 +627,7 @@ def describe_result(result: BakeResult) -> str:
                 f"({s['volume_nodes']} nodes{', cached' if s.get('volume_tetrahedra_cached') else ''}), "
                 f"near field within {max(s['cutoff_mm']):.3g} mm ({s['near_field_pairs']} pairs); entering "
                 f"{s['entering_power']:.4g} W, exitant {ex[0]:.4g}/{ex[1]:.4g}/{ex[2]:.4g} W (r/g/b); {t}")
-    far = (f" (area lights: geodesic near field within {max(s['near_mm']):.3g} mm, {s['far_field']} far field "
+    far = (f" (area lights: geodesic near zone within {max(s['near_mm']):.3g} mm, {s['far_field']} far field "
            f"beyond)" if "near_mm" in s else "")
     if s.get("geodesic_pairs_computed", s.get("pairs_found")) != s.get("pairs_found"):
         far += f", {s['geodesic_pairs_computed']} geodesic distances computed"

@@ -1,7 +1,7 @@
 """Clustered far-field summation of the planar dipole with a guaranteed relative error.
 
 The bake sums ``M(x_o) = sum_i Phi_i R(|x_o - x_i|)`` over entry samples i. Pairs closer than ``r_near`` (chord)
-stay in the geodesic near field (gather.py); the pairs with ``r_near < |x_o - x_i| <= cutoff`` are summed
+stay in the geodesic near zone (gather.py); the pairs with ``r_near < |x_o - x_i| <= cutoff`` are summed
 here with the dipole of the chord distance. Following Jensen & Buhler 2002 ("A rapid hierarchical rendering
 technique for translucent materials", SIGGRAPH), the sources are clustered in a tree and a cluster far enough
 from the receiver is replaced by its total power at its power-weighted centroid.
@@ -190,7 +190,7 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
     sources : SourceTree, or (positions (k, 3) mm, power (k,) or (k, 3) W >= 0)
     receivers : (n, 3) float64 mm
     material : Material (per-channel dipole: R_c(r) = dipole_profile(r sigma_t') sigma_t'^2, 1/mm^2)
-    r_near_mm : float or (3,) >= 0; pairs at chord distance <= r_near belong to the near field (excluded)
+    r_near_mm : float or (3,) >= 0; pairs at chord distance <= r_near belong to the near zone (excluded)
     cutoff_mm : float or (3,) > 0; pairs beyond are excluded
     rel_tol : float >= 0; guaranteed ``|M - M_exact| <= rel_tol * M_exact`` per receiver and channel (module
         docstring); 0 gives the exact sum (only clusters of coincident sources are merged)

@@ -278,7 +278,7 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
                 d = np.sqrt(dx * dx + dy * dy + dz * dz)
                 a = A[node, c]
                 if d + a < rn_in[c] or d - a > cut_out[c]:
-                    continue  # wholly inside the near field or wholly beyond the cutoff
+                    continue  # wholly inside the near zone or wholly beyond the cutoff
                 if d - a > rn_out[c]:
                     s = st[c]
                     m3_6 = M3[node, c] * s * s * s / 6.0

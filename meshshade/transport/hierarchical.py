@@ -5,19 +5,19 @@ The direct sum (transport="direct", transport/baking.py) pays an exact geodesic 
 vertex v is a potential source with the power Phi_v its light gives it, and the exitance splits by the chord
 distance of each pair (docs/physics.md §9.1, eq. (71)):
 
-* **near field** — pairs within a few patch radii of the source (``r_near(u) = near_patch_radii * a_u``, a_u the
+* **near zone** — pairs within a few patch radii of the source (``r_near(u) = near_patch_radii * a_u``, a_u the
   radius of the source's dual patch; chord <= r_near(u), found by a geodesic query to 1.1 r_near(u), so pairs
   across a fold are dropped): the model's own kernel (PairKernel, exact or arc geodesics, the patch average of
   eq. (58)), computed once per mesh and material into a sparse matrix per channel, ``M_near = W Phi``;
-* **far field** — every other pair within the cutoff: a k-d tree of the lit sources per kernel kind, traversed
+* **far zone** — every other pair within the cutoff: a k-d tree of the lit sources per kernel kind, traversed
   per receiver (transport/hierarchy_loops.py). A cluster of radius a at distance d >= a/theta is replaced by
   four sigma points carrying its zeroth to second moments, with its mean normal and mean shape operator (the
   kernel stays expanded at the source, as in the direct sum); closer clusters are opened, and leaves are summed
   pair by pair. Surface distances of far pairs are arcs from the chord and the two normals (eq. (59)).
 
-Cost: the near field is O(N) pairs (about 25 per vertex at 5 patch radii); a receiver visits O(log(cutoff/r_near)
+Cost: the near zone is O(N) pairs (about 25 per vertex at 5 patch radii); a receiver visits O(log(cutoff/r_near)
 / theta^2) clusters, so the far field is O(N log N). :class:`SurfaceTransport` holds everything that depends
-only on the mesh, material and model (curvatures, frames, the auto plan, the near-field matrices, the trees), so
+only on the mesh, material and model (curvatures, frames, the auto plan, the near-zone matrices, the trees), so
 that each further light, frame or bake costs only its rays, one sparse product and one traversal.
 
 Pure array work; no I/O.
@@ -205,7 +205,7 @@ class SurfaceTransport:
     ``material``, ``model``; ``curvature`` (PrincipalCurvatures of the vertices); ``frames`` (SourceFrames of
     every vertex); ``plan`` (AutoPlan per vertex for ``model="auto"``, else None); ``kind`` (n,) int8 kernel
     per vertex as a source (models.Kernel); ``cutoff_mm`` (3,); ``near_mm`` (n,) near radius per
-    source; ``near`` the sparse near-field matrices per computed channel (receiver rows, source columns,
+    source; ``near`` the sparse near-zone matrices per computed channel (receiver rows, source columns,
     1/mm^2 with the patch average); ``timings`` and ``stats`` of the build.
     """
 
@@ -245,7 +245,7 @@ class SurfaceTransport:
               near_field: str = "point") -> "SurfaceTransport":
         """The geometric work for ``mesh`` (a Mesh in mm), ``material`` and ``model`` (one of MODELS).
 
-        ``geodesic`` ("exact" or "arc"): the near field's geodesics (with ``auto``, exact where the plan asks
+        ``geodesic`` ("exact" or "arc"): the near zone's geodesics (with ``auto``, exact where the plan asks
         for it and "exact" is allowed). ``curvature``: PrincipalCurvatures of the mesh, if already computed.
         ``theta`` in (0, 1): the clusters' opening criterion. ``near_patch_radii`` (>= 4, or None): the near
         radius in patch radii; None lets :func:`far_distance_check` choose it from NEAR_PATCH_RADII on this mesh,
@@ -313,7 +313,7 @@ class SurfaceTransport:
         else:
             exact = np.full(n, geodesic == "exact")
         near, near_pairs, nstats = _near_matrices(mesh, src, frames, kernel, exact, near_mm, patch, progress)
-        timings["near field"] = time.perf_counter() - t0
+        timings["near zone"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         shape = _shape_operators(frames)
         trees = {}
@@ -417,7 +417,7 @@ class SurfaceTransport:
             m = W @ pv
             for cc in same:
                 M[:, cc] = m
-        timings["near field"] = time.perf_counter() - t0
+        timings["near zone"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         rep = np.arange(3)
         for c, same in self.channels:
@@ -474,13 +474,13 @@ def _shape_operators(frames) -> np.ndarray:
 
 
 def _near_matrices(mesh, src, frames, kernel: PairKernel, exact, near_mm, patch, progress):
-    """Sparse near-field matrices per computed channel: W[v, u] = R(v; u) w_patch for the pairs with chord <=
+    """Sparse near-zone matrices per computed channel: W[v, u] = R(v; u) w_patch for the pairs with chord <=
     near_mm[u] found within geodesic NEAR_MARGIN near_mm[u] of u (exact geodesics where ``exact``, arc elsewhere)."""
     n = mesh.n_vertices
     parts = {c: [] for c, _ in kernel.channels}
     rows_all, cols_all, geo_s, geo_phi = [], [], [], []
     n_pairs = n_exact = 0
-    bar = Progress(progress if isinstance(progress, str) else "bake", n, "sources (near field)",
+    bar = Progress(progress if isinstance(progress, str) else "bake", n, "sources (near zone)",
                    enabled=bool(progress))
     with bar:
         for method, sel_all in (("exact", np.flatnonzero(exact)), ("arc", np.flatnonzero(~exact))):

@@ -11,7 +11,7 @@ cancel by symmetry: fourth order for symmetric clusters), whatever the kernel. T
 of a curved cluster) is dropped: (k a^2/2)^2 against a^2.
 
 Every pair's kernel is :func:`meshshade.transport.kernel_evaluation.kernel_value` (``kind`` a
-:class:`~meshshade.transport.models.Kernel`), the one evaluation the near field and the direct sum use too; the
+:class:`~meshshade.transport.models.Kernel`), the one evaluation the near zone and the direct sum use too; the
 fitted model's pairs take the normal-section curvature between their two points (:func:`fitted_geometry`). The
 surface distance of a far pair is the arc of docs/physics.md eq. (59) from the chord and the two normals.
 """

@@ -104,15 +104,15 @@ def add_geodesic_arg(p: argparse.ArgumentParser) -> None:
 def add_far_field_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--far-field", default=None, choices=["off", "clustered"],
                    help="directional/point lights: sum pairs beyond r_near (where 10 %% of the dipole's energy "
-                        "lies beyond) by clusters of the planar dipole (default: off; auto uses it where the surface "
-                        "is flat on the scale of the cutoff)")
+                        "lies beyond) by source clusters of the planar dipole (default: off; auto uses it where the "
+                        "surface is flat on the scale of the cutoff)")
 
 
 def add_transport_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--transport", default="auto", choices=["auto", "hierarchical", "direct"],
                    help="surface models: how directional/point-light samples are summed: hierarchical (near "
-                        "field plus clusters; near-linear in the vertex count), direct (every pair, the reference) "
-                        "or auto (default: "
+                        "zone plus source clusters; near-linear in the vertex count), direct (every pair, the "
+                        "reference) or auto (default: "
                         "hierarchical where its distance check passes on the mesh, else direct)")
 
 
