@@ -87,10 +87,12 @@ def normal_curvatures(phi, k1, k2):
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def euler_curvatures(phi, k1, k2):
-    """(k_along, k_across, tau^2) of one direction (:func:`normal_curvatures`)."""
-    c2 = math.cos(phi) ** 2
-    tau = 0.5 * (k1 - k2) * math.sin(2.0 * phi)
-    return k1 * c2 + k2 * (1.0 - c2), k1 * (1.0 - c2) + k2 * c2, tau * tau
+    """(k_along, k_across, tau^2) of one direction (:func:`normal_curvatures`): docs/physics.md eq. (3),
+    ``k_n(phi) = H + dk cos 2 phi`` with ``H = (k1 + k2)/2``, ``dk = (k1 - k2)/2``, and ``tau = dk sin 2 phi``."""
+    H, dk = 0.5 * (k1 + k2), 0.5 * (k1 - k2)
+    c = dk * math.cos(2.0 * phi)
+    tau = dk * math.sin(2.0 * phi)
+    return H + c, H - c, tau * tau
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -177,7 +177,8 @@ class SphereTables:
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def sphere_table_value(log_table, r0, row, c, s):
     """R [1/mm^2] of channel ``c`` at surface distance ``s`` (mm) from table row ``row`` of :class:`SphereTables`:
-    log-linear interpolation on the uniform theta grid (relative error < 1e-5 for R0 >= 1 transport length)."""
+    log-linear interpolation on the uniform theta grid (relative error ~1e-5, up to 1e-4 within a few grid steps of
+    the peak on spheres of tens of transport lengths: tests/transport/test_kernel_evaluation.py)."""
     r = row * 3 + c
     th = min(s / r0[row], math.pi)
     m = log_table.shape[1] - 1
@@ -209,27 +210,33 @@ def kernel_value(kind, c, chord, s, kn, knp, t2, sph_row, p):
     return sphere_table_value(p.sphere_log, p.sphere_r0, sph_row, c, s)
 
 
-@numba.njit(cache=True, error_model="numpy")
-def kernel_values(kind, c, chord, s, kn, knp, t2, sph_row, p, out):
-    """:func:`kernel_value` of one ``kind`` over arrays of pairs (all (k,); ``sph_row`` int64) into ``out``.
+def per_kernel(loop, **options) -> dict:
+    """``{kind: loop compiled with that kind fixed}`` for every :class:`~meshshade.transport.models.Kernel`:
+    ``loop(kind)`` returns a plain function that reads ``kind`` as a constant (a closure); each is compiled with
+    ``numba.njit(cache=True, **options)`` on its first call only.
 
-    The kind is chosen once, outside the loop, and handed to :func:`kernel_value` as a constant, so that each loop
-    holds one kernel's code (with the kind read per pair, the loop ran at about 300 ns per dipole pair, 7x slower)."""
-    if kind == DIPOLE_CHORD:
+    Why: with ``kind`` a constant numba drops the other kernels' branches of :func:`kernel_value` before typing, so
+    a compiled loop holds one kernel's code: it runs as fast as a loop written for that kernel (with the kind read
+    per pair the dipole loop ran at about 300 ns per pair, 7x slower), and compiling it costs that kernel alone, not
+    all five (a dipole bake compiled the curved, fitted and exact-sphere kernels too: a third of ``meshshade
+    demo``'s first run). numba's cache keeps each by its closure's value."""
+    return {int(k): numba.njit(cache=True, **options)(loop(int(k))) for k in Kernel}
+
+
+def _values_loop(kind):
+    def kernel_values_of_kind(c, chord, s, kn, knp, t2, sph_row, p, out):
         for j in range(s.size):
-            out[j] = kernel_value(DIPOLE_CHORD, c, chord[j], s[j], kn[j], knp[j], t2[j], sph_row[j], p)
-    elif kind == DIPOLE_SURFACE:
-        for j in range(s.size):
-            out[j] = kernel_value(DIPOLE_SURFACE, c, chord[j], s[j], kn[j], knp[j], t2[j], sph_row[j], p)
-    elif kind == CURVED:
-        for j in range(s.size):
-            out[j] = kernel_value(CURVED, c, chord[j], s[j], kn[j], knp[j], t2[j], sph_row[j], p)
-    elif kind == FITTED:
-        for j in range(s.size):
-            out[j] = kernel_value(FITTED, c, chord[j], s[j], kn[j], knp[j], t2[j], sph_row[j], p)
-    else:
-        for j in range(s.size):
-            out[j] = kernel_value(EXACT_SPHERE, c, chord[j], s[j], kn[j], knp[j], t2[j], sph_row[j], p)
+            out[j] = kernel_value(kind, c, chord[j], s[j], kn[j], knp[j], t2[j], sph_row[j], p)
+    return kernel_values_of_kind
+
+
+_VALUES = per_kernel(_values_loop, error_model="numpy")
+
+
+def kernel_values(kind, c, chord, s, kn, knp, t2, sph_row, p, out):
+    """:func:`kernel_value` of one ``kind`` over arrays of pairs (all (k,); ``sph_row`` int64) into ``out``: the
+    compiled loop of that kind (:func:`per_kernel`), compiled on its first call."""
+    _VALUES[int(kind)](c, chord, s, kn, knp, t2, sph_row, p, out)
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshshade.errors import ParameterError
-from meshshade.kernels.curvature import CurvatureTable
+from meshshade.kernels.curvature import VALIDITY_TOL
 from meshshade.kernels.fitted_curvature import chord_curvature, normal_curvatures
 from meshshade.materials import Material
-from meshshade.transport.kernel_evaluation import (SPHERE_THETA_POINTS, KernelParams, SphereTables, kernel_params,
-                                                   kernel_values)
+from meshshade.transport.kernel_evaluation import (SPHERE_THETA_POINTS, KernelParams, SphereTables, curved_values,
+                                                   kernel_params, kernel_values)
 from meshshade.transport.models import MODEL_KERNEL, MODELS, Kernel
 
 
@@ -119,7 +119,6 @@ class PairKernel:
         self.params = params
         self._reach = (np.full(3, np.inf) if params is not None
                        else None if reach_mm is None else np.broadcast_to(np.asarray(reach_mm, float), (3,)).copy())
-        self._tables: dict = {}  # curved: one CurvatureTable per channel (the first-order range count)
         #: (source positions (k, 3) mm, receiver positions (n, 3) mm, receiver unit normals (n, 3), receiver
         #: principal curvatures k1, k2 (n,) 1/mm and first principal directions (n, 3)), or None: with them the
         #: fitted model measures each pair's curvatures between its two points (:meth:`_pair_curvatures`) when
@@ -146,25 +145,22 @@ class PairKernel:
             return out
         kind = np.ascontiguousarray(self.kind[src])
         kinds = np.flatnonzero(np.bincount(kind, minlength=len(Kernel)))
-        f = self.frames
-        curving = (Kernel.CURVED in kinds) or (Kernel.FITTED in kinds)
-        if curving:   # the source's normal curvatures along and across the pair (Euler's formula)
-            ka, kc, t2 = normal_curvatures(phi, f.k1[src], f.k2[src])
-        else:         # the dipoles and the exact sphere read none
-            ka = kc = t2 = np.zeros(s.shape)
-        fitted = kind == Kernel.FITTED if Kernel.FITTED in kinds else None
-        if fitted is not None and vtx is not None and self.pair_points is not None:
-            ka[fitted], kc[fitted], t2[fitted] = self._pair_curvatures(src[fitted], np.asarray(vtx)[fitted],
-                                                                       ka[fitted], kc[fitted], t2[fitted])
-        row, series = self._sphere_rows(src, kind) if Kernel.EXACT_SPHERE in kinds else (np.full(s.shape, -1), ())
-        params = self._params_for(s)
-        for k in kinds:   # one kind per call (kernel_values)
-            if kinds.size == 1:
-                kernel_values(int(k), c, chord, s, ka, kc, t2, row, params, out)
+        row, series = self._sphere_rows(src, kind) if Kernel.EXACT_SPHERE in kinds else (None, ())
+        params = self._params_for(s)   # after the sphere rows: their tables may have grown
+        for k in kinds:   # one kind per call: each compiled loop holds one kernel
+            m = slice(None) if kinds.size == 1 else np.flatnonzero(kind == k)
+            part = out if kinds.size == 1 else np.empty(m.size)
+            if k == Kernel.CURVED:   # curvatures by Euler's formula and the first-order range, in one pass
+                f = self.frames
+                n_out = curved_values(c, s[m], phi[m], np.ascontiguousarray(f.k1[src[m]]),
+                                      np.ascontiguousarray(f.k2[src[m]]), params, VALIDITY_TOL, part)
+                self.stats["curved_pairs_out_of_first_order_range"] = (
+                    self.stats.get("curved_pairs_out_of_first_order_range", 0) + int(n_out))
             else:
-                m = np.flatnonzero(kind == k)
-                part = np.empty(m.size)
-                kernel_values(int(k), c, chord[m], s[m], ka[m], kc[m], t2[m], row[m], params, part)
+                ka, kc, t2 = self._pair_geometry(k, src[m], phi[m], None if vtx is None else np.asarray(vtx)[m])
+                kernel_values(int(k), c, chord[m], s[m], ka, kc, t2,
+                              row[m] if row is not None else np.full(part.size, -1, np.int64), params, part)
+            if kinds.size > 1:
                 out[m] = part
         if len(series):   # radius bins with few pairs: the series at each pair
             bins = self._bin[src[series]]
@@ -172,14 +168,19 @@ class PairKernel:
                 sel = series[bins == b]
                 R0 = SphereTables.bin_radius(b)
                 out[sel] = self.sphere.series(c, R0, np.clip(s[sel] / R0, 0.0, np.pi))
-        curved = kind == Kernel.CURVED if Kernel.CURVED in kinds else None
-        if curved is not None:
-            kmax = np.maximum(np.abs(f.k1[src[curved]]), np.abs(f.k2[src[curved]]))
-            st = self.material.sigma_t_prime[c]
-            valid = self._curvature_table(c, float(s.max())).validity(s[curved] * st, kmax / st)
-            self.stats["curved_pairs_out_of_first_order_range"] = (
-                self.stats.get("curved_pairs_out_of_first_order_range", 0) + int((~valid).sum()))
         return out
+
+    def _pair_geometry(self, kind, src, phi, vtx):
+        """(k_along, k_across, tau^2) (p,) 1/mm of the pairs of one non-curved kernel: for FITTED the source's
+        normal curvatures (Euler's formula), with the receivers known measured between the points
+        (:meth:`_pair_curvatures`); zeros for the dipoles and the exact sphere, which read none."""
+        if kind != Kernel.FITTED:
+            z = np.zeros(src.size)
+            return z, z, z
+        ka, kc, t2 = normal_curvatures(phi, self.frames.k1[src], self.frames.k2[src])
+        if vtx is not None and self.pair_points is not None:
+            ka, kc, t2 = self._pair_curvatures(src, vtx, ka, kc, t2)
+        return ka, kc, t2
 
     def _params_for(self, s) -> KernelParams:
         """The kernel parameters, their curvature tables grown when a longer distance than they reach shows up."""
@@ -233,13 +234,3 @@ class PairKernel:
         kc = np.where(ok, 0.5 * (kc + rk1[vtx] * c2 + rk2[vtx] * (1.0 - c2)), kc)
         t2 = np.where(ok, 0.5 * (t2 + (rk1[vtx] - rk2[vtx]) ** 2 * c2 * (1.0 - c2)), t2)
         return ka, kc, t2
-
-    def _curvature_table(self, c, s_max):
-        """One Chebyshev table of the curvature coefficients per channel (the first-order range count), grown
-        when a longer distance shows up."""
-        st = float(self.material.sigma_t_prime[c])
-        t = self._tables.get(c)
-        if t is None or t.rho_max_opt < s_max * st:
-            t = self._tables[c] = CurvatureTable(float(self.material.albedo_prime[c]), float(self.material.eta),
-                                                 max(s_max * st * 1.25, 10.0))
-        return t
