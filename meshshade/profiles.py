@@ -19,12 +19,12 @@ point      (--k1, --k2)        R_d(s)                                 (none)    
 =========  ==================  =====================================  =========================  ===========
 
 ``fitted`` is the curvature model fitted to Monte Carlo (:mod:`meshshade.kernels.fitted_curvature`, docs/physics.md
-§14) on every shape: R_d(s) times its curvature factor, or with ``near_field="beam"`` the near-field base R_near(s)
+§14) on every shape: R_d(s) times its curvature factor, or with ``source_model="beam"`` the near-field base R_near(s)
 times it (eq. (82)). A cavity is the medium outside a ball, a bore the medium outside a cylinder (its first
 principal direction, k1 = 0, runs along the axis).
 
-``near_field`` says what enters the medium (docs/physics.md §13): ``"point"`` is every model's own point source at
-depth z_r; ``"beam"`` replaces it by the near-field model (exact single scattering plus the beam's fitted diffusion
+``source_model`` says what enters the medium (docs/physics.md §13): ``"point"`` is every model's own point source
+at depth z_r; ``"beam"`` replaces it by the near-field model (exact single scattering plus the beam's fitted diffusion
 sources, :mod:`meshshade.kernels.near_field`), composed with each model's geometry:
 
 =========  ========================================================================================================
@@ -57,7 +57,7 @@ from meshshade.materials import CHANNELS, Material
 from meshshade.montecarlo.shapes import shape_mc_profile
 from meshshade.names import PROFILE_MC_PHOTONS as MC_PHOTONS, PROFILE_SHAPES as SHAPES  # the CLI's too
 from meshshade.transport.baking import RTOL_RANGE
-from meshshade.transport.near_field import check_near_field
+from meshshade.transport.near_field import check_source_model, source_model_keyword
 
 MODELS = ("dipole", "exact", "curved", "fitted", "mc")
 #: the shapes with an exact Monte Carlo (meshshade.montecarlo.shapes)
@@ -143,8 +143,8 @@ def _check_models(models) -> list[str]:
         raise ParameterError(f"models: give at least one of {', '.join(MODELS)}")
     for m in models:
         if m == "beam":
-            raise ParameterError("the near-field model is a switch, not a model: --near-field beam "
-                                 "(near_field='beam') with --models dipole, exact or curved")
+            raise ParameterError("the near-field model is a source model, not a model: --source-model beam "
+                                 "(source_model='beam') with --models dipole, exact or curved")
         if m not in MODELS:
             raise ParameterError(f"unknown model {m!r}; choose among {', '.join(MODELS)}")
     dup = sorted({m for m in models if models.count(m) > 1})
@@ -185,7 +185,7 @@ def _mc(material, s, shape, azimuth_deg, photons, seed):
 
 def reflectance_profile(material: Material, distances_mm, *, model: str = "dipole", shape: Shape | None = None,
                         azimuth_deg: float = 0.0, rtol: float = 1e-10, photons: int = MC_PHOTONS,
-                        seed: int = 0, near_field: str = "point") -> np.ndarray:
+                        seed: int = 0, source_model: str | None = None, near_field: str | None = None) -> np.ndarray:
     """Diffuse reflectance per unit power entering the medium [mm^-2], shape (3, n): channels r, g, b.
 
     Parameters
@@ -197,8 +197,9 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     azimuth_deg : angle of the exit direction from the first principal direction [degrees], finite
     rtol : relative tolerance of the exact series, in [1e-15, 0.1] (``RTOL_RANGE``)
     photons, seed : Monte Carlo photons per channel and seed (``model="mc"``)
-    near_field : "point" | "beam" — the models' point source at z_r or the near-field model (module docstring);
-        Monte Carlo is exact either way
+    source_model : "point" (default) | "beam" — the models' point source at z_r or the near-field model (module
+        docstring); Monte Carlo is exact either way
+    near_field : the former name of ``source_model`` (deprecated: a DeprecationWarning)
 
     Every argument is checked first (MeshshadeError, one line naming it, its value and the allowed range).
     """
@@ -211,7 +212,7 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
     (model,) = _check_models([model])
     phi = np.deg2rad(_check_azimuth(azimuth_deg))
     rtol = _check_rtol(rtol)
-    near_field = check_near_field(near_field)
+    source_model = check_source_model(source_model_keyword(source_model, near_field) or "point")
     if model == "mc":
         return _mc(material, s, shape, azimuth_deg, photons, seed).reflectance
     out = np.empty((3, s.size))
@@ -224,7 +225,7 @@ def reflectance_profile(material: Material, distances_mm, *, model: str = "dipol
         done[key] = c
         st = float(material.sigma_t_prime[c])
         par = {"albedo_prime": float(material.albedo_prime[c]), "eta": material.eta}
-        if near_field == "beam":
+        if source_model == "beam":
             out[c] = _beam_profile_opt(s * st, model, shape, phi, st, par, material.g, rtol) * st * st
         else:
             out[c] = _profile_opt(s * st, model, shape, phi, st, par, rtol) * st * st
@@ -307,14 +308,15 @@ def _profile_opt(r, model, shape, phi, st, par, rtol):
 
 
 def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_deg=(0.0,), rtol=1e-10,
-                 photons: int = MC_PHOTONS, seed: int = 0, near_field: str = "point"):
+                 photons: int = MC_PHOTONS, seed: int = 0, source_model="point", near_field=None):
     """All (model, radius, azimuth, channel) curves as rows of dicts, for the CSV, table and plot; Monte Carlo
     rows (``mc``, ``photons`` per channel, ``seed``) also hold ``stderr_per_mm2``.
 
     ``models``: a non-empty list of distinct names among ``MODELS``; ``shapes``: a non-empty list of
     :class:`Shape`; ``azimuths_deg``: a non-empty list of finite angles; ``distances_mm`` and ``rtol`` as
-    :func:`reflectance_profile`; ``near_field``: "point", "beam" or a list of both (each model's curve for each;
-    curves with the near field are named ``model+beam``; Monte Carlo once). All checked before any curve is computed (MeshshadeError, one line).
+    :func:`reflectance_profile`; ``source_model``: "point", "beam" or a list of both (each model's curve for each;
+    curves with the beam are named ``model+beam``; Monte Carlo once; ``near_field``: its former name, deprecated).
+    All checked before any curve is computed (MeshshadeError, one line).
     """
     s_all = _check_distances(distances_mm)
     models = _check_models(models)
@@ -325,10 +327,12 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
     if not azimuths_deg:
         raise ParameterError("azimuths: give at least one angle in degrees")
     rtol = _check_rtol(rtol)
-    near_fields = [near_field] if isinstance(near_field, str) else list(near_field)
-    near_fields = list(dict.fromkeys(check_near_field(x) for x in near_fields))
-    if not near_fields:
-        raise ParameterError("near field: give point, beam or both")
+    if near_field is not None:
+        source_model = source_model_keyword(None, near_field)
+    source_models = [source_model] if isinstance(source_model, str) else list(source_model)
+    source_models = list(dict.fromkeys(check_source_model(x) for x in source_models))
+    if not source_models:
+        raise ParameterError("source model: give point, beam or both")
     if not isinstance(material, Material):
         raise ParameterError(f"material must be a Material, got {type(material).__name__}")
     rows = []
@@ -342,15 +346,15 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
                 raise ParameterError(f"no requested distance lies on the {shape.kind} of radius {shape.radius_mm:g} mm")
         for az in azimuths_deg:
             for model in models:
-                for nf in (near_fields if model != "mc" else near_fields[:1]):
+                for sm in (source_models if model != "mc" else source_models[:1]):
                     err = None
                     if model == "mc":
                         res = _mc(material, s, shape, az, photons, seed)
                         R, err = res.reflectance, res.stderr
                     else:
                         R = reflectance_profile(material, s, model=model, shape=shape, azimuth_deg=az, rtol=rtol,
-                                                near_field=nf)
-                    label = model + ("+beam" if nf == "beam" and model != "mc" and len(near_fields) > 1 else "")
+                                                source_model=sm)
+                    label = model + ("+beam" if sm == "beam" and model != "mc" and len(source_models) > 1 else "")
                     for c, ch in enumerate(CHANNELS):
                         rows.append({"model": label, "channel": ch, "radius_mm": shape.radius_mm,
                                      "azimuth_deg": az, "distance_mm": s, "reflectance_per_mm2": R[c],

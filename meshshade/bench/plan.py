@@ -14,10 +14,10 @@ others at ``bake``'s defaults; rows ``knob="default"`` are the baseline):
   exitance at the pixel centres' surface points of the same orthographic camera against the exact reference;
 * ``photons``: the Monte Carlo photon count (model ``mc``; against an exact reference, or against the
   reference MC run with another seed);
-* ``near_field``: the other near field of ``bake`` (docs/physics.md §13; "beam" when the baseline is "point"), on
-  the scenes with a Monte Carlo reference only (the exact references are diffusion's own point source).
+* ``source_model``: the other source model of ``bake`` (docs/physics.md §13; "beam" when the baseline is "point"),
+  on the scenes with a Monte Carlo reference only (the exact references are diffusion's own point source).
 
-The ``volume`` model always carries the beam near field and has no series, cutoff or geodesics: it gets the
+The ``volume`` model always takes the beam source model and has no series, cutoff or geodesics: it gets the
 ``default``, ``resolution`` and ``render`` rows only.
 """
 from __future__ import annotations
@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 from meshshade.bench.scenes import SCENES, Scene
 from meshshade.errors import ParameterError
 from meshshade.transport import MODELS, bake
-from meshshade.transport.near_field import check_near_field
+from meshshade.transport.near_field import check_source_model, source_model_keyword
 
-KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons", "near_field")
+KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons", "source_model")
 #: models for which bake's rtol (series tolerance) changes nothing
 NO_SERIES = ("dipole", "curved", "fitted")
 
@@ -44,7 +44,7 @@ def bake_defaults() -> dict:
 @dataclass(frozen=True)
 class Run:
     """One measurement: ``scene`` with ``model`` at ``level``; ``knob``/``value`` name what differs from the
-    defaults. ``settings``: bake keywords (rtol, cutoff_tol, geodesic, near_field), or ``render`` / ``photons``."""
+    defaults. ``settings``: bake keywords (rtol, cutoff_tol, geodesic, source_model), or ``render`` / ``photons``."""
 
     scene: Scene
     model: str
@@ -110,17 +110,18 @@ FULL = BenchConfig(
 
 
 def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchConfig | None = None,
-               near_field: str = "point") -> list:
+               source_model: str | None = None, near_field: str | None = None) -> list:
     """The runs of a bench mode (``config`` overrides ``quick``); ``scenes`` (names of :data:`SCENES`, or
-    :class:`Scene` objects) and ``models`` restrict it; ``near_field`` is the bakes' baseline near field (the
-    ``near_field`` knob measures the other one).
+    :class:`Scene` objects) and ``models`` restrict it; ``source_model`` is the bakes' baseline source model
+    (default "point"; the ``source_model`` knob measures the other one; ``near_field``: its former name,
+    deprecated).
 
     Models default to :data:`meshshade.transport.MODELS`, so a model added there is benchmarked without a
     change here.
     """
     cfg = config or (QUICK if quick else FULL)
-    near_field = check_near_field(near_field)
-    other_near = "beam" if near_field == "point" else "point"
+    source_model = check_source_model(source_model_keyword(source_model, near_field) or "point")
+    other_source = "beam" if source_model == "point" else "point"
     models = tuple(MODELS) if models is None else tuple(models)
     bad = [m for m in models if m not in MODELS]
     if bad:
@@ -136,10 +137,11 @@ def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchCo
     for sc in (n if isinstance(n, Scene) else SCENES[n] for n in picked):
         n = sc.name
         L = cfg.levels.get(n, sc.level)
-        base = {"rtol": d["rtol"], "cutoff_tol": d["cutoff_tol"], "geodesic": sc.geodesic, "near_field": near_field}
+        base = {"rtol": d["rtol"], "cutoff_tol": d["cutoff_tol"], "geodesic": sc.geodesic,
+                "source_model": source_model}
         for m in models:
-            if m == "volume":   # the beam near field always; rtol, cutoff and geodesics are the surface models'
-                vb = {**base, "near_field": "beam"}
+            if m == "volume":   # the beam source model always; rtol, cutoff and geodesics are the surface models'
+                vb = {**base, "source_model": "beam"}
                 runs.append(Run(sc, m, "default", "", L, dict(vb)))
                 runs += [Run(sc, m, "resolution", str(v), v, dict(vb)) for v in cfg.resolution.get(n, ()) if v != L]
                 if n in cfg.render_scenes and sc.reference == "exact" and sc.light == "beam":
@@ -148,7 +150,7 @@ def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchCo
                 continue
             runs.append(Run(sc, m, "default", "", L, dict(base)))
             if sc.reference == "mc":
-                runs.append(Run(sc, m, "near_field", other_near, L, {**base, "near_field": other_near}))
+                runs.append(Run(sc, m, "source_model", other_source, L, {**base, "source_model": other_source}))
             if n in cfg.rtol_scenes and m not in NO_SERIES:
                 runs += [Run(sc, m, "rtol", f"{v:g}", L, {**base, "rtol": v}) for v in cfg.rtol]
             if n in cfg.cutoff_scenes:

@@ -168,9 +168,9 @@ def table_markdown(rows, metadata) -> str:
             label = model if base["knob"] == "default" else f"{model} ({_knob_label(base)})"
             lines.append(f"| {sc} | {ref} | {label} | {_e(base['error_max'])} | {_e(base['error_mean'])} | "
                          f"{base['error_energy']:+.1e} | {base['time_s']:.3g} | " + " | ".join(cells) + " |")
-            for nf in (r for r in mine if r["knob"] == "near_field"):   # the other near field: its own line
-                lines.append(f"| {sc} | {ref} | {model} ({_knob_label(nf)}) | {_e(nf['error_max'])} | "
-                             f"{_e(nf['error_mean'])} | {nf['error_energy']:+.1e} | {nf['time_s']:.3g} | "
+            for sm in (r for r in mine if r["knob"] == "source_model"):   # the other source model: its own line
+                lines.append(f"| {sc} | {ref} | {model} ({_knob_label(sm)}) | {_e(sm['error_max'])} | "
+                             f"{_e(sm['error_mean'])} | {sm['error_energy']:+.1e} | {sm['time_s']:.3g} | "
                              + " | ".join("" for _ in ERROR_LEVELS) + " |")
     return "\n".join(lines) + "\n"
 

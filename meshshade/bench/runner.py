@@ -154,7 +154,7 @@ class _Runner:
             err = vertex_errors(mesh, mc.radiance[:, 0], ref)
         else:
             kw = {k: st[k] for k in ("rtol", "cutoff_tol", "geodesic")}
-            kw["near_field"] = st.get("near_field", "point")
+            kw["source_model"] = st.get("source_model", "point")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 t = time.perf_counter()

@@ -84,7 +84,7 @@ class _BakeProperties:
     transport: EnumProperty(name="Transport", default="auto",
                             items=[("auto", "auto", "surface models: hierarchical where its distance check "
                                                     "passes, else direct (the volume model has its own)"),
-                                   ("hierarchical", "hierarchical", "near field + clusters (near-linear cost)"),
+                                   ("hierarchical", "hierarchical", "near zone + source clusters (near-linear cost)"),
                                    ("direct", "direct", "every pair within the cutoff (reference)")])
     texture: BoolProperty(name="Bake to texture", default=False,
                           description="also bake into a float image of the active UV map (each texel a point on "

@@ -42,12 +42,12 @@ def run_bake(args) -> int:
         for path in texture_outputs(args.texture, atlas=False).values():
             check_output_path(path, outs, suffixes=(path.suffix,), option="--texture")
     check_bake_options(args.model, args.cutoff_tol, args.curvature_radius, args.geodesic, args.far_field,
-                       transport=args.transport, near_field=args.near_field)
+                       transport=args.transport, source_model=args.source_model)
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
     options = dict(model=args.model, cutoff_tol=args.cutoff_tol, curvature_radius_mm=args.curvature_radius,
                    progress=not args.quiet, geodesic=args.geodesic, far_field=args.far_field,
-                   transport=args.transport, near_field=args.near_field, volume_cache=AssetCache("volume"))
+                   transport=args.transport, source_model=args.source_model, volume_cache=AssetCache("volume"))
     texture = None
     if args.texture:
         uv = read_uv_map(args.mesh, mesh)

@@ -27,7 +27,7 @@ def run_bench(args) -> int:
         raise MeshshadeError(f"--seed must be >= 0, got {args.seed}")
     check_cluster_options(args.scheduler, args.workers)
     plan = bench_plan(quick=args.quick, scenes=parse_names(args.scenes), models=parse_names(args.models),
-                      near_field=args.near_field)
+                      source_model=args.source_model)
     out = output_dir(args.out)
     with contextlib.ExitStack() as stack:
         client = (stack.enter_context(open_client(args.scheduler, args.workers, quiet=args.quiet))

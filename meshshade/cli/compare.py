@@ -17,9 +17,9 @@ from meshshade.output.tonemap import check_tonemap_options
 
 
 def run_compare(args) -> int:
-    near = tuple(x.strip() for x in args.near_field.split(",") if x.strip()) if args.near_field else (None,)
-    models = check_models(tuple(m.strip() for m in args.models.split(",") if m.strip()),
-                          near_field=near[0] if len(near) == 1 else near)
+    sm = tuple(x.strip() for x in args.source_model.split(",") if x.strip()) if args.source_model else (None,)
+    source_model = sm[0] if len(sm) == 1 else sm
+    models = check_models(tuple(m.strip() for m in args.models.split(",") if m.strip()), source_model=source_model)
     check_floor(args.floor)
     check_image_size(args.width, args.height, args.spp)
     check_tonemap_options(args.tonemap, args.bias)
@@ -29,7 +29,7 @@ def run_compare(args) -> int:
                          height=args.height, spp=args.spp, per_pixel=args.per_pixel, cutoff_tol=args.cutoff_tol,
                          floor=args.floor, mc_photons=args.photons, geodesic=args.geodesic,
                          far_field=args.far_field, transport=args.transport,
-                         progress=False if args.quiet else "compare", near_field=near[0] if len(near) == 1 else near,
+                         progress=False if args.quiet else "compare", source_model=source_model,
                          volume_cache=AssetCache("volume"))
     for p in save_comparison(cmp, out, models=cmp["labels"], metadata=scene.metadata, operator=args.tonemap,
                              bias=args.bias, background=scene.background):

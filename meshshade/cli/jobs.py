@@ -40,10 +40,12 @@ import hashlib
 import itertools
 import json
 import re
+import warnings
 from pathlib import Path
 
 from meshshade.batch.jobs import NAME_PATTERN, Job, JobFileError
 from meshshade.cli import arguments, bake, compare, mc, profile, render
+from meshshade.cli.arguments.common import deprecated_aliases
 from meshshade.io import output_transaction, read_toml
 
 __all__ = ["COMMANDS", "OUTPUTS", "expand", "read_jobs", "check_job", "command_parser", "command_job", "job_argv",
@@ -143,15 +145,20 @@ def command_job(name: str, command: str, **options) -> Job:
 
 
 def _normalise(command: str, options: dict, where: str, base: Path) -> dict:
-    """Options with dashes, inputs resolved against ``base``, outputs defaulted and checked."""
+    """Options with dashes, inputs resolved against ``base``, outputs defaulted and checked; an option's former
+    spelling (``near-field``) becomes its new one (``source-model``), with a warning."""
     kinds = _option_kinds(command)
+    renamed = deprecated_aliases(command_parser(command))
     out: dict = {}
     for raw, value in options.items():
         key = str(raw)
+        if key in renamed:
+            warnings.warn(f"job file option {key} is deprecated; use {renamed[key]}", FutureWarning, stacklevel=2)
+            key = renamed[key]
         if key in BATCH_ONLY:
             raise JobFileError(f"{where}: option {raw!r} is set for the whole batch, not per job")
         if key not in kinds:
-            known = ", ".join(sorted(k for k in kinds if k not in BATCH_ONLY))
+            known = ", ".join(sorted(k for k in kinds if k not in BATCH_ONLY and k not in renamed))
             raise JobFileError(f"{where}: {command} has no option {raw!r} (it has: {known})")
         if key in out:
             raise JobFileError(f"{where}: option {raw!r} given twice")

@@ -31,7 +31,7 @@ def run_profile(args) -> int:
         shapes = [Shape.make(args.shape, r) for r in radii]
     rows = profile_rows(material, distances, models=models, shapes=shapes, azimuths_deg=azimuths,
                         rtol=args.rtol, photons=args.photons, seed=args.seed,
-                        near_field=[x.strip() for x in args.near_field.split(",") if x.strip()])
+                        source_model=[x.strip() for x in args.source_model.split(",") if x.strip()])
     extra = (["radius_mm"] if len(shapes) > 1 else []) + (
         ["azimuth_deg"] if len(azimuths) > 1 or shapes[0].kind in ("cylinder", "saddle", "point") else [])
     if args.csv:

@@ -55,12 +55,12 @@ def run_render(args) -> int:
     if baked is not None:
         return _render_baked(args, baked, exr, png)
     check_bake_options(args.model, args.cutoff_tol, None, args.geodesic, args.far_field, transport=args.transport,
-                       near_field=args.near_field)
+                       source_model=args.source_model)
     scene = image_scene_from_args(args)
     mesh, material = scene.mesh, scene.material
     res = bake(mesh, material, scene.lights, model=args.model, cutoff_tol=args.cutoff_tol, geodesic=args.geodesic,
                far_field=args.far_field, transport=args.transport, progress=False if args.quiet else "render",
-               near_field=args.near_field, volume_cache=AssetCache("volume"))
+               source_model=args.source_model, volume_cache=AssetCache("volume"))
     gather = PixelGather(mesh, res) if args.per_pixel else None
     rgb, alpha = render_radiance(mesh, res.radiance, scene.camera, args.width, args.height, args.spp,
                                  eta=material.eta, exitance_at=gather)

@@ -9,7 +9,7 @@ point lights pick a face in proportion to the centroid estimate of its incident 
 the Fresnel reflectance F(cos) from index 1 into ``eta`` is split off as specular power and the direction is
 refracted (Snell).
 
-Three steps, so that the ray casts can be Embree's from the numba threads (``direct``) or one embreex call
+Three steps, so that the ray casts can be Embree's from the numba threads (``fused``) or one embreex call
 (``batched``) with the same sampling:
 
 1. :func:`sample_entries` (``prange`` over photons): the light, face and point of every photon, and the ray it

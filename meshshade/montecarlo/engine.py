@@ -13,7 +13,7 @@ A pool of ``pool`` photon slots is advanced in rounds; every step that touches p
    Fresnel-reflected or leaves (:func:`~meshshade.montecarlo.loops.surface_s`). At most ``MAX_STEPS`` events per
    photon and round.
 
-   * ``direct`` (default): every thread calls Embree's ``rtcIntersect1`` itself
+   * ``fused`` (default): every thread calls Embree's ``rtcIntersect1`` itself, inside the walk
      (:mod:`meshshade.montecarlo.fused_walk` through :mod:`meshshade.raycast.embree_direct`), so the boundary
      tests run on all cores;
    * ``batched``: the interior loop stops every photon at its first uncertified free path, ONE embreex call

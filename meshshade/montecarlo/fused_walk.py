@@ -1,4 +1,4 @@
-"""The fused walk loop of the pooled engine's ``direct`` mode: Embree's ``rtcIntersect1`` from numba threads.
+"""The fused walk loop of the pooled engine's ``fused`` mode: Embree's ``rtcIntersect1`` from numba threads.
 
 One ``prange`` kernel over the live slots walks every live photon for up to ``max_steps`` events: free paths
 certified by the safe-distance grid (:mod:`meshshade.montecarlo.interior`) need no ray, the others are traced from

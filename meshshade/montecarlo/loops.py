@@ -17,7 +17,7 @@ only as an uncorrelated-looking reuse of numbers at different points of two diff
 Physics is that of :mod:`meshshade.montecarlo.simulation` (MCML conventions); the resolution of a boundary test
 repeats the float64 ray-triangle reconstruction of :meth:`meshshade.raycast.scene._SceneBase._hits_on_faces`
 (Moller & Trumbore 1997, barycentrics clipped onto the triangle) and the ray offsets of
-:meth:`~meshshade.raycast.scene._SceneBase.offset_epsilon`. The fused walk of the ``direct`` mode, which calls
+:meth:`~meshshade.raycast.scene._SceneBase.offset_epsilon`. The fused walk of the ``fused`` mode, which calls
 Embree from these threads, is :mod:`meshshade.montecarlo.fused_walk`.
 """
 from __future__ import annotations

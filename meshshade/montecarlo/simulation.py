@@ -56,7 +56,7 @@ from meshshade.light.samples import check_exitance
 from meshshade.materials import Material
 from meshshade.montecarlo.distributed import walk_on_client
 from meshshade.montecarlo.emitter import Emitter
-from meshshade.montecarlo.walks import channel_groups, prepare_walks, walk_group
+from meshshade.montecarlo.walks import channel_groups, check_engine, prepare_walks, walk_group
 from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
@@ -180,7 +180,7 @@ def check_mc_options(photons=100_000, *, seed=0, time_budget=None, n_batches=DEF
       message gives the estimate and how to proceed (fewer photons, or a time budget);
     * ``seed``: an integer in [0, 2^64); ``time_budget``: None or a finite number of seconds > 0;
     * ``n_batches``: an integer in [2, ``MAX_BATCHES``]; ``pool``: None or an integer in [1, ``MAX_POOL``];
-    * ``engine``: "auto", "direct" or "batched".
+    * ``engine``: "auto", "fused" or "batched" ("direct": the former spelling of "fused", deprecated).
     """
     if time_budget is not None:
         t = float(time_budget) if isinstance(time_budget, (int, float, np.number)) and \
@@ -197,8 +197,7 @@ def check_mc_options(photons=100_000, *, seed=0, time_budget=None, n_batches=DEF
     seed = _count(seed, "seed", 0, (1 << 64) - 1, "2^64 - 1")
     if pool is not None:
         pool = _count(pool, "pool (photons walked together)", 1, MAX_POOL)
-    if engine not in ("auto", "direct", "batched"):
-        raise MeshshadeError(f"engine must be 'auto', 'direct' or 'batched', got {engine!r}")
+    check_engine(engine)
     if photons is not None:
         cores = os.cpu_count() or 1
         least = photons * groups / (MAX_EVENTS_PER_SECOND_PER_CORE * cores)
@@ -241,9 +240,10 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     fast_interior : True: the pooled engine (numba interior walks inside a conservative safe-distance grid,
         one batched Embree query per round, :mod:`meshshade.montecarlo.engine`); False: the plain numpy
         wavefront with an Embree query every step (the baseline: same distribution, different random streams)
-    engine : pooled engine's Embree calls: "direct" (rtcIntersect1 from the numba threads,
-        :mod:`meshshade.raycast.embree_direct`), "batched" (one embreex call per round) or "auto" (direct when the
-        Embree library can be bound, else batched). Both give the same photon paths up to float32 ties.
+    engine : pooled engine's Embree calls: "fused" (rtcIntersect1 from the numba threads, inside the walk,
+        :mod:`meshshade.raycast.embree_direct`), "batched" (one embreex call per round) or "auto" (fused when the
+        Embree library can be bound, else batched). Both give the same photon paths up to float32 ties. "direct":
+        the former spelling of "fused" (deprecated: a DeprecationWarning).
     progress : False, True or the task named in the progress lines (default "mc"): photons emitted, as a bar on
         a terminal and as periodic lines otherwise (:class:`meshshade.progress.Progress`)
     client : a :class:`distributed.Client`: split the photons across its workers in tasks of whole entry chunks
@@ -269,6 +269,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     if not isinstance(material, Material):
         raise MaterialError(f"Monte Carlo needs a Material, got {type(material).__name__}")
     groups = channel_groups(material)
+    engine = check_engine(engine)
     photons, seed, time_budget, n_batches, pool = check_mc_options(
         photons, seed=seed, time_budget=time_budget, n_batches=n_batches, pool=pool, engine=engine,
         groups=len(groups))

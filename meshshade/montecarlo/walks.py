@@ -26,7 +26,22 @@ from meshshade.montecarlo.wavefront_oracle import WavefrontWalk
 from meshshade.raycast import make_scene
 from meshshade.raycast.embree_direct import DirectEmbreeScene
 
-__all__ = ["WalkSetup", "GroupTally", "channel_groups", "prepare_walks", "walk_group"]
+__all__ = ["ENGINES", "WalkSetup", "GroupTally", "channel_groups", "check_engine", "prepare_walks", "walk_group"]
+
+#: the pooled engine's ways of calling Embree: "fused" (rtcIntersect1 from the numba threads, inside the walk),
+#: "batched" (one embreex call per round), "auto" (fused when the Embree library can be bound)
+ENGINES = ("auto", "fused", "batched")
+
+
+def check_engine(engine, stacklevel: int = 3) -> str:
+    """``engine`` if it is one of :data:`ENGINES`; "direct", its former spelling of "fused", with a
+    DeprecationWarning (attributed ``stacklevel`` frames up); MeshshadeError otherwise."""
+    if engine == "direct":
+        warnings.warn("engine='direct' is deprecated; use engine='fused'", DeprecationWarning, stacklevel=stacklevel)
+        return "fused"
+    if engine not in ENGINES:
+        raise MeshshadeError(f"engine must be 'auto', 'fused' or 'batched', got {engine!r}")
+    return engine
 
 
 def channel_groups(material: Material) -> list[tuple[tuple[float, float], list[int]]]:
@@ -62,8 +77,7 @@ def prepare_walks(mesh, material: Material, lights, *, engine: str = "auto", fas
     half_space_certificates : also certify free paths inside local half-spaces (a set-up cost that pays back
         except under a short time budget).
     """
-    if engine not in ("auto", "direct", "batched"):
-        raise MeshshadeError(f"engine must be 'auto', 'direct' or 'batched', got {engine!r}")
+    engine = check_engine(engine)
     V, F = mesh.vertices, mesh.faces
     normals, areas = mesh.face_normals, mesh.face_areas
     scene = make_scene(V, F)
@@ -78,8 +92,8 @@ def prepare_walks(mesh, material: Material, lights, *, engine: str = "auto", fas
             try:
                 direct = DirectEmbreeScene(V, F, scene.center)
             except (RuntimeError, OSError) as exc:
-                if engine == "direct":
-                    raise MeshshadeError(f"engine='direct' is not available here ({exc}); use 'batched'") from exc
+                if engine == "fused":
+                    raise MeshshadeError(f"engine='fused' is not available here ({exc}); use 'batched'") from exc
     emitter = Emitter(V, F, normals, areas, lights, scene, material.eta)
     return WalkSetup(V, F, normals, scene, grid, direct, emitter, material, channel_groups(material), fast_interior)
 

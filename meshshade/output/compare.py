@@ -24,7 +24,7 @@ from meshshade.output.tonemap import luminance
 from meshshade.raycast import make_scene
 from meshshade.transport.baking import bake, check_bake_options
 from meshshade.transport.models import DEFAULT_MODEL, MODELS
-from meshshade.transport.near_field import NEAR_FIELDS, check_near_field
+from meshshade.transport.near_field import SOURCE_MODELS, check_source_model, source_model_keyword
 
 #: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
 DEFAULT_FLOOR = 1e-3
@@ -45,27 +45,28 @@ def check_floor(floor) -> float:
     return x
 
 
-def near_field_pair(near_field, models=None) -> tuple:
-    """``near_field`` ("point", "beam", None, or one per model A, B) as a checked pair; MeshshadeError otherwise.
-    None: each model's default (the beam for ``volume``, the point source for the others)."""
-    pair = (near_field, near_field) if near_field is None or isinstance(near_field, str) else tuple(near_field)
+def source_model_pair(source_model, models=None) -> tuple:
+    """``source_model`` ("point", "beam", None, or one per model A, B) as a checked pair; MeshshadeError
+    otherwise. None: each model's default (the beam for ``volume``, the point source for the others)."""
+    pair = (source_model, source_model) if source_model is None or isinstance(source_model, str) \
+        else tuple(source_model)
     if len(pair) != 2:
-        raise ParameterError(f"near field: give one value or two (A,B) among {', '.join(NEAR_FIELDS)}, got "
-                             f"{near_field!r}")
+        raise ParameterError(f"source model: give one value or two (A,B) among {', '.join(SOURCE_MODELS)}, got "
+                             f"{source_model!r}")
     models = tuple(models) if models is not None and len(models) == 2 else (None, None)
-    return tuple(check_near_field(x if x is not None else ("beam" if m == "volume" else "point"))
+    return tuple(check_source_model(x if x is not None else ("beam" if m == "volume" else "point"))
                  for x, m in zip(pair, models))
 
 
-def compare_labels(models, near_field=None) -> tuple:
-    """The names of the two sides: the model, with ``+beam`` where a surface model's near field is the beam."""
-    return tuple(m + ("+beam" if nf == "beam" and m not in ("mc", "volume") else "")
-                 for m, nf in zip(models, near_field_pair(near_field, models)))
+def compare_labels(models, source_model=None) -> tuple:
+    """The names of the two sides: the model, with ``+beam`` where a surface model's source model is the beam."""
+    return tuple(m + ("+beam" if sm == "beam" and m not in ("mc", "volume") else "")
+                 for m, sm in zip(models, source_model_pair(source_model, models)))
 
 
-def check_models(models, near_field=None) -> tuple:
-    """Exactly two model names among ``COMPARE_MODELS``, different unless their near fields differ
-    (``near_field``: one value or one per model); MeshshadeError otherwise."""
+def check_models(models, source_model=None) -> tuple:
+    """Exactly two model names among ``COMPARE_MODELS``, different unless their source models differ
+    (``source_model``: one value or one per model); MeshshadeError otherwise."""
     if isinstance(models, str) or not all(isinstance(m, str) for m in models):
         raise ParameterError(f"models must be two model names A,B, got {models!r}")
     models = tuple(models)
@@ -75,8 +76,8 @@ def check_models(models, near_field=None) -> tuple:
     for m in models:
         if m not in COMPARE_MODELS:
             raise ParameterError(f"unknown model {m!r}; choose two among {', '.join(COMPARE_MODELS)}")
-    if len(set(compare_labels(models, near_field))) < 2:
-        raise ParameterError(f"compare needs two different models (or near fields), got {models[0]!r} twice")
+    if len(set(compare_labels(models, source_model))) < 2:
+        raise ParameterError(f"compare needs two different models (or source models), got {models[0]!r} twice")
     return models
 
 
@@ -157,7 +158,7 @@ def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
 def run_comparison(mesh, material, lights, models=(DEFAULT_MODEL, "dipole"), *, camera=None, width=256, height=256,
                    spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
                    seed: int = 0, geodesic: str = "exact", far_field: str | None = None, transport: str = "auto",
-                   progress: bool | str = False, near_field=None, volume_cache=None) -> dict:
+                   progress: bool | str = False, source_model=None, volume_cache=None, near_field=None) -> dict:
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
     ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
@@ -171,14 +172,15 @@ def run_comparison(mesh, material, lights, models=(DEFAULT_MODEL, "dipole"), *, 
     :func:`~meshshade.output.render.check_image_size`; with ``mc``, ``mc_photons`` and ``seed`` as
     :func:`~meshshade.montecarlo.simulation.check_mc_options`; ``camera`` a Camera or None; the lights.
     ``progress`` (False, True or a task name, default "compare") is passed to each bake and Monte Carlo run.
-    ``near_field``: "point" or "beam" for both models, or one per model, or None for each model's default
-    (:func:`~meshshade.transport.baking.bake`);
+    ``source_model``: "point" or "beam" for both models, or one per model, or None for each model's default
+    (:func:`~meshshade.transport.baking.bake`); ``near_field``: its former name (deprecated);
     ``labels`` in the result name the sides (``curved+beam``). ``volume_cache``: as
     :func:`~meshshade.transport.baking.bake`'s.
     """
-    models = check_models(models, near_field)
-    near = near_field_pair(near_field, models)
-    labels = compare_labels(models, near)
+    source_model = source_model_keyword(source_model, near_field)
+    models = check_models(models, source_model)
+    sources = source_model_pair(source_model, models)
+    labels = compare_labels(models, sources)
     floor = check_floor(floor)
     if not isinstance(mesh, Mesh):
         raise ParameterError(f"run_comparison needs a meshshade Mesh (mm), got {type(mesh).__name__}")
@@ -198,13 +200,13 @@ def run_comparison(mesh, material, lights, models=(DEFAULT_MODEL, "dipole"), *, 
     scene = make_scene(mesh.vertices, mesh.faces)
     task = (progress if isinstance(progress, str) else "compare") if progress else False
     bakes, images = [], []
-    for m, nf in zip(models, near):
+    for m, sm in zip(models, sources):
         if m == "mc":  # Monte Carlo reference: per-vertex exitance (per-pixel gathering does not apply)
             mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed, progress=task)
             res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
         else:
             res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field,
-                       transport=transport, progress=task, near_field=nf, volume_cache=volume_cache)
+                       transport=transport, progress=task, source_model=sm, volume_cache=volume_cache)
             ex = render.PixelGather(mesh, res) if per_pixel else None
         images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
                                              exitance_at=ex, scene=scene))

@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
@@ -37,13 +38,14 @@ from meshshade.preview import mesh_preview
 from meshshade.progress import Progress, kernel_interrupts
 from meshshade.raycast import make_scene
 from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
-from meshshade.transport.farfield import (DEFAULT_FAR_TOL, far_field_exitance, far_field_exitance_direct,
+from meshshade.transport.farfield import (DEFAULT_FAR_TOL, far_field_exitance, far_field_exitance_pairwise,
                                           far_field_radius)
 from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
                                               vertex_drift, vertex_power)
 from meshshade.transport.gather import PairStream, Stopwatch, chunk_size, cutoff_radii, gather
 from meshshade.transport.models import DEFAULT_MODEL, MODELS
-from meshshade.transport.near_field import check_near_field, drift_angles, near_field_factors, refracted_drift
+from meshshade.transport.near_field import (check_source_model, drift_angles, near_field_factors, refracted_drift,
+                                            source_model_keyword)
 from meshshade.transport.pair_kernel import PairKernel, source_frames
 from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
 from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay, neighbourhood_solver
@@ -51,9 +53,23 @@ from meshshade.volume.transport import NORMAL_SPACING, VolumeTransport, grading
 
 log = logging.getLogger("meshshade")
 
-FAR_FIELD_METHODS = ("off", "clustered", "direct")
+FAR_FIELD_METHODS = ("off", "clustered", "pairwise")
 GEODESIC_METHODS = ("exact", "arc")
 TRANSPORTS = ("auto", "hierarchical", "direct")
+#: former spellings of option values (still accepted, with a DeprecationWarning): far_field="direct" (the far
+#: field pair by pair, not the direct-sum transport) and far_geodesic="cluster" (sample groups, not source clusters)
+RENAMED_FAR_FIELD = {"direct": "pairwise"}
+RENAMED_FAR_GEODESIC = {"cluster": "shared"}
+
+
+def renamed_value(name: str, value, renamed: dict):
+    """``value``, or its new spelling if it is a former one of option ``name`` (with a DeprecationWarning
+    attributed to the caller of the function that calls this)."""
+    if isinstance(value, str) and value in renamed:
+        warnings.warn(f"{name}={value!r} is deprecated; use {name}={renamed[value]!r}", DeprecationWarning,
+                      stacklevel=3)
+        return renamed[value]
+    return value
 
 
 @dataclass(frozen=True)
@@ -116,8 +132,8 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
          curvature_radius_mm: float | None = None, backend: str = "embree", progress: bool | str = False,
          rtol: float = 1e-10, geodesic: str = "exact", auto_options: dict | None = None,
          far_field: str | None = None, far_tol: float = DEFAULT_FAR_TOL, far_rel_tol: float = 1e-2,
-         far_geodesic: str = "cluster", transport="auto", near_field: str | None = None,
-         volume=None, volume_cache=None) -> BakeResult:
+         far_geodesic: str = "shared", transport="auto", source_model: str | None = None,
+         volume=None, volume_cache=None, near_field: str | None = None) -> BakeResult:
     """Per-vertex radiant exitance of ``mesh`` (a :class:`~meshshade.geometry.mesh.Mesh` in mm) lit by ``lights``.
 
     Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
@@ -126,11 +142,11 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     ``model="volume"`` (the default): diffusion inside the object's own volume, solved on a tetrahedral mesh
     that keeps the surface's vertices, from sources along the refracted light, with the analytic near field
     (the beam's near-field model less the Robin half-space's response to the same sources) on top
-    (:class:`meshshade.volume.transport.VolumeTransport`, docs/physics.md §15). It always carries the beam
-    near field. ``volume``: a VolumeTransport built for this mesh and material (reused across lights);
+    (:class:`meshshade.volume.transport.VolumeTransport`, docs/physics.md §15). It always takes the beam
+    source model. ``volume``: a VolumeTransport built for this mesh and material (reused across lights);
     ``volume_cache``: where the tetrahedral mesh is looked up and kept between runs
     (:class:`meshshade.asset_cache.AssetCache`; the CLI, batches and the add-on pass one). On a mesh that is not closed,
-    or that cannot be tetrahedralised, the bake uses ``model="auto"`` with the beam near field and says why in
+    or that cannot be tetrahedralised, the bake uses ``model="auto"`` with the beam source model and says why in
     ``stats["transport"]``. The options below (geodesics, far field, transport, cutoff) are the surface
     models'.
 
@@ -140,16 +156,16 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     the geodesic method is chosen per entry sample ("arc" restricts it to arc) and ``auto_options`` may override
     the tolerances of :func:`meshshade.transport.auto.plan_sources`.
 
-    ``far_field``: "off", "clustered" or "direct" (default: "clustered" for ``auto``, "off" otherwise; "off" with
+    ``far_field``: "off", "clustered" or "pairwise" (default: "clustered" for ``auto``, "off" otherwise; "off" with
     ``auto`` also turns off the shared far-zone geodesics, leaving exact or arc geodesics per sample). When on,
     the pairs of *vertex* entry samples (directional and point lights; beams have few samples and keep the full
     geodesic neighbourhood) are split at the chord radius ``r_near`` per channel beyond which the dipole's tail
     holds ``far_tol`` of its energy (farfield.far_field_radius): closer pairs are gathered over geodesic
     neighbourhoods with the model's kernel, farther ones are summed with the planar dipole of the chord distance
-    by a source tree with relative error <= ``far_rel_tol`` on that part (farfield.py; "direct" sums them
-    exactly, for validation). Pairs whose chord is within r_near but whose geodesic distance is not (across a
-    fold) are dropped, as the geodesic neighbourhood drops them without the far field.
-    ``far_geodesic`` ("cluster" or "arc"): how ``auto`` finds the far-zone geodesics of curved vertex samples:
+    by a source tree with relative error <= ``far_rel_tol`` on that part (farfield.py; "pairwise" sums them
+    pair by pair, exactly, for validation). Pairs whose chord is within r_near but whose geodesic distance is not
+    (across a fold) are dropped, as the geodesic neighbourhood drops them without the far field.
+    ``far_geodesic`` ("shared" or "arc"): how ``auto`` finds the far-zone geodesics of curved vertex samples:
     one exact query per group of nearby samples, each member's distance from the centre's by the law of
     cosines in the tangent plane (sample_groups.py), or the arc method.
 
@@ -160,11 +176,13 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     says which and why), or a :class:`~meshshade.transport.hierarchical.SurfaceTransport` built for this
     mesh, material and model (reused across lights and frames). Beam samples always use the direct sum.
 
-    ``near_field``: what enters the medium. "point" (default): each kernel's point source at depth z_r. "beam":
-    exact single scattering plus diffusion sources along the beam fitted to exact transport (docs/physics.md
-    §13), carried by every model as the factor of eq. (79): pairs are multiplied by the ratio of the near-field
-    model to the planar dipole (patch-averaged near the source; for beams over the receiver's patch), and the far
-    field by the ratio of their tails (transport/near_field.py, eq. (80)).
+    ``source_model``: what enters the medium at each entry sample. "point" (default; "beam" for ``volume``): each
+    kernel's point source at depth z_r. "beam": the near-field model, exact single scattering plus diffusion
+    sources along the beam fitted to exact transport (docs/physics.md §13), carried by every model as the factor
+    of eq. (79): pairs are multiplied by the ratio of the near-field model to the planar dipole (patch-averaged
+    near the source; for beams over the receiver's patch), and the far field by the ratio of their tails
+    (transport/near_field.py, eq. (80)). ``near_field``: the former name of ``source_model`` (deprecated: a
+    DeprecationWarning).
 
     ``progress``: False (default), True or the task named in the progress lines ("bake"; ``render`` and
     ``compare`` pass their own name): the gather's sources done, as a bar on a terminal and as periodic lines
@@ -176,11 +194,15 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
         raise MeshshadeError(f"bake needs a meshshade Mesh (mm), got {type(mesh).__name__}")
     if not isinstance(material, Material):
         raise MaterialError(f"bake needs a Material, got {type(material).__name__}")
+    source_model = source_model_keyword(source_model, near_field)
+    far_field = renamed_value("far_field", far_field, RENAMED_FAR_FIELD)
+    far_geodesic = renamed_value("far_geodesic", far_geodesic, RENAMED_FAR_GEODESIC)
     far_field_given = far_field is not None
     check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol, far_tol=far_tol,
                        far_rel_tol=far_rel_tol, far_geodesic=far_geodesic, backend=backend,
-                       auto_options=auto_options, transport=transport, near_field=near_field)
-    near_field = check_near_field("beam" if near_field is None and model == "volume" else near_field or "point")
+                       auto_options=auto_options, transport=transport, source_model=source_model)
+    source_model = check_source_model("beam" if source_model is None and model == "volume"
+                                      else source_model or "point")
     if volume is not None and (model != "volume" or not isinstance(volume, VolumeTransport) or volume.mesh is not mesh
                                or volume.material.describe() != material.describe()):
         raise ParameterError("the VolumeTransport passed as volume was built for another mesh or material (or the "
@@ -191,7 +213,7 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     if model == "volume":
         vt, volume_why = _volume_transport(mesh, material, volume, volume_cache, clock)
         if vt is None:
-            log.warning("%s; using the surface transport (model auto, beam near field)", volume_why)
+            log.warning("%s; using the surface transport (model auto, beam source model)", volume_why)
             model = "auto"
     far_field = check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol,
                                    far_tol=far_tol, far_rel_tol=far_rel_tol, far_geodesic=far_geodesic,
@@ -209,20 +231,20 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     if model == "volume":
         return _volume_bake(vt, mesh, material, lights, samples, curv, clock)
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
-    direct_options = far_field_given or far_geodesic != "cluster"
+    direct_options = far_field_given or far_geodesic != "shared"
     core, why, built = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
-                                   direct_options=direct_options, near_field=near_field,
+                                   direct_options=direct_options, source_model=source_model,
                                    cutoff_tol=cutoff_tol, auto_options=auto_options, rtol=rtol, progress=progress)
     opts = SumOptions(model, far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol, auto_options, progress,
-                      near_field)
+                      source_model)
     verified = None
     if core is not None:
         pv = vertex_power(samples, mesh.n_vertices)
         pv_c = pv
-        if near_field == "beam":   # per channel: each sample's power times its incidence scale
+        if source_model == "beam":   # per channel: each sample's power times its incidence scale
             pv_c = vertex_power(samples, mesh.n_vertices,
                                 near_field_factors(material).incidence_scale(samples.cos_incidence))
-        drift = vertex_drift(samples, mesh.n_vertices, material.eta) if near_field == "beam" else None
+        drift = vertex_drift(samples, mesh.n_vertices, material.eta) if source_model == "beam" else None
         M, hstats = core.exitance(pv_c, drift=drift, progress=progress)
         if transport == "auto":  # the far field's distances on this light's configuration, or the direct sum
             t_v = time.perf_counter()
@@ -255,8 +277,8 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     stats.update(kstats)
     if volume_why:
         stats["transport"] += f" [volume transport not used: {volume_why}]"
-    stats["near_field"] = near_field
-    if near_field == "beam" and near_field_factors(material).clamped:
+    stats["near_field"] = source_model   # the stats key keeps its name: outputs and reports read it
+    if source_model == "beam" and near_field_factors(material).clamped:
         stats["near_field_clamped"] = True   # a channel outside the fitted domain: its nearest node is used
     stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
     stats["entering_power"] = float(samples.power.sum())
@@ -325,24 +347,24 @@ class SumOptions(NamedTuple):
     rtol: float
     auto_options: dict | None
     progress: bool | str
-    near_field: str = "point"
+    source_model: str = "point"
 
 
 def _direct(mesh, material, lights, samples, curv, cut, clock, opts: SumOptions):
     """The direct sum of :func:`bake` over ``samples``: (M, beam distance, stats, AutoPlan or None, kernel stats)."""
-    model, far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol, auto_options, progress, near_field = opts
+    model, far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol, auto_options, progress, source_model = opts
     frames = source_frames(samples, curv, mesh.faces)
     far_field, near = _near_radius(mesh, material, samples, cut, far_field, far_tol)
     plan = None
     if model == "auto":
         plan = _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, auto_options)
         clock.lap("auto")
-    if plan is not None and far_geodesic == "cluster" and not groups_pay(mesh, cut):
+    if plan is not None and far_geodesic == "shared" and not groups_pay(mesh, cut):
         far_geodesic = "none"  # small mesh or short cutoff: shared far-zone geodesics would not save work
     zone = assign_zones(len(samples), samples.vertex >= 0, far_field, geodesic, plan, far_geodesic)
     clustered, src_cut, chord_cut = _gather_radii(zone, cut, near)
     groups = _zone_groups(zone)
-    factors = near_field_factors(material) if near_field == "beam" else None
+    factors = near_field_factors(material) if source_model == "beam" else None
     kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors, reach_mm=cut)
     kernel.pair_points = (samples.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
     if factors is not None:
@@ -400,9 +422,9 @@ def _surface_transport(transport, mesh, material, model, samples, curv, *, direc
     ``built``: whether this call built it (not passed in, nor reused from :mod:`meshshade.memo`)."""
     if isinstance(transport, SurfaceTransport):
         if (transport.mesh is not mesh or transport.material.describe() != material.describe()
-                or transport.model != model or transport.near_field != kw.get("near_field", "point")):
+                or transport.model != model or transport.source_model != kw.get("source_model", "point")):
             raise ParameterError("the SurfaceTransport passed as transport was built for another mesh, material, "
-                                 "model or near field")
+                                 "model or source model")
         return transport, None, False
     if transport == "direct":
         return None, None, False
@@ -455,16 +477,22 @@ RTOL_RANGE = (1e-15, 0.1)
 
 
 def check_bake_options(model=DEFAULT_MODEL, cutoff_tol=1e-4, curvature_radius_mm=None, geodesic="exact",
-                       far_field=None, *, rtol=1e-10, far_tol=DEFAULT_FAR_TOL, far_rel_tol=1e-2, far_geodesic="cluster",
-                       backend="embree", auto_options=None, transport="auto", near_field=None) -> str:
+                       far_field=None, *, rtol=1e-10, far_tol=DEFAULT_FAR_TOL, far_rel_tol=1e-2, far_geodesic="shared",
+                       backend="embree", auto_options=None, transport="auto", source_model=None,
+                       near_field=None) -> str:
     """Reject bad options of :func:`bake` (MeshshadeError, one line naming the option, its value and what is
     allowed) before any work; returns the far-field method with its default resolved. Also used by
-    :func:`meshshade.output.compare.run_comparison` to check everything up front."""
+    :func:`meshshade.output.compare.run_comparison` to check everything up front. ``near_field``, and the
+    far-field and far-geodesic values ``"direct"`` and ``"cluster"``: the former spellings of ``source_model``,
+    ``"pairwise"`` and ``"shared"`` (deprecated: a DeprecationWarning)."""
+    source_model = source_model_keyword(source_model, near_field)
+    far_field = renamed_value("far_field", far_field, RENAMED_FAR_FIELD)
+    far_geodesic = renamed_value("far_geodesic", far_geodesic, RENAMED_FAR_GEODESIC)
     if model not in MODELS:
         raise MeshshadeError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     if model == "volume":   # options of the surface models that the volume model cannot honour
-        if near_field is not None and near_field != "beam":
-            raise ParameterError("the volume model carries the beam near field; near field 'point' applies to the "
+        if source_model is not None and source_model != "beam":
+            raise ParameterError("the volume model takes the beam source model; source model 'point' applies to the "
                                  "surface models (dipole, curved, exact-sphere, fitted, auto)")
         if not (isinstance(transport, str) and transport == "auto"):
             raise ParameterError(f"transport {transport if isinstance(transport, str) else 'SurfaceTransport'!r} "
@@ -480,15 +508,15 @@ def check_bake_options(model=DEFAULT_MODEL, cutoff_tol=1e-4, curvature_radius_mm
         raise MeshshadeError(f"unknown geodesic method {geodesic!r}; choose exact or arc")
     far_field = far_field or ("clustered" if model in ("auto", "volume") else "off")
     if far_field not in FAR_FIELD_METHODS:
-        raise MeshshadeError(f"unknown far-field method {far_field!r}; choose off, clustered or direct")
+        raise MeshshadeError(f"unknown far-field method {far_field!r}; choose off, clustered or pairwise")
     if not RTOL_RANGE[0] <= _real(rtol) <= RTOL_RANGE[1]:
         raise MeshshadeError(f"rtol (relative tolerance of the exact series) must lie in [{RTOL_RANGE[0]:g}, "
                              f"{RTOL_RANGE[1]:g}], got {rtol!r}")
     for name, value in (("far_tol", far_tol), ("far_rel_tol", far_rel_tol)):
         if not 0.0 < _real(value) < 1.0:
             raise MeshshadeError(f"{name} must lie in (0, 1), got {value!r}")
-    if far_geodesic not in ("cluster", "arc"):
-        raise MeshshadeError(f"unknown far_geodesic {far_geodesic!r}; choose cluster or arc")
+    if far_geodesic not in ("shared", "arc"):
+        raise MeshshadeError(f"unknown far_geodesic {far_geodesic!r}; choose shared or arc")
     if backend not in ("embree", "numpy"):
         raise MeshshadeError(f"unknown ray backend {backend!r}; choose embree or numpy")
     if not (isinstance(transport, SurfaceTransport) or (isinstance(transport, str) and transport in TRANSPORTS)):
@@ -576,7 +604,7 @@ def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, fa
     (farfield.far_field_exitance). The planar dipole of the chord from each entry point: the light's sideways drift
     (docs/physics.md §13.4) is left out here, beyond r_near, where the far field carries the kernel's faint tail
     (``far_tol``)."""
-    fn = far_field_exitance if far_field == "clustered" else far_field_exitance_direct
+    fn = far_field_exitance if far_field == "clustered" else far_field_exitance_pairwise
     pos = samples.positions[clustered]
     columns = [None] if scale is None else [0, 1, 2]
     M = np.zeros((mesh.n_vertices, 3))

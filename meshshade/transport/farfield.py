@@ -31,7 +31,7 @@ the total exitance the error is at most ``rel_tol`` times the far field's share 
 
 Cost: the expansion is accepted when (a/d)^3 ~ rel_tol (1/r^3 regime) or (mu a)^3 ~ rel_tol (exponential
 regime), so a receiver evaluates O(log(cutoff/r_near) / rel_tol^(2/3)) clusters, plus the leaves that straddle
-the two radii (a ring of leaves: O(sqrt(n)) pairs on a surface). Directly: O(k_cutoff) pairs per receiver.
+the two radii (a ring of leaves: O(sqrt(n)) pairs on a surface). Pair by pair: O(k_cutoff) pairs per receiver.
 """
 from __future__ import annotations
 
@@ -57,8 +57,8 @@ DEFAULT_LEAF_SIZE = 16
 #: default share of the dipole's energy left to the far field when choosing r_near (far_field_radius; the bake's
 #: ``far_tol``): 0.1 gives r_near = 9-16 transport lengths for marble and milk, 2.3-5.1 for skin1
 DEFAULT_FAR_TOL = 0.1
-#: candidate pairs per chunk in the direct sum (memory ~ 24 bytes per pair)
-DIRECT_PAIRS_PER_CHUNK = 4_000_000
+#: candidate pairs per chunk in the pairwise sum (memory ~ 24 bytes per pair)
+PAIRWISE_PAIRS_PER_CHUNK = 4_000_000
 #: receivers per block of the processing order (k-d leaves, shuffled across threads)
 RECEIVER_BLOCK = 32
 
@@ -171,7 +171,8 @@ def _receiver_order(recv) -> np.ndarray:
         return np.arange(n)
     depth = int(tree_depth(n, RECEIVER_BLOCK))
     lo, hi = node_ranges(n, depth)
-    order = kd_permutation(recv, depth, lo, hi)
+    # a writable C copy (mesh.vertices is read-only): the same compiled specialisation as the source trees' calls
+    order = kd_permutation(np.array(recv, dtype=np.float64, order="C"), depth, lo, hi)
     # numba's prange hands each thread one contiguous part: shuffle the k-d leaves (fixed seed) so that the
     # threads get a mix of cheap and expensive regions while each leaf keeps its locality
     first = (1 << depth) - 1
@@ -243,13 +244,13 @@ def _near_ratio_args(near_ratio):
     return np.ascontiguousarray(nlog, dtype=np.float64), float(l0), float(step)
 
 
-def far_field_exitance_direct(sources, receivers, material: Material, r_near_mm, cutoff_mm, *,
-                              rel_tol: float = 0.0, leaf_size: int = DEFAULT_LEAF_SIZE,
-                              near_ratio=None) -> tuple[np.ndarray, dict]:
+def far_field_exitance_pairwise(sources, receivers, material: Material, r_near_mm, cutoff_mm, *,
+                                rel_tol: float = 0.0, leaf_size: int = DEFAULT_LEAF_SIZE,
+                                near_ratio=None) -> tuple[np.ndarray, dict]:
     """Exact twin of :func:`far_field_exitance` (same signature; ``rel_tol`` and ``leaf_size`` are ignored).
 
     Candidate pairs come from scipy's cKDTree (``sparse_distance_matrix`` between a receiver chunk and the
-    sources, within max(cutoff)), in chunks of about ``DIRECT_PAIRS_PER_CHUNK`` pairs; the masks
+    sources, within max(cutoff)), in chunks of about ``PAIRWISE_PAIRS_PER_CHUNK`` pairs; the masks
     ``r_near_c < r <= cutoff_c`` and the kernel are applied in numba with the same distance formula as the
     clustered sum. Cost O(n k_cutoff), never all pairs. stats: ``pairs_exact``, ``candidate_pairs``, ``seconds``.
     """
@@ -285,7 +286,7 @@ def far_field_exitance_direct(sources, receivers, material: Material, r_near_mm,
             n_cand += len(ii)
             per = max(len(ii) / len(idx), 1.0)
             a += len(idx)
-            chunk = int(np.clip(DIRECT_PAIRS_PER_CHUNK / per, 16, 1 << 20))
+            chunk = int(np.clip(PAIRWISE_PAIRS_PER_CHUNK / per, 16, 1 << 20))
     return M, {"pairs_exact": int(n_eval), "candidate_pairs": int(n_cand), "seconds": time.perf_counter() - t0}
 
 

@@ -44,8 +44,8 @@ from meshshade.transport.hierarchy_loops import (Clusters, FarFactors, Opening, 
                                                    far_traverse)
 from meshshade.transport.kernel_evaluation import SphereTables, kernel_params
 from meshshade.transport.models import MODEL_KERNEL, MODELS, Kernel
-from meshshade.transport.near_field import (check_near_field, drift_angles, near_field_factors,
-                                            refracted_drift)
+from meshshade.transport.near_field import (check_source_model, drift_angles, near_field_factors,
+                                            refracted_drift, source_model_keyword)
 from meshshade.transport.pair_kernel import PairKernel, source_frames
 from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
 from meshshade.transport.zones import NEAR_MARGIN, neighbourhood_solver
@@ -229,11 +229,11 @@ class SurfaceTransport:
     params: object
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
-    #: "point" or "beam" (transport/near_field.py: the near matrices and every far pair carry the near-field
-    #: factor N(s) of eq. (80))
-    near_field: str = "point"
-    #: with near_field "beam": the near pairs' sources, distances and azimuths (:class:`NearPairs`) for the drift
-    #: factor of each light; None otherwise
+    #: the source model, "point" or "beam" (transport/near_field.py: with "beam" the near matrices and every far
+    #: pair carry the near-field factor N(s) of eq. (80))
+    source_model: str = "point"
+    #: with the source model "beam": the near pairs' sources, distances and azimuths (:class:`NearPairs`) for the
+    #: drift factor of each light; None otherwise
     near_pairs: object = None
 
     # ------------------------------------------------------------------------------------------------ build
@@ -242,7 +242,7 @@ class SurfaceTransport:
               cutoff_tol: float = 1e-4, curvature=None, curvature_radius_mm: float | None = None,
               auto_options: dict | None = None, rtol: float = 1e-10, theta: float = THETA,
               near_patch_radii: float | None = None, progress: bool | str = False,
-              near_field: str = "point") -> "SurfaceTransport":
+              source_model: str | None = None, near_field: str | None = None) -> "SurfaceTransport":
         """The geometric work for ``mesh`` (a Mesh in mm), ``material`` and ``model`` (one of MODELS).
 
         ``geodesic`` ("exact" or "arc"): the near zone's geodesics (with ``auto``, exact where the plan asks
@@ -250,10 +250,11 @@ class SurfaceTransport:
         ``theta`` in (0, 1): the clusters' opening criterion. ``near_patch_radii`` (>= 4, or None): the near
         radius in patch radii; None lets :func:`far_distance_check` choose it from NEAR_PATCH_RADII on this mesh,
         and raises :class:`FarFieldUnsupported` when none of them makes the far field's distances accurate
-        enough (bake's ``transport="auto"`` then uses the direct sum). ``near_field``: "point" or "beam"
-        (transport/near_field.py: the near matrices and the far field's pairs carry the near-field factor N(s)).
+        enough (bake's ``transport="auto"`` then uses the direct sum). ``source_model``: "point" (default) or
+        "beam" (transport/near_field.py: the near matrices and the far field's pairs carry the near-field factor
+        N(s)); ``near_field``: its former name (deprecated).
         """
-        near_field = check_near_field(near_field)
+        source_model = check_source_model(source_model_keyword(source_model, near_field) or "point")
         if model not in MODELS:
             raise ParameterError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
         if geodesic not in ("exact", "arc"):
@@ -302,7 +303,7 @@ class SurfaceTransport:
         logr = np.where(sph_row >= 0, np.log(sphere.r0[np.maximum(sph_row, 0)] if sphere.r0.size else 1.0), 0.0)
         params = kernel_params(material, cut, sphere)
         timings["sphere tables"] = time.perf_counter() - t0
-        factors = near_field_factors(material) if near_field == "beam" else None
+        factors = near_field_factors(material) if source_model == "beam" else None
         # the near matrices read the same tables as the far field (no series at single pairs)
         kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors, params=params,
                             sphere=sphere, sphere_series_pairs=0)
@@ -331,7 +332,7 @@ class SurfaceTransport:
         if model == "exact-sphere":
             stats["exact_sphere_fallback_dipole"] = int((H <= 0).sum())
         return cls(mesh, material, model, curv, frames, plan, kind, cut, near_mm, patch, kernel.channels, near,
-                   float(theta), trees, shape, sph_row, logr, params, timings, stats, near_field, near_pairs)
+                   float(theta), trees, shape, sph_row, logr, params, timings, stats, source_model, near_pairs)
 
     # ------------------------------------------------------------------------------------------------ use
     def sample_plan(self, samples):
@@ -353,7 +354,7 @@ class SurfaceTransport:
         pv = np.asarray(vertex_power, dtype=np.float64)
         if drift is not None:
             if self.near_pairs is None:
-                raise ParameterError("a light's drift needs a transport built with near_field='beam'")
+                raise ParameterError("a light's drift needs a transport built with source_model='beam'")
             drift = np.asarray(drift, dtype=np.float64)
             if drift.shape != (n, 3) or not np.all(np.isfinite(drift)):
                 raise ParameterError(f"drift must be a finite (n, 3) = ({n}, 3) array")
@@ -394,7 +395,7 @@ class SurfaceTransport:
         chan = None
         dslope, dlog0, dlogstep, dst = np.zeros(0), 0.0, 1.0, 1.0
         nlog = np.zeros((3, 0))
-        if self.near_field == "beam":   # the near field's factor N(s) on every far pair (eq. (80))
+        if self.source_model == "beam":   # the near field's factor N(s) on every far pair (eq. (80))
             factors = near_field_factors(self.material)
             nlog = factors.log_ratio_table()
             _, dlog0, dlogstep = factors.slope_table(0)

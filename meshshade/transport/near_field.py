@@ -1,6 +1,6 @@
-"""The near-field model in the bake (``near_field="beam"``; docs/physics.md §13.2, eq. (80)).
+"""The near-field model in the bake (the source model ``source_model="beam"``; docs/physics.md §13.2, eq. (80)).
 
-Every kernel of the bake answers a point source at depth z_r. With ``near_field="beam"`` each pair's value is
+Every kernel of the bake answers a point source at depth z_r. With ``source_model="beam"`` each pair's value is
 multiplied by the ratio of the half-space's near-field model (:mod:`meshshade.kernels.near_field`, eq. (76): exact
 single scattering plus the beam's fitted diffusion sources) to the planar dipole, so that every model carries the
 same near field as the factor of eq. (79):
@@ -10,7 +10,7 @@ same near field as the factor of eq. (79):
   receiver's own patch, since a vertex's exitance is the average over the patch it stands for):
   ``G(s, a) = <R_near>_a(s) / <R_d>_a(s)``, the ratio of the two kernels' averages over the disc (the same
   quadrature as the dipole's patch average, pair_kernel.py), on top of the dipole's patch factor;
-* the far field (pairs beyond the near radius r, summed by clusters of the planar dipole): N(s) per pair (per
+* the far field (pairs beyond the near radius r, summed by source clusters of the planar dipole): N(s) per pair (per
   cluster at its centroid distance), from the same table;
 * the direction the light travels inside (docs/physics.md eq. (81)): an entry sample whose light enters at
   incidence theta_i refracts to theta_t, and the near-field model's sources then lie at depths cos(theta_t) t_k;
@@ -36,6 +36,7 @@ Pure array work; no I/O.
 from __future__ import annotations
 
 import math
+import warnings
 from functools import lru_cache
 
 import numpy as np
@@ -47,8 +48,9 @@ from meshshade.kernels.near_field import (incidence_gain, near_field_profile, ne
 from meshshade.materials import Material
 from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, _disc_average
 
-#: what enters the medium in the bake: the kernels' own point source at z_r, or the near-field model
-NEAR_FIELDS = ("point", "beam")
+#: the source models: what enters the medium at an entry sample, the kernels' own point source at z_r ("point") or
+#: the near-field model ("beam")
+SOURCE_MODELS = ("point", "beam")
 _N_LOG_R = np.linspace(math.log(1e-4), math.log(1e3), 701)
 _G_U = np.linspace(0.0, PATCH_AVERAGE_RADII, 129)
 _G_LOG_A = np.arange(math.log(1e-3), math.log(8.0) + 0.1, 0.2)
@@ -56,11 +58,24 @@ _G_LOG_A = np.arange(math.log(1e-3), math.log(8.0) + 0.1, 0.2)
 _COS_T = np.linspace(0.05, 1.0, 96)
 
 
-def check_near_field(near_field) -> str:
-    """``near_field`` lower-cased if it is one of :data:`NEAR_FIELDS`; ParameterError (one line) otherwise."""
-    if not isinstance(near_field, str) or near_field.lower() not in NEAR_FIELDS:
-        raise ParameterError(f"near field must be one of {', '.join(NEAR_FIELDS)}, got {near_field!r}")
-    return near_field.lower()
+def check_source_model(source_model) -> str:
+    """``source_model`` lower-cased if it is one of :data:`SOURCE_MODELS`; ParameterError (one line) otherwise."""
+    if not isinstance(source_model, str) or source_model.lower() not in SOURCE_MODELS:
+        raise ParameterError(f"source model must be one of {', '.join(SOURCE_MODELS)}, got {source_model!r}")
+    return source_model.lower()
+
+
+def source_model_keyword(source_model, near_field, stacklevel: int = 3):
+    """The source model a function was given: ``source_model``, or the value of the keyword it replaces,
+    ``near_field`` (deprecated: a DeprecationWarning attributed to the function's caller; ``stacklevel`` 3 when
+    called from the function itself). Both given and different: ParameterError."""
+    if near_field is None:
+        return source_model
+    warnings.warn("near_field= is deprecated; use source_model=", DeprecationWarning, stacklevel=stacklevel)
+    if source_model is not None and source_model != near_field:
+        raise ParameterError(f"source_model={source_model!r} and the deprecated near_field={near_field!r} disagree; "
+                             "give source_model only")
+    return near_field
 
 
 class _Channel:

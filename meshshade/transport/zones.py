@@ -53,14 +53,14 @@ GROUP_EDGES = 4.0
 GROUP_NEAR = 3.0
 
 
-def assign_zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic: str = "cluster") -> np.ndarray:
+def assign_zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic: str = "shared") -> np.ndarray:
     """(k,) int64 zone index (into ZONES) per entry sample.
 
     Without a plan: every source uses ``geodesic``; with a far field, vertex samples gather only to r_near.
     With the auto plan: exact or arc per sample (only arc when ``geodesic`` is "arc"); vertex samples whose
     surroundings are flat to the cutoff (``plan.far_dipole``) gather to r_near and leave the rest to the clustered
     dipole; the other vertex samples keep their kernel over the whole neighbourhood, with exact geodesics in the
-    near zone and, beyond it, geodesics shared by groups of samples (``far_geodesic="cluster"``) or arc
+    near zone and, beyond it, geodesics shared by groups of samples (``far_geodesic="shared"``) or arc
     geodesics ("arc"). ``area`` : (k,) bool, the vertex samples (directional and point lights).
     """
     far = area & (far_field != "off")
@@ -73,7 +73,7 @@ def assign_zones(k: int, area, far_field: str, geodesic: str, plan, far_geodesic
         far_geodesic = "arc"
     zone = np.where(ex, EXACT, ARC).astype(np.int64)
     if far_geodesic != "none":
-        split = EXACT_NEAR_SHARED_FAR if far_geodesic == "cluster" else EXACT_NEAR_ARC_FAR
+        split = EXACT_NEAR_SHARED_FAR if far_geodesic == "shared" else EXACT_NEAR_ARC_FAR
         zone[far & ex & ~plan.far_dipole] = split
     zone[far & plan.far_dipole] = np.where(ex[far & plan.far_dipole], EXACT_NEAR, ARC_NEAR)
     return zone

@@ -77,28 +77,28 @@ def test_bench_plan_iterates_over_transport_models():
     plan = bench.bench_plan(quick=True, scenes=["sphere_r20_beam"])
     assert {r.model for r in plan if r.knob == "default"} == set(MODELS)
     assert {r.knob for r in plan} <= set(bench.KNOBS)
-    # the near-field knob: every model of every Monte Carlo scene once, the other near field, in its settings
+    # the source-model knob: every model of every Monte Carlo scene once, the other source model, in its settings
     full = bench.bench_plan()
-    nf = [r for r in full if r.knob == "near_field"]
+    nf = [r for r in full if r.knob == "source_model"]
     mc_scenes = {r.scene.name for r in full if r.scene.reference == "mc"}
-    surface = [m for m in MODELS if m != "volume"]     # the volume model has the beam near field only
+    surface = [m for m in MODELS if m != "volume"]     # the volume model has the beam source model only
     assert {(r.scene.name, r.model) for r in nf} == {(n, m) for n in mc_scenes for m in surface}
-    assert all(r.value == "beam" and r.settings["near_field"] == "beam" for r in nf)
-    assert all(r.settings["near_field"] == "point" for r in full
-               if r.knob not in ("near_field", "photons") and r.model != "volume")
+    assert all(r.value == "beam" and r.settings["source_model"] == "beam" for r in nf)
+    assert all(r.settings["source_model"] == "point" for r in full
+               if r.knob not in ("source_model", "photons") and r.model != "volume")
     volume = [r for r in full if r.model == "volume"]
-    assert volume and all(r.settings["near_field"] == "beam" for r in volume)
+    assert volume and all(r.settings["source_model"] == "beam" for r in volume)
     assert {r.knob for r in volume} <= {"default", "resolution", "render"}
 
 
 def test_bench_tiny_rows_finite_with_required_columns(tiny_result):
     rows = tiny_result.rows
     # sphere: 2 defaults + the rtol rows (exact-sphere only: the dipole sums no series); torus (Monte Carlo
-    # reference): 2 defaults + their 2 near_field=beam rows + 1 mc row
+    # reference): 2 defaults + their 2 source_model=beam rows + 1 mc row
     assert len(rows) == 2 + len(TINY.rtol) + 2 + 2 + 1
-    beam = [r for r in rows if r["knob"] == "near_field"]
+    beam = [r for r in rows if r["knob"] == "source_model"]
     assert {(r["scene"], r["value"]) for r in beam} == {("tiny_torus_beam", "beam")}
-    assert "dipole (near_field=beam)" in table_markdown(rows, tiny_result.metadata)
+    assert "dipole (source_model=beam)" in table_markdown(rows, tiny_result.metadata)
     for r in rows:
         for c in REQUIRED:
             assert c in r

@@ -76,32 +76,32 @@ def test_profile_near_field_beam_is_the_near_field_in_mm(tmp_path):
     m = Material.preset("skin1")
     s = np.array([0.1, 0.5, 2.0])
     for model in ("dipole", "exact", "curved"):   # on the plane every model's near field is the half-space's
-        R = reflectance_profile(m, s, model=model, near_field="beam")
+        R = reflectance_profile(m, s, model=model, source_model="beam")
         for c in range(3):
             st = float(m.sigma_t_prime[c])
             want = near_field_profile(s * st, albedo_prime=float(m.albedo_prime[c]), eta=m.eta, g=m.g) * st * st
             np.testing.assert_allclose(R[c], want, rtol=1e-12)
     # the dipole on a sphere: at the chord, as the point-source dipole
-    Rs = reflectance_profile(m, np.array([5.0]), model="dipole", shape=Shape.make("sphere", 5.0), near_field="beam")
+    Rs = reflectance_profile(m, np.array([5.0]), model="dipole", shape=Shape.make("sphere", 5.0), source_model="beam")
     chord = 2 * 5.0 * math.sin(0.5)
     st = float(m.sigma_t_prime[0])
     assert Rs[0, 0] == pytest.approx(near_field_profile(chord * st, albedo_prime=float(m.albedo_prime[0]), eta=m.eta,
                                                         g=m.g) * st * st, rel=1e-12)
-    with pytest.raises(MeshshadeError, match="--near-field beam"):
+    with pytest.raises(MeshshadeError, match="--source-model beam"):
         reflectance_profile(m, s, model="beam")
-    with pytest.raises(MeshshadeError, match="near field"):
-        reflectance_profile(m, s, near_field="pencil")
-    assert main(["profile", "--material", "skin1", "--models", "dipole,curved", "--near-field", "beam", "--distances",
+    with pytest.raises(MeshshadeError, match="source model"):
+        reflectance_profile(m, s, source_model="pencil")
+    assert main(["profile", "--material", "skin1", "--models", "dipole,curved", "--source-model", "beam", "--distances",
                  "0.1,1", "--plot", str(tmp_path / "p.png"), "--quiet"]) == 0
     assert (tmp_path / "p.png").stat().st_size > 0
     assert main(["profile", "--material", "skin1", "--models", "beam"]) == 2
     # both near fields in one call: curves named model and model+beam, Monte Carlo once
     from meshshade.profiles import profile_rows
     rows = profile_rows(m, s, models=["exact", "mc"], shapes=[Shape.make("sphere", 10.0)], photons=20_000,
-                        near_field=["point", "beam"])
+                        source_model=["point", "beam"])
     assert sorted({r["model"] for r in rows}) == ["exact", "exact+beam", "mc"] and len(rows) == 9
     assert main(["profile", "--material", "skin1", "--shape", "sphere", "--radius", "10", "--models", "exact,curved",
-                 "--near-field", "point,beam", "--distances", "0.1,1", "--csv", str(tmp_path / "p.csv"),
+                 "--source-model", "point,beam", "--distances", "0.1,1", "--csv", str(tmp_path / "p.csv"),
                  "--quiet"]) == 0
     assert "curved+beam" in (tmp_path / "p.csv").read_text()
 

@@ -129,10 +129,10 @@ def test_deterministic_for_seed_threads_and_pool():
 
 @pytest.mark.slow
 def test_batched_embreex_mode_walks_the_same_paths():
-    """One embreex call per round (separate kernels, slow to compile) walks exactly the direct mode's paths."""
+    """One embreex call per round (separate kernels, slow to compile) walks exactly the fused mode's paths."""
     mesh, mat, lights = _sphere_scene()
     kw = dict(photons=20_000, seed=3, beam_distances=False)
-    a = simulate(mesh, mat, lights, engine="direct", **kw)
+    a = simulate(mesh, mat, lights, engine="fused", **kw)
     b = simulate(mesh, mat, lights, engine="batched", **kw)
     assert (b.events, b.boundary_events, b.boundary_tests) == (a.events, a.boundary_events, a.boundary_tests)
     _assert_same(a, b, exact=False)
@@ -145,8 +145,8 @@ def test_auto_engine_falls_back_to_batched(monkeypatch):
     a = simulate(mesh, mat, lights, engine="batched", **kw)
     monkeypatch.setattr(montecarlo_embree, "_library", lambda: None)   # no bindable Embree library
     _assert_same(a, simulate(mesh, mat, lights, engine="auto", **kw))
-    with pytest.raises(MeshshadeError, match="direct"):
-        simulate(mesh, mat, lights, engine="direct", **kw)
+    with pytest.raises(MeshshadeError, match="fused"):
+        simulate(mesh, mat, lights, engine="fused", **kw)
 
 
 def test_half_space_certificates_change_cost_not_paths(monkeypatch):

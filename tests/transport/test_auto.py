@@ -125,11 +125,11 @@ def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     # d ln R/ds ~ -(sigma_tr + 2/s) ~ -0.37/mm, so the dim far side may move by up to 0.3 % * 20 mm * 0.37/mm ~ 2.2 %
     lit = ref.radiance > 1e-3 * ref.radiance.max(axis=0)
     assert zones.groups_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
-    for far_geodesic, zone, max_tol, median_tol in (("cluster", "zone_exact_near_shared_far", 0.01, 2e-4),
+    for far_geodesic, zone, max_tol, median_tol in (("shared", "zone_exact_near_shared_far", 0.01, 2e-4),
                                                    ("arc", "zone_exact_near_arc_far", 0.025, 2e-3)):
         split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic, transport="direct")
         assert split.stats[zone] == split.stats["entry_samples"]
-        if far_geodesic == "cluster":  # one exact far query per group instead of per sample
+        if far_geodesic == "shared":  # one exact far query per group instead of per sample
             assert split.stats["geodesic_pairs_computed"] < 0.6 * ref.stats["geodesic_pairs_computed"]
         rel = np.abs(split.radiance - ref.radiance)[lit] / ref.radiance[lit]
         assert rel.max() < max_tol and np.median(rel) < median_tol, (far_geodesic, rel.max(), np.median(rel))
@@ -210,7 +210,7 @@ def test_far_field_dipole_model_matches_no_far_field(sphere40):
     is lit only through the shell, it is not small (measured up to 8 %), and the test says nothing there."""
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
     off = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", transport="direct")
-    direct = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="direct", transport="direct")
+    direct = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="pairwise", transport="direct")
     clustered = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="clustered",
                                far_rel_tol=1e-2)
     assert direct.stats["zone_arc_near"] == direct.stats["entry_samples"]

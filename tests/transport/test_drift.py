@@ -110,7 +110,7 @@ def oblique_slab():
     entry = np.array([0.0137, 0.0213, 10.0])
     light = BeamLight(tuple(entry - 30.0 * d), tuple(d))
     mc = simulate(mesh, BENCH, [light], photons=300_000, seed=11, keep_beam_exits=False, beam_distances=False)
-    res = bake(mesh, BENCH, [light], model="dipole", near_field="beam")
+    res = bake(mesh, BENCH, [light], model="dipole", source_model="beam")
     return mesh, entry, mc, res
 
 
@@ -154,7 +154,7 @@ def test_hierarchical_and_direct_sums_carry_the_same_drift():
     low there)."""
     mesh = Mesh(*icosphere(20.0, 4))
     light = DirectionalLight((0.0, 0.0, -1.0))
-    out = {tr: bake(mesh, SKIN, [light], model="dipole", geodesic="arc", near_field="beam", transport=tr)
+    out = {tr: bake(mesh, SKIN, [light], model="dipole", geodesic="arc", source_model="beam", transport=tr)
            for tr in ("hierarchical", "direct")}
     assert out["hierarchical"].stats["transport"] == "hierarchical"
     lit = mesh.vertices[:, 2] > 0.0

@@ -14,7 +14,7 @@ import pytest
 
 from meshshade.transport import farfield_loops as fk
 from meshshade.errors import MeshshadeError
-from meshshade.transport.farfield import SourceTree, far_field_exitance, far_field_exitance_direct, far_field_radius
+from meshshade.transport.farfield import SourceTree, far_field_exitance, far_field_exitance_pairwise, far_field_radius
 from meshshade.geometry.procedural import box, icosphere
 from meshshade.kernels.dipole import dipole_profile, dipole_tail_reflectance, dipole_total_reflectance
 from meshshade.kernels.optics import diffusion_params
@@ -129,13 +129,13 @@ def test_source_tree_structure_and_moments(rng):
 
 # ---------------------------------------------------------------------------------------------- direct twin
 @pytest.mark.parametrize("name", MATERIALS)
-def test_far_field_exitance_direct_matches_brute_force(name, rng):
+def test_far_field_exitance_pairwise_matches_brute_force(name, rng):
     m = Material.preset(name)
     src = rng.uniform(-8, 8, (300, 3))
     pw = rng.uniform(0, 2, (300, 3))
     recv = np.concatenate([rng.uniform(-8, 8, (100, 3)), src[:50]])
     r_near, cut = 0.6 / m.sigma_t_prime, np.array([9.0, 7.0, 5.0])
-    M, stats = far_field_exitance_direct((src, pw), recv, m, r_near, cut)
+    M, stats = far_field_exitance_pairwise((src, pw), recv, m, r_near, cut)
     np.testing.assert_allclose(M, brute_force(src, pw, recv, m, r_near, cut), rtol=1e-12, atol=0)
     assert stats["pairs_exact"] > 0
 
@@ -182,7 +182,7 @@ def test_far_field_exitance_error_below_bound(kind, name, rng):
     r_near = 3.0 / m.sigma_t_prime
     cut = cutoff_radii(m, 1e-4)
     tree = SourceTree.build(V, pw, leaf_size=4)  # small leaves: many clusters at this size, a harder test
-    M_d, sd = far_field_exitance_direct((V, pw), recv, m, r_near, cut)
+    M_d, sd = far_field_exitance_pairwise((V, pw), recv, m, r_near, cut)
     assert np.mean(M_d > 0) > 0.5
     for tol in (1e-3, 1e-2, 1e-1):
         M, stats = far_field_exitance(tree, recv, m, r_near, cut, rel_tol=tol)
@@ -202,7 +202,7 @@ def test_far_field_exitance_budget_and_cutoff_straddling_within_bound(name, rng)
     V = V / np.linalg.norm(V, axis=1, keepdims=True) * 10.0
     pw = rng.uniform(0.5, 1.0, (len(V), 3)) * (V[:, 2:3] > 0)
     r_near, cut = 2.0 / m.sigma_t_prime, np.array([9.0, 6.0, 4.0])
-    M_d, _ = far_field_exitance_direct((V, pw), V, m, r_near, cut)
+    M_d, _ = far_field_exitance_pairwise((V, pw), V, m, r_near, cut)
     tree = SourceTree.build(V, pw, leaf_size=4)
     M, stats = far_field_exitance(tree, V, m, r_near, cut, rel_tol=0.1, budget_share=0.5)
     assert stats["clusters_from_budget"] > 0
@@ -297,7 +297,7 @@ def test_far_field_exitance_bad_input():
     with pytest.raises(MeshshadeError):
         far_field_exitance((V, ok), V, m, 1.0, 10.0, budget_share=1.0)
     with pytest.raises(MeshshadeError):
-        far_field_exitance_direct("nonsense", V, m, 1.0, 10.0)
+        far_field_exitance_pairwise("nonsense", V, m, 1.0, 10.0)
     with pytest.raises(MeshshadeError):
         far_field_radius(m, 1.5)
 
@@ -328,6 +328,6 @@ def test_far_field_work_per_receiver_grows_slowly():
         M, stats = far_field_exitance((V, pw), V, m, 3.0 / m.sigma_t_prime, cut, rel_tol=0.1)
         work.append((stats["pairs_exact"] + stats["clusters_accepted"]) / len(V))
         if s == 41:
-            M_d, _ = far_field_exitance_direct((V, pw), V, m, 3.0 / m.sigma_t_prime, cut)
+            M_d, _ = far_field_exitance_pairwise((V, pw), V, m, 3.0 / m.sigma_t_prime, cut)
             assert_within_bound(M, M_d, stats, 0.1)
     assert work[1] < 2.0 * work[0], work

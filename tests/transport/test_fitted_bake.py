@@ -99,6 +99,6 @@ def test_cli_bake_and_profile_take_the_fitted_model(tmp_path, capsys):
                  "--quiet", "--out", str(out)]) == 0
     assert out.exists()
     assert main(["profile", "--material", "skin1", "--shape", "cavity", "--radius", "5", "--models",
-                 "curved,fitted", "--distances", "0.5,2,8", "--near-field", "point,beam"]) == 0
+                 "curved,fitted", "--distances", "0.5,2,8", "--source-model", "point,beam"]) == 0
     text = capsys.readouterr().out
     assert "fitted+beam" in text and "curved" in text

@@ -1,4 +1,4 @@
-"""The near-field model in the bake (``near_field="beam"``, transport/near_field.py, docs/physics.md eq. (80)).
+"""The near-field model in the bake (``source_model="beam"``, transport/near_field.py, docs/physics.md eq. (80)).
 
 References are independent of the bake's sums: the near-field model's closed-form total and profile
 (kernels.near_field, eq. (76)) and the planar dipole's closed-form total. A 100 mm sphere stands in for the
@@ -42,7 +42,7 @@ def test_a_beam_delivers_the_near_field_total_at_any_resolution(level, sphere5):
     edges (3.5 mm at level 5) are wider than the kernel's peak; the point source's point values are not (measured
     +56 % to +438 % at level 5, within 2 % at level 7)."""
     mesh = sphere5 if level == 5 else Mesh(*icosphere(R, level))
-    res = bake(mesh, SKIN, [BeamLight((0.3, 0.2, R + 10.0), (0.0, 0.0, -1.0))], model="dipole", near_field="beam")
+    res = bake(mesh, SKIN, [BeamLight((0.3, 0.2, R + 10.0), (0.0, 0.0, -1.0))], model="dipole", source_model="beam")
     e = np.array(res.stats["exitant_power"]) / res.stats["entering_power"]
     assert res.stats["near_field"] == "beam"
     np.testing.assert_allclose(e, _totals("beam"), rtol=0.012)
@@ -58,7 +58,7 @@ def test_directional_light_carries_the_near_field_total(transport, material, sph
     (skin1 at normal incidence: +0.7 %, -6.5 %, -12.2 %; grazing light adds up to 16-28 %). At alpha' = 0.998 most
     of the light travels beyond the near radius, into the far field (clusters), whose tail scale is 0.96."""
     light = DirectionalLight((0.0, 0.0, -1.0))
-    res = {nf: bake(sphere5, material, [light], model="dipole", near_field=nf, transport=transport, geodesic="arc",
+    res = {nf: bake(sphere5, material, [light], model="dipole", source_model=nf, transport=transport, geodesic="arc",
                     far_field="clustered" if transport == "direct" else None) for nf in ("point", "beam")}
     P = {nf: np.array(r.stats["exitant_power"]) for nf, r in res.items()}
     smp = res["beam"].samples
@@ -75,7 +75,7 @@ def test_directional_light_carries_the_near_field_total(transport, material, sph
 def test_a_beam_bake_follows_the_near_field_profile():
     mesh = Mesh(*icosphere(R, 6))
     entry = np.array([0.3, 0.2, np.sqrt(R * R - 0.13)])
-    res = bake(mesh, SKIN, [BeamLight((0.3, 0.2, R + 10.0), (0.0, 0.0, -1.0))], model="dipole", near_field="beam")
+    res = bake(mesh, SKIN, [BeamLight((0.3, 0.2, R + 10.0), (0.0, 0.0, -1.0))], model="dipole", source_model="beam")
     s = res.beam_distance
     sel = (s > 4.0) & (s < 12.0)     # two patch radii and more from the entry point
     assert sel.sum() > 50
@@ -116,21 +116,21 @@ def test_cli_near_field_switch(tmp_path):
         out = tmp_path / f"{nf}.ply"
         npz = tmp_path / f"{nf}.npz"
         assert main(["bake", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1", "--model",
-                     "curved", "--near-field", nf, "--out", str(out), "--npz", str(npz), "--quiet"]) == 0
+                     "curved", "--source-model", nf, "--out", str(out), "--npz", str(npz), "--quiet"]) == 0
         outs[nf] = np.load(npz)["radiance"]
     assert not np.allclose(outs["point"], outs["beam"])
     assert main(["compare", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1", "--models",
-                 "curved,curved", "--near-field", "point,beam", "--width", "32", "--height", "32", "--spp", "1",
+                 "curved,curved", "--source-model", "point,beam", "--width", "32", "--height", "32", "--spp", "1",
                  "--out", str(tmp_path / "cmp"), "--quiet"]) == 0
     stats = json.loads((tmp_path / "cmp" / "stats.json").read_text())
     assert stats["models"] == ["curved", "curved+beam"] and (tmp_path / "cmp" / "curved+beam.exr").exists()
     assert main(["compare", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1", "--models",
                  "curved,curved", "--out", str(tmp_path / "cmp2"), "--quiet"]) == 2
     assert main(["render", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1",
-                 "--near-field", "beam", "--width", "32", "--height", "32", "--spp", "1", "--out",
+                 "--source-model", "beam", "--width", "32", "--height", "32", "--spp", "1", "--out",
                  str(tmp_path / "r"), "--quiet"]) == 0
     assert main(["bake", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1",
-                 "--near-field", "pencil", "--out", str(tmp_path / "x.ply")]) == 2
+                 "--source-model", "pencil", "--out", str(tmp_path / "x.ply")]) == 2
 
 
 @pytest.mark.parametrize("kw", [{"transport": "direct", "far_field": "clustered", "far_tol": 0.5},
@@ -145,9 +145,9 @@ def test_the_far_field_carries_the_near_field_models_tail(kw, sphere5):
     (3.1 % with no drift at all), so that case is held to 2.5 %."""
     m = Material(1.0, 0.002, 1.3, 0.0)
     light = DirectionalLight((0.0, 0.0, -1.0))
-    ref = bake(sphere5, m, [light], model="dipole", near_field="beam", transport="direct", geodesic="arc",
+    ref = bake(sphere5, m, [light], model="dipole", source_model="beam", transport="direct", geodesic="arc",
                far_field="off")
-    res = bake(sphere5, m, [light], model="dipole", near_field="beam", geodesic="arc", **kw)
+    res = bake(sphere5, m, [light], model="dipole", source_model="beam", geodesic="arc", **kw)
     e = res.stats["exitant_power"][0] / ref.stats["exitant_power"][0] - 1.0
     lit = ref.radiance[:, 0] > 1e-3 * ref.radiance[:, 0].max()
     rel = np.abs(res.radiance[lit, 0] / ref.radiance[lit, 0] - 1.0)

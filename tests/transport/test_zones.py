@@ -33,7 +33,7 @@ def test_assign_zones_with_plan():
     area = np.array([False, True, True, True, True])
     plan = AutoPlan(kernel=np.zeros(5, np.int8), exact_geodesic=np.array([True, True, True, False, False]),
                     far_dipole=np.array([False, False, True, True, False]))
-    got = assign_zones(5, area, "clustered", "exact", plan, "cluster")
+    got = assign_zones(5, area, "clustered", "exact", plan, "shared")
     np.testing.assert_array_equal(got, [zones.EXACT, zones.EXACT_NEAR_SHARED_FAR, zones.EXACT_NEAR, zones.ARC_NEAR,
                                         zones.ARC])
     got = assign_zones(5, area, "clustered", "exact", plan, "arc")
@@ -41,7 +41,7 @@ def test_assign_zones_with_plan():
     got = assign_zones(5, area, "clustered", "exact", plan, "none")
     assert got[1] == zones.EXACT
     # geodesic="arc" caps auto at arc geodesics (and the far zone of curved samples at arc)
-    got = assign_zones(5, area, "clustered", "arc", plan, "cluster")
+    got = assign_zones(5, area, "clustered", "arc", plan, "shared")
     np.testing.assert_array_equal(got, [zones.ARC, zones.ARC, zones.ARC_NEAR, zones.ARC_NEAR, zones.ARC])
-    got = assign_zones(5, area, "off", "exact", plan, "cluster")
+    got = assign_zones(5, area, "off", "exact", plan, "shared")
     np.testing.assert_array_equal(got, [zones.EXACT, zones.EXACT, zones.EXACT, zones.ARC, zones.ARC])

@@ -159,7 +159,7 @@ def test_open_mesh_falls_back_and_says_why(ball, caplog):
     assert res.stats["near_field"] == "beam"
 
 
-@pytest.mark.parametrize("kwargs, word", [({"near_field": "point"}, "beam near field"),
+@pytest.mark.parametrize("kwargs, word", [({"source_model": "point"}, "beam source model"),
                                           ({"transport": "direct"}, "surface models"),
                                           ({"far_field": "clustered"}, "far-field option")])
 def test_options_of_the_surface_models_are_refused(ball, kwargs, word):

@@ -25,7 +25,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from meshshade.transport.farfield import SourceTree, far_field_exitance, far_field_exitance_direct
+from meshshade.transport.farfield import SourceTree, far_field_exitance, far_field_exitance_pairwise
 from meshshade.geometry.procedural import box
 from meshshade.materials import Material
 from meshshade.transport.gather import cutoff_radii
@@ -75,7 +75,7 @@ def run_case(kind, n_target, name, args, ns_per_pair):
     predicted = cand * ns_per_pair.get("ns", 80.0) * 1e-9
     direct = None
     if predicted <= args.direct_limit_s:
-        M_d, sd = far_field_exitance_direct((V, power), V, m, r_near, cut)
+        M_d, sd = far_field_exitance_pairwise((V, power), V, m, r_near, cut)
         direct = M_d
         case["direct"] = {"seconds": round(sd["seconds"], 3), "pairs": sd["pairs_exact"],
                           "ns_per_candidate_pair": round(sd["seconds"] / max(cand, 1) * 1e9, 2)}
@@ -88,7 +88,7 @@ def run_case(kind, n_target, name, args, ns_per_pair):
     subset = np.arange(len(V)) if direct is not None else np.sort(
         np.random.default_rng(1).choice(len(V), size=min(len(V), args.error_subset), replace=False))
     if direct is None:
-        direct = far_field_exitance_direct((V, power), V[subset], m, r_near, cut)[0]
+        direct = far_field_exitance_pairwise((V, power), V[subset], m, r_near, cut)[0]
         case["errors_on_random_receivers"] = len(subset)
     case["clustered"] = []
     for tol in args.tols:
@@ -129,7 +129,7 @@ def main(argv=None) -> int:
     p = np.ones((len(V), 3))
     m = Material.preset("marble")
     far_field_exitance((V, p), V, m, 1.0, 20.0)
-    far_field_exitance_direct((V, p), V, m, 1.0, 20.0)
+    far_field_exitance_pairwise((V, p), V, m, 1.0, 20.0)
     ns = {}
     cases = []
     for kind in args.geometries:

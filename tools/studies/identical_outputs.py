@@ -32,7 +32,7 @@ def outputs() -> dict:
         light = sc.make_light(mesh)
         for model in MODELS:
             for near in ((None,) if model == "volume" else ("point", "beam")):
-                res = bake(mesh, MATERIAL, [light], model=model, near_field=near)
+                res = bake(mesh, MATERIAL, [light], model=model, source_model=near)
                 out[f"bake/{name}/{model}/{near}"] = res.radiance
                 print(f"bake {name} {model} {near}", flush=True)
         res = bake(mesh, MATERIAL, [light], model="curved", transport="direct")
@@ -46,7 +46,7 @@ def outputs() -> dict:
                 for az in (0.0, 60.0):
                     key = f"profile/{shape.kind}/{model}/{near}/{az}"
                     try:
-                        out[key] = reflectance_profile(MATERIAL, s, model=model, shape=shape, near_field=near,
+                        out[key] = reflectance_profile(MATERIAL, s, model=model, shape=shape, source_model=near,
                                                        azimuth_deg=az)
                     except Exception as e:  # noqa: BLE001 - a refused combination is an output too
                         out[key] = np.array([np.nan])

@@ -2,7 +2,7 @@
 
 For each scene (a bench scene, or the 20 mm sphere under a sun) and each channel of the material (default skin1):
 a long Monte Carlo run is the reference (bench patch metrics: meshshade.bench.references.mc_reference and
-vertex_errors); against it, bakes of ``--models`` with ``near_field="point"`` and ``"beam"``, and a short Monte
+vertex_errors); against it, bakes of ``--models`` with ``source_model="point"`` and ``"beam"``, and a short Monte
 Carlo run with another seed (``--short-photons``, the issue's yardstick). Prints one JSON line per (scene, channel,
 run) with the mean and max patch error and the wall time.
 
@@ -64,7 +64,7 @@ def main(argv=None) -> int:
             for model in args.models.split(","):
                 for nf in args.near_fields.split(","):
                     t = time.perf_counter()
-                    res = bake(mesh, mat, [light], model=model, geodesic=sc.geodesic, near_field=nf)
+                    res = bake(mesh, mat, [light], model=model, geodesic=sc.geodesic, source_model=nf)
                     runs[f"{model} {nf}"] = (res.radiance, time.perf_counter() - t)
         for ch in channels:
             ref = mc_reference(mesh, light, long, patch_mm=sc.patch_mm, channel=ch)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from meshshade.cli.arguments.common import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args,
-                                          add_mesh_args, add_model_arg, add_near_field_arg, add_transport_arg, number)
+                                          add_mesh_args, add_model_arg, add_source_model_arg, add_transport_arg, number)
 
 HELP = "per-vertex radiance of a translucent mesh, written as a coloured PLY, glTF/GLB or USD"
 
@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_geodesic_arg(p)
     add_far_field_arg(p)
     add_transport_arg(p)
-    add_near_field_arg(p)
+    add_source_model_arg(p)
     p.add_argument("--out", metavar="OUT.ply|.glb|.gltf|.usd|.usda|.usdc",
                    help="the baked mesh, format from the extension: PLY with radiance_r/g/b (W/mm^2) and tone-mapped "
                         "red/green/blue; glTF/GLB with COLOR_0 and _RADIANCE (with --texture: the texture bound as "

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import decimal
 import math
+import sys
 
 from meshshade.material_presets import JENSEN_2001_PRESETS
 from meshshade.names import DEFAULT_MODEL, MODELS
@@ -87,12 +88,46 @@ def add_model_arg(p: argparse.ArgumentParser) -> None:
                         "method the scene calls for and reports its choices")
 
 
-def add_near_field_arg(p: argparse.ArgumentParser, default: str | None = None) -> None:
-    p.add_argument("--near-field", default=default, choices=["point", "beam"],
+# --- former spellings ---------------------------------------------------------------------------------------
+class DeprecatedAlias(argparse.Action):
+    """A former spelling of an option (hidden from --help): it still works, storing into the new option's ``dest``,
+    and says so in one line on stderr, ``meshshade: warning: --old is deprecated; use --new``."""
+
+    def __init__(self, option_strings, dest, *, new: str, **kwargs):
+        self.new = new
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"meshshade: warning: {option_string} is deprecated; use {self.new}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
+def add_deprecated_alias(p: argparse.ArgumentParser, old: str, new: str, **kwargs) -> None:
+    """``old`` as a hidden, deprecated spelling of the option ``new`` (already added to ``p``; ``kwargs``: its
+    ``choices`` or ``metavar``)."""
+    dest = next(a.dest for a in p._actions if new in a.option_strings)
+    p.add_argument(old, dest=dest, action=DeprecatedAlias, new=new, default=argparse.SUPPRESS, help=argparse.SUPPRESS,
+                   **kwargs)
+
+
+def deprecated_aliases(p: argparse.ArgumentParser) -> dict:
+    """``{old option name: new option name}`` (without dashes) of the parser's :class:`DeprecatedAlias` options."""
+    return {o.lstrip("-"): a.new.lstrip("-") for a in p._actions if isinstance(a, DeprecatedAlias)
+            for o in a.option_strings}
+
+
+# --- source model -------------------------------------------------------------------------------------------
+SOURCE_MODEL_HELP = ("point, each surface model's point source at depth z_r; beam, the near-field model: exact "
+                     "single scattering plus diffusion sources along the beam fitted to exact transport, composed "
+                     "with the model's geometry (docs/physics.md §13)")
+
+
+def add_source_model_arg(p: argparse.ArgumentParser, default: str | None = None) -> None:
+    """``--source-model {point,beam}`` (and its former spelling ``--near-field``)."""
+    p.add_argument("--source-model", default=default, choices=["point", "beam"],
                    help=f"what enters the medium (default {default or 'beam for volume, point for the others'}): "
-                        "point, each surface model's point source at depth z_r; "
-                        "beam, exact single scattering plus diffusion sources along the beam fitted to exact "
-                        "transport, composed with the model's geometry (docs/physics.md §13)")
+                        + SOURCE_MODEL_HELP)
+    add_deprecated_alias(p, "--near-field", "--source-model", choices=["point", "beam"])
 
 
 def add_geodesic_arg(p: argparse.ArgumentParser) -> None:

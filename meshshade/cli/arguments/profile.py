@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from meshshade.cli.arguments.common import add_material_args, integer, number
+from meshshade.cli.arguments.common import add_deprecated_alias, add_material_args, integer, number
 from meshshade.names import PROFILE_MC_PHOTONS as MC_PHOTONS, PROFILE_SHAPES as SHAPES
 
 HELP = "reflectance vs geodesic distance on a plane, sphere, cylinder, saddle, cavity, bore or curvature pair"
@@ -23,10 +23,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma list among dipole,exact,curved,fitted,mc (default dipole,exact); fitted: the "
                         "curvature model fitted to Monte Carlo; mc: Monte Carlo on the exact plane, sphere, "
                         "cylinder, cavity or bore, with error bars")
-    p.add_argument("--near-field", default="point", metavar="NF[,NF]",
-                   help="what enters the medium: point (each model's point source at z_r; default), beam (single "
-                        "scattering plus the fitted beam sources, composed with the model's geometry, docs/physics.md "
-                        "§13), or point,beam for both curves (named model+beam)")
+    p.add_argument("--source-model", default="point", metavar="SM[,SM]",
+                   help="what enters the medium: point (each model's point source at z_r; default), beam (the "
+                        "near-field model: single scattering plus the fitted beam sources, composed with the model's "
+                        "geometry, docs/physics.md §13), or point,beam for both curves (named model+beam)")
+    add_deprecated_alias(p, "--near-field", "--source-model", metavar="SM[,SM]")
     p.add_argument("--distances", metavar="LIST", help="geodesic distances [mm], e.g. 0.1,0.5,1")
     p.add_argument("--max-distance", type=number, default=None, metavar="MM",
                    help="with --samples: evenly spaced distances 0..MM (default 20 mm)")
