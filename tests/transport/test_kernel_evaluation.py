@@ -130,17 +130,23 @@ def test_one_enumeration_names_the_plan_codes_and_the_models():
     assert MODEL_KERNEL["dipole"] == Kernel.DIPOLE_CHORD
 
 
+def _auto_sources(k1, k2, pairs):
+    """Sources with principal curvatures k1, k2 in the xy plane, auto plan codes 0, 1, 2, 3, 0, ... and ``pairs``
+    pairs each (s in [0, 10] mm, phi in [-3, 3])."""
+    n = len(k1)
+    frames = SourceFrames(np.asarray(k1), np.asarray(k2), np.tile([1.0, 0, 0], (n, 1)), np.tile([0, 1.0, 0], (n, 1)),
+                          np.tile([0, 0, 1.0], (n, 1)))
+    plan = AutoPlan(np.arange(n, dtype=np.int8) % 4, np.ones(n, bool), np.zeros(n, bool))
+    return (frames, plan, np.repeat(np.arange(n), pairs), np.tile(np.linspace(0.0, 10.0, pairs), n),
+            np.tile(np.linspace(-3.0, 3.0, pairs), n))
+
+
 def test_pair_kernel_takes_each_sources_kernel_from_the_auto_plan():
     """One call over sources of all four auto kernels equals each source's kernel evaluated alone."""
-    n = 8
     rng = np.random.default_rng(3)
-    k1, k2 = rng.uniform(0.01, 0.1, n), rng.uniform(0.01, 0.1, n)
-    d1 = np.tile([1.0, 0, 0], (n, 1))
-    frames = SourceFrames(k1, k2, d1, np.tile([0, 1.0, 0], (n, 1)), np.tile([0, 0, 1.0], (n, 1)))
-    plan = AutoPlan(np.arange(n, dtype=np.int8) % 4, np.ones(n, bool), np.zeros(n, bool))
-    src = np.repeat(np.arange(n), 50)
-    s = np.tile(np.linspace(0.0, 10.0, 50), n)
-    phi = np.tile(np.linspace(-3.0, 3.0, 50), n)
+    k1, k2 = rng.uniform(0.01, 0.1, 8), rng.uniform(0.01, 0.1, 8)
+    frames, plan, src, s, phi = _auto_sources(k1, k2, 50)
+    n, d1 = 8, frames.d1
     pk = PairKernel("auto", MAT, frames, plan=plan, reach_mm=20.0)
     got = pk.evaluate(0, src, s, 0.95 * s, phi)
     for i in range(n):
@@ -163,14 +169,8 @@ def test_the_far_traversal_takes_records_not_positional_tuples():
 def test_pair_kernel_reads_sphere_tables_it_grows_in_the_same_call():
     """Mixed kernels with the exact sphere read from tables built during the call (sphere_series_pairs=0, as the
     hierarchical near field): equal to the series at each pair (the bake's default for few pairs)."""
-    n = 8
-    k = np.linspace(0.02, 0.09, n)
-    d1 = np.tile([1.0, 0, 0], (n, 1))
-    frames = SourceFrames(k, k, d1, np.tile([0, 1.0, 0], (n, 1)), np.tile([0, 0, 1.0], (n, 1)))
-    plan = AutoPlan(np.arange(n, dtype=np.int8) % 4, np.ones(n, bool), np.zeros(n, bool))
-    src = np.repeat(np.arange(n), 40)
-    s = np.tile(np.linspace(0.0, 10.0, 40), n)
-    phi = np.tile(np.linspace(-3.0, 3.0, 40), n)
+    k = np.linspace(0.02, 0.09, 8)
+    frames, plan, src, s, phi = _auto_sources(k, k, 40)
     tables = PairKernel("auto", MAT, frames, plan=plan, reach_mm=20.0, sphere_series_pairs=0)
     series = PairKernel("auto", MAT, frames, plan=plan, reach_mm=20.0)
     for c in range(3):
