@@ -251,7 +251,7 @@ def _fit_plane_undefined(V, F, indptr, indices, normals, radius, tol):
         tail = 1
         vv[0] = i
         stamp[i] = i
-        hs = 0
+        hs = np.int64(0)   # not the literal 0: numba would compile _heap_push/_heap_pop for Literal[int](0) too
         while head < tail:           # the queue is vv itself: popped in order, appended in order
             t = vv[head]
             head += 1

@@ -127,13 +127,16 @@ def node_ranges(k, depth):
     return lo, hi
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def kd_permutation(pos, depth, lo, hi):
-    """Order of the points such that every node's range is split at its median along its widest axis."""
+    """Order of the points such that every node's range is split at its median along its widest axis.
+
+    Serial: with parallel=True (a prange over each level's nodes) it measured slower on 2 cores (2.5k points:
+    100 ms against 1-4 ms; 164k: 460-570 ms against 330-360 ms) and took longer to compile."""
     perm = np.arange(pos.shape[0])
     for level in range(depth):
         first = (1 << level) - 1
-        for t in prange(1 << level):
+        for t in range(1 << level):
             i = first + t
             a, b = lo[i], hi[i]
             if b - a < 2:

@@ -40,8 +40,8 @@ from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sou
 from meshshade.transport.farfield import _receiver_order
 from meshshade.transport.farfield_loops import kd_permutation, node_ranges, tree_depth
 from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.hierarchy_loops import (Clusters, FarFactors, Opening, TreeSources, cluster_geometry,
-                                                   far_traverse)
+from meshshade.transport.hierarchy_loops import (FAR_TRAVERSE, Clusters, FarFactors, Opening, TreeSources,
+                                                   cluster_geometry)
 from meshshade.transport.kernel_evaluation import SphereTables, kernel_params
 from meshshade.transport.models import MODEL_KERNEL, MODELS, Kernel
 from meshshade.transport.near_field import (check_source_model, drift_angles, near_field_factors,
@@ -456,7 +456,8 @@ class SurfaceTransport:
                 for a in range(0, n, RECEIVER_BLOCK):
                     blk = order[a:a + RECEIVER_BLOCK]
                     with kernel_interrupts():
-                        Mf, cnt = far_traverse(recv, rnrm, blk, k, sources, geo, opening, rep, self.params, far)
+                        Mf, cnt = FAR_TRAVERSE[int(k)](recv, rnrm, blk, sources, geo, opening, rep, self.params,
+                                                       far)
                     M[blk] += Mf[blk]
                     counts += cnt[blk].sum(axis=0)
                     bar.update(blk.size)

@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from meshshade.transport.farfield_loops import log_grid_interp, near_factor
-from meshshade.transport.kernel_evaluation import FITTED, kernel_value
+from meshshade.transport.kernel_evaluation import FITTED, kernel_value, per_kernel
 
 STACK_SIZE = 256
 
@@ -175,7 +175,7 @@ def rotated_shape(S, row, a0, a1, a2, b0, b1, b2, out, orow, w):
     out[orow, 5] += w * B[1, 2]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def cluster_geometry(pos, nrm, shape, power, patch, near, sph, logr, lo, hi):
     """Per node of the tree (rows in tree order): total power P, sigma points (4, 3), their normals (4, 3: the mean
     normal turned by the mean shape operator, dn = S dx, so a sigma point is a point of the smooth surface) and
@@ -195,7 +195,9 @@ def cluster_geometry(pos, nrm, shape, power, patch, near, sph, logr, lo, hi):
     rad = np.zeros(n_nodes)
     rn = np.zeros(n_nodes)
     srow = np.full(n_nodes, -1, np.int64)
-    for i in prange(n_nodes):
+    # serial: parallel=True measured no faster on 2 cores (2.5k-164k sources: 14-1600 ms either way) and doubled
+    # its compile time (tools/benchmarks/bench_first_run.py)
+    for i in range(n_nodes):
         a, b = lo[i], hi[i]
         w = 0.0
         cx = cy = cz = 0.0
@@ -318,129 +320,142 @@ def drift_factor(u0, u1, u2, n0, n1, n2, d0, d1, d2, s, dslope, dlog0, dlogstep,
 
 
 # ---------------------------------------------------------------------------------------------------- traversal
-@njit(cache=True, parallel=True)
-def far_traverse(recv, rnrm, order, kind, tree, clusters, opening, rep, params, factors):
-    """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in ``order``, from
-    the sources of one :class:`TreeSources` (``tree``, all of kernel ``kind``) and their :class:`Clusters`, with the
-    :class:`Opening` criteria, the kernel's :class:`~meshshade.transport.kernel_evaluation.KernelParams` and the
-    near-field model's :class:`FarFactors`.
+def _traverse_of(kind):
+    """:func:`far_traverse` for the sources of kernel ``kind`` (a constant of the closure: only that kernel's
+    code is typed and compiled; :func:`~meshshade.transport.kernel_evaluation.per_kernel`)."""
 
-    A node is skipped when its sources are all beyond the cutoff (chord), used whole (sigma points, mean normal,
-    mean shape operator, representative sphere row) when all its pairs are far (d - a > its largest near
-    radius + ``margin``), a <= theta d and its normal cone is within acos(cone_min), else opened; at leaves each
-    source counts when the chord from its ``home`` position exceeds its near radius and its surface distance is
-    within the cutoff. ``rep[c]`` is the channel computed for channel c (equal channels are computed once).
+    def far_traverse(recv, rnrm, order, tree, clusters, opening, rep, params, factors):
+        """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in
+        ``order``, from the sources of one :class:`TreeSources` (``tree``, all of kernel ``kind``) and their
+        :class:`Clusters`, with the :class:`Opening` criteria, the kernel's
+        :class:`~meshshade.transport.kernel_evaluation.KernelParams` and the near-field model's :class:`FarFactors`.
 
-    The light's sideways drift (docs/physics.md §13.4, eq. (88)): with ``dslope`` non-empty every pair is
-    multiplied by exp(A (cos psi - 1)) / i0e(A), A = |D| lambda(s~) s / s~, from the source's drift D (``drift`` (k, 3) mm;
-    a whole node: its power-weighted mean ``ndrift``) and the slope lambda(s) = g(ln(s dst)) / s of the near-field
-    model, g tabulated in ``dslope`` on the uniform grid ``dlog0 + i dlogstep`` of ln(r sigma_t'), ``dst`` that
-    channel's sigma_t' (one channel per pass: the others' columns are not used). The near field's pair factor
-    (docs/physics.md eq. (80), N(s) = R_near(s) / R_d(s)): with ``nlog`` (3, m) non-empty, each channel's kernel is
-    multiplied by exp(nlog[c]) interpolated at ln(s sigma_t'[c]) on the same grid as ``dslope``. Returns M and
-    per-receiver counts (n, 2): kernel evaluations at leaves, clusters used.
-    """
-    pos, nrm, shape, power, near, sph, lo, hi, first_leaf = tree
-    P, sig, nsig, ssig, nmean, cone, Smean, rad, rn, srow = clusters
-    cutoff, theta, cone_min = opening
-    drift, ndrift, dslope, dlog0, dlogstep, dst, nlog = factors
-    n = recv.shape[0]
-    M = np.zeros((n, 3))
-    counts = np.zeros((n, 2), np.int64)
-    use_drift = dslope.shape[0] > 0
-    use_n = nlog.shape[1] > 0
-    full = 0
-    for c in range(3):
-        if rep[c] == c:
-            full |= 1 << c
-    for t in prange(order.shape[0]):
-        o = order[t]
-        x0, x1, x2 = recv[o, 0], recv[o, 1], recv[o, 2]
-        nx0, nx1, nx2 = rnrm[o, 0], rnrm[o, 1], rnrm[o, 2]
-        acc = np.zeros(3)
-        stack = np.empty(STACK_SIZE, np.int64)
-        smask = np.empty(STACK_SIZE, np.int64)
-        stack[0], smask[0] = 0, full
-        top = 1
-        n_leaf = 0
-        n_clu = 0
-        while top > 0:
-            top -= 1
-            node, mask = stack[top], smask[top]
-            if not P[node] > 0.0:
-                continue
-            # distance from the receiver to the node's power centroid (the mean of its sigma points)
-            cx = 0.25 * (sig[node, 0, 0] + sig[node, 1, 0] + sig[node, 2, 0] + sig[node, 3, 0])
-            cy = 0.25 * (sig[node, 0, 1] + sig[node, 1, 1] + sig[node, 2, 1] + sig[node, 3, 1])
-            cz = 0.25 * (sig[node, 0, 2] + sig[node, 1, 2] + sig[node, 2, 2] + sig[node, 3, 2])
-            v0, v1, v2 = x0 - cx, x1 - cy, x2 - cz
-            d = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-            a = rad[node]
-            whole = d - a > rn[node] and a <= theta * d and cone[node] >= cone_min
-            s_hi = 0.0
-            if whole:  # the surface distance of the node's farthest pair, by the centroid's arc curvature
-                kc = ((nx0 - nmean[node, 0]) * v0 + (nx1 - nmean[node, 1]) * v1 + (nx2 - nmean[node, 2]) * v2) / (d * d)
-                s_hi = arc_length(d + a, 0.5 * kc * (d + a))
-            use = 0
-            open_mask = 0
-            for c in range(3):
-                if not (mask >> c) & 1 or d - a > cutoff[c]:  # chord <= surface distance: all beyond the cutoff
-                    continue
-                if whole and s_hi <= cutoff[c]:
-                    use |= 1 << c
-                else:
-                    open_mask |= 1 << c
-            if use:
-                w = 0.25 * P[node]
-                for q in range(4):
-                    ch, s, kn, knp = pair_geometry(x0, x1, x2, nx0, nx1, nx2, sig[node, q, 0], sig[node, q, 1],
-                                                   sig[node, q, 2], nsig[node, q, 0], nsig[node, q, 1],
-                                                   nsig[node, q, 2], ssig[node], q)
-                    ka, t2 = fitted_geometry(kind, kn, knp, ssig[node], q, x0, x1, x2, nx0, nx1, nx2,
-                                             sig[node, q, 0], sig[node, q, 1], sig[node, q, 2], nsig[node, q, 0],
-                                             nsig[node, q, 1], nsig[node, q, 2])
-                    wq = w
-                    if use_drift:
-                        wq *= drift_factor(x0 - sig[node, q, 0], x1 - sig[node, q, 1], x2 - sig[node, q, 2],
-                                           nsig[node, q, 0], nsig[node, q, 1], nsig[node, q, 2], ndrift[node, 0],
-                                           ndrift[node, 1], ndrift[node, 2], s, dslope, dlog0, dlogstep, dst)
-                    for c in range(3):
-                        if (use >> c) & 1:
-                            kv = kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], params)
-                            if use_n:
-                                kv *= near_factor(nlog, c, s * params.sigma_t[c], dlog0, dlogstep)
-                            acc[c] += wq * kv
-                n_clu += 1
-            if open_mask == 0:
-                continue
-            if node >= first_leaf:
-                for j in range(lo[node], hi[node]):
-                    if power[j] <= 0.0:
-                        continue
-                    ch, s, kn, knp = pair_geometry(x0, x1, x2, nx0, nx1, nx2, pos[j, 0], pos[j, 1], pos[j, 2],
-                                                   nrm[j, 0], nrm[j, 1], nrm[j, 2], shape, j)
-                    if ch <= near[j]:
-                        continue
-                    ka, t2 = fitted_geometry(kind, kn, knp, shape, j, x0, x1, x2, nx0, nx1, nx2, pos[j, 0],
-                                             pos[j, 1], pos[j, 2], nrm[j, 0], nrm[j, 1], nrm[j, 2])
-                    pj = power[j]
-                    if use_drift:
-                        pj *= drift_factor(x0 - pos[j, 0], x1 - pos[j, 1], x2 - pos[j, 2], nrm[j, 0], nrm[j, 1],
-                                           nrm[j, 2], drift[j, 0], drift[j, 1], drift[j, 2], s, dslope, dlog0,
-                                           dlogstep, dst)
-                    for c in range(3):
-                        if (open_mask >> c) & 1 and s <= cutoff[c]:
-                            kv = kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], params)
-                            if use_n:
-                                kv *= near_factor(nlog, c, s * params.sigma_t[c], dlog0, dlogstep)
-                            acc[c] += pj * kv
-                    n_leaf += 1
-                continue
-            stack[top], smask[top] = 2 * node + 1, open_mask
-            stack[top + 1], smask[top + 1] = 2 * node + 2, open_mask
-            top += 2
+        A node is skipped when its sources are all beyond the cutoff (chord), used whole (sigma points, mean
+        normal, mean shape operator, representative sphere row) when all its pairs are far (d - a > its largest
+        near radius + ``margin``), a <= theta d and its normal cone is within acos(cone_min), else opened; at leaves
+        each source counts when the chord from its ``home`` position exceeds its near radius and its surface
+        distance is within the cutoff. ``rep[c]`` is the channel computed for channel c (equal channels are
+        computed once).
+
+        The light's sideways drift (docs/physics.md §13.4, eq. (88)): with ``dslope`` non-empty every pair is
+        multiplied by exp(A (cos psi - 1)) / i0e(A), A = |D| lambda(s~) s / s~, from the source's drift D
+        (``drift`` (k, 3) mm; a whole node: its power-weighted mean ``ndrift``) and the slope
+        lambda(s) = g(ln(s dst)) / s of the near-field model, g tabulated in ``dslope`` on the uniform grid
+        ``dlog0 + i dlogstep`` of ln(r sigma_t'), ``dst`` that channel's sigma_t' (one channel per pass: the others'
+        columns are not used). The near field's pair factor (docs/physics.md eq. (80), N(s) = R_near(s) / R_d(s)):
+        with ``nlog`` (3, m) non-empty, each channel's kernel is multiplied by exp(nlog[c]) interpolated at
+        ln(s sigma_t'[c]) on the same grid as ``dslope``. Returns M and per-receiver counts (n, 2): kernel
+        evaluations at leaves, clusters used.
+        """
+        pos, nrm, shape, power, near, sph, lo, hi, first_leaf = tree
+        P, sig, nsig, ssig, nmean, cone, Smean, rad, rn, srow = clusters
+        cutoff, theta, cone_min = opening
+        drift, ndrift, dslope, dlog0, dlogstep, dst, nlog = factors
+        n = recv.shape[0]
+        M = np.zeros((n, 3))
+        counts = np.zeros((n, 2), np.int64)
+        use_drift = dslope.shape[0] > 0
+        use_n = nlog.shape[1] > 0
+        full = 0
         for c in range(3):
-            M[o, c] = acc[rep[c]]
-        counts[o, 0] = n_leaf
-        counts[o, 1] = n_clu
-    return M, counts
+            if rep[c] == c:
+                full |= 1 << c
+        for t in prange(order.shape[0]):
+            o = order[t]
+            x0, x1, x2 = recv[o, 0], recv[o, 1], recv[o, 2]
+            nx0, nx1, nx2 = rnrm[o, 0], rnrm[o, 1], rnrm[o, 2]
+            acc = np.zeros(3)
+            stack = np.empty(STACK_SIZE, np.int64)
+            smask = np.empty(STACK_SIZE, np.int64)
+            stack[0], smask[0] = 0, full
+            top = 1
+            n_leaf = 0
+            n_clu = 0
+            while top > 0:
+                top -= 1
+                node, mask = stack[top], smask[top]
+                if not P[node] > 0.0:
+                    continue
+                # distance from the receiver to the node's power centroid (the mean of its sigma points)
+                cx = 0.25 * (sig[node, 0, 0] + sig[node, 1, 0] + sig[node, 2, 0] + sig[node, 3, 0])
+                cy = 0.25 * (sig[node, 0, 1] + sig[node, 1, 1] + sig[node, 2, 1] + sig[node, 3, 1])
+                cz = 0.25 * (sig[node, 0, 2] + sig[node, 1, 2] + sig[node, 2, 2] + sig[node, 3, 2])
+                v0, v1, v2 = x0 - cx, x1 - cy, x2 - cz
+                d = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+                a = rad[node]
+                whole = d - a > rn[node] and a <= theta * d and cone[node] >= cone_min
+                s_hi = 0.0
+                if whole:  # the surface distance of the node's farthest pair, by the centroid's arc curvature
+                    kc = ((nx0 - nmean[node, 0]) * v0 + (nx1 - nmean[node, 1]) * v1
+                          + (nx2 - nmean[node, 2]) * v2) / (d * d)
+                    s_hi = arc_length(d + a, 0.5 * kc * (d + a))
+                use = 0
+                open_mask = 0
+                for c in range(3):
+                    if not (mask >> c) & 1 or d - a > cutoff[c]:  # chord <= surface distance: all beyond the cutoff
+                        continue
+                    if whole and s_hi <= cutoff[c]:
+                        use |= 1 << c
+                    else:
+                        open_mask |= 1 << c
+                if use:
+                    w = 0.25 * P[node]
+                    for q in range(4):
+                        ch, s, kn, knp = pair_geometry(x0, x1, x2, nx0, nx1, nx2, sig[node, q, 0], sig[node, q, 1],
+                                                       sig[node, q, 2], nsig[node, q, 0], nsig[node, q, 1],
+                                                       nsig[node, q, 2], ssig[node], q)
+                        ka, t2 = fitted_geometry(kind, kn, knp, ssig[node], q, x0, x1, x2, nx0, nx1, nx2,
+                                                 sig[node, q, 0], sig[node, q, 1], sig[node, q, 2], nsig[node, q, 0],
+                                                 nsig[node, q, 1], nsig[node, q, 2])
+                        wq = w
+                        if use_drift:
+                            wq *= drift_factor(x0 - sig[node, q, 0], x1 - sig[node, q, 1], x2 - sig[node, q, 2],
+                                               nsig[node, q, 0], nsig[node, q, 1], nsig[node, q, 2], ndrift[node, 0],
+                                               ndrift[node, 1], ndrift[node, 2], s, dslope, dlog0, dlogstep, dst)
+                        for c in range(3):
+                            if (use >> c) & 1:
+                                kv = kernel_value(kind, c, ch, s, ka, knp, t2, srow[node], params)
+                                if use_n:
+                                    kv *= near_factor(nlog, c, s * params.sigma_t[c], dlog0, dlogstep)
+                                acc[c] += wq * kv
+                    n_clu += 1
+                if open_mask == 0:
+                    continue
+                if node >= first_leaf:
+                    for j in range(lo[node], hi[node]):
+                        if power[j] <= 0.0:
+                            continue
+                        ch, s, kn, knp = pair_geometry(x0, x1, x2, nx0, nx1, nx2, pos[j, 0], pos[j, 1], pos[j, 2],
+                                                       nrm[j, 0], nrm[j, 1], nrm[j, 2], shape, j)
+                        if ch <= near[j]:
+                            continue
+                        ka, t2 = fitted_geometry(kind, kn, knp, shape, j, x0, x1, x2, nx0, nx1, nx2, pos[j, 0],
+                                                 pos[j, 1], pos[j, 2], nrm[j, 0], nrm[j, 1], nrm[j, 2])
+                        pj = power[j]
+                        if use_drift:
+                            pj *= drift_factor(x0 - pos[j, 0], x1 - pos[j, 1], x2 - pos[j, 2], nrm[j, 0], nrm[j, 1],
+                                               nrm[j, 2], drift[j, 0], drift[j, 1], drift[j, 2], s, dslope, dlog0,
+                                               dlogstep, dst)
+                        for c in range(3):
+                            if (open_mask >> c) & 1 and s <= cutoff[c]:
+                                kv = kernel_value(kind, c, ch, s, ka, knp, t2, sph[j], params)
+                                if use_n:
+                                    kv *= near_factor(nlog, c, s * params.sigma_t[c], dlog0, dlogstep)
+                                acc[c] += pj * kv
+                        n_leaf += 1
+                    continue
+                stack[top], smask[top] = 2 * node + 1, open_mask
+                stack[top + 1], smask[top + 1] = 2 * node + 2, open_mask
+                top += 2
+            for c in range(3):
+                M[o, c] = acc[rep[c]]
+            counts[o, 0] = n_leaf
+            counts[o, 1] = n_clu
+        return M, counts
+
+    return far_traverse
+
+
+#: the far-field traversal compiled per kernel kind (parallel over receivers), each on its first use:
+#: ``FAR_TRAVERSE[kind](recv, rnrm, order, tree, clusters, opening, rep, params, factors)``
+FAR_TRAVERSE = per_kernel(_traverse_of, parallel=True)

@@ -162,8 +162,20 @@ def test_pair_kernel_takes_each_sources_kernel_from_the_auto_plan():
 
 
 def test_the_far_traversal_takes_records_not_positional_tuples():
-    params = inspect.signature(hierarchy_loops.far_traverse.py_func).parameters
-    assert len(params) <= 12, list(params)
+    for kind in Kernel:
+        params = inspect.signature(hierarchy_loops.FAR_TRAVERSE[int(kind)].py_func).parameters
+        assert len(params) <= 12, list(params)
+
+
+def test_compiled_loops_hold_one_kernel_each():
+    """One compiled loop per kernel kind, compiled on first use only (a dipole bake compiles no other kernel)."""
+    from meshshade.transport import kernel_evaluation
+
+    for table in (kernel_evaluation._VALUES, hierarchy_loops.FAR_TRAVERSE):
+        assert set(table) == {int(k) for k in Kernel}
+        assert len({id(f) for f in table.values()}) == len(Kernel)
+        closure = {f.py_func.__closure__[0].cell_contents for f in table.values()}
+        assert closure == {int(k) for k in Kernel}
 
 
 def test_pair_kernel_reads_sphere_tables_it_grows_in_the_same_call():

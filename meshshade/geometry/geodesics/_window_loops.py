@@ -362,7 +362,7 @@ def _window_block(src_vertex, src_face, src_bary, cutoff, n_vertices, he_tail, h
     counts = np.zeros(k, np.int64)
     out_v = np.empty(max(1024, 64 * k), np.int32)
     out_d = np.empty(out_v.shape[0])
-    nout = 0
+    nout = np.int64(0)   # not the literal 0: numba would compile _append_results for Literal[int](0) too
     for i in range(k):
         stamp = i + 1
         cut = cutoff[i]

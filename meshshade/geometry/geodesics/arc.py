@@ -166,7 +166,7 @@ def _arc_block(src_v, src_corner, src_pt, src_n, cut, X, N, e_ptr, e_nbr, e_len,
             R = cut[i]
             R2 = R * R
             dmax = _PRUNE * R
-            size = 0
+            size = np.int64(0)   # not the literal 0: numba would compile _heap_push for Literal[int](0) too
             cnt = 0
             fb = 0
             if src_v[i] >= 0:
