@@ -1,5 +1,12 @@
 """Pacing: long kernel work cut into calls of about 0.2 s on worker threads, so that Ctrl-C acts between calls.
 
+This is also how meshshade's compiled loops use several cores: a loop is compiled serial (``nogil=True``) and
+called on blocks of its items from these worker threads (:func:`run_paced`, :func:`run_in_blocks`). numba's own
+threads (``parallel=True``, ``prange``) are kept only where one compiled call forks and joins many times (the
+volume's conjugate gradients, the Monte Carlo rounds): a parallel build costs about twice a serial one to compile
+(``meshshade demo``'s first run: 27 of its 80 compile seconds before the far-field traversal, the arc geodesics and
+the volume's assembly, location and near field moved here) and cannot be interrupted.
+
 Python acts on Ctrl-C (and SIGTERM, SIGHUP) only between bytecodes, never inside a compiled loop, so a kernel that
 runs over many sources (the geodesic neighbourhood queries, :mod:`meshshade.geometry.geodesics`) is called on
 consecutive blocks of sources instead, each of about :data:`BLOCK_SECONDS` of work:
@@ -16,7 +23,9 @@ Where blocks end never changes a result: every source is computed on its own. Th
 """
 from __future__ import annotations
 
+import math
 import os
+import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
@@ -24,7 +33,7 @@ import numpy as np
 
 from meshshade.progress import kernel_interrupts, polled_interrupts
 
-__all__ = ["BLOCK_SECONDS", "POLL_SECONDS", "Pacer", "default_threads", "pace_rate", "run_paced"]
+__all__ = ["BLOCK_SECONDS", "POLL_SECONDS", "Pacer", "default_threads", "pace_rate", "run_in_blocks", "run_paced"]
 
 #: seconds of work per kernel call: Python acts on Ctrl-C (and SIGTERM, SIGHUP) only between calls, never inside
 #: a compiled loop, so this bounds how long an interrupt waits (see :func:`run_paced`)
@@ -34,11 +43,18 @@ POLL_SECONDS = 0.02
 
 
 def default_threads() -> int:
-    """The number of CPUs this process may run on (its affinity mask where the platform has one), at least 1."""
+    """Worker threads for the compiled loops: numba's thread count for the calling thread where numba is loaded
+    (``NUMBA_NUM_THREADS``, or a Dask task's share of its worker's cores set by
+    :func:`meshshade.batch.dask_cluster.task_threads`), at most the CPUs this process may run on (its affinity mask
+    where the platform has one); at least 1."""
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        n_cpu = max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - macOS/Windows
-        return max(1, os.cpu_count() or 1)
+        n_cpu = max(1, os.cpu_count() or 1)
+    numba = sys.modules.get("numba")
+    if numba is None:
+        return n_cpu
+    return max(1, min(n_cpu, int(numba.get_num_threads())))
 
 
 def pace_rate(rates: dict, work) -> dict:
@@ -162,3 +178,21 @@ def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, s
             ex.shutdown(wait=True)
     return [results[a] for a in sorted(results)]
 
+
+
+def run_in_blocks(run, k: int, *, n_threads: int | None = None, block: int | None = None, min_block: int = 256,
+                  progress=None) -> list:
+    """``run(a, b)`` over consecutive blocks ``a:b`` of ``k`` items on ``n_threads`` worker threads (default
+    :func:`default_threads`), the results in item order: a serial compiled loop (``nogil=True``) over items that
+    are each computed on their own, run on several cores (:func:`run_paced` with blocks of one size; Ctrl-C acts
+    between blocks).
+
+    ``block``: items per call; by default ``k`` split into four blocks per thread (for balance), at least
+    ``min_block`` items. Where blocks end never changes a result when every item is computed on its own.
+    """
+    n_threads = default_threads() if n_threads is None else max(1, int(n_threads))
+    if block is None:
+        block = max(int(min_block), math.ceil(k / (4 * n_threads)))
+    block = max(1, int(block))
+    pacer = Pacer(np.ones(k), seconds=np.inf, min_block=block, max_block=block)
+    return run_paced(run, pacer, k, n_threads=n_threads, progress=progress)

@@ -29,7 +29,7 @@ from meshshade.geometry.procedural import icosphere
 from meshshade.light import parse_light_spec
 from meshshade.materials import material_from_options
 from meshshade.montecarlo.simulation import simulate
-from meshshade.pacing import BLOCK_SECONDS, Pacer, run_paced
+from meshshade.pacing import BLOCK_SECONDS, Pacer, default_threads, run_in_blocks, run_paced
 from meshshade.progress import Progress, format_duration, interrupt_in, kernel_interrupts
 from meshshade.transport.baking import bake
 
@@ -413,3 +413,24 @@ def test_polled_interrupts_outside_the_main_thread_do_nothing():
     t.start()
     t.join()
     assert seen == [None]
+
+
+def test_run_in_blocks_covers_the_items_in_order_on_threads():
+    seen = []
+    out = run_in_blocks(lambda a, b: seen.append(threading.get_ident()) or (a, b), 1000, n_threads=2, block=64)
+    assert out == [(a, min(a + 64, 1000)) for a in range(0, 1000, 64)]
+    out = run_in_blocks(lambda a, b: (a, b), 5000, n_threads=4)   # default: 4 blocks per thread, >= 256 items
+    assert [b - a for a, b in out] == [313] * 15 + [5000 - 15 * 313]
+    assert run_in_blocks(lambda a, b: (a, b), 0) == []
+
+
+def test_default_threads_follow_numba_in_the_calling_thread():
+    import numba
+
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert default_threads() == 1
+    finally:
+        numba.set_num_threads(before)
+    assert 1 <= default_threads() <= (os.cpu_count() or 1)

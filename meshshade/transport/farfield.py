@@ -45,6 +45,7 @@ from meshshade.errors import ParameterError
 from meshshade.kernels.dipole import dipole_cutoff_radius
 from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
+from meshshade.pacing import run_in_blocks
 from meshshade.transport.farfield_loops import (accumulate_pairs, kd_permutation, node_moments, node_ranges,
                                                   traverse, tree_depth)
 
@@ -173,8 +174,8 @@ def _receiver_order(recv) -> np.ndarray:
     lo, hi = node_ranges(n, depth)
     # a writable C copy (mesh.vertices is read-only): the same compiled specialisation as the source trees' calls
     order = kd_permutation(np.array(recv, dtype=np.float64, order="C"), depth, lo, hi)
-    # numba's prange hands each thread one contiguous part: shuffle the k-d leaves (fixed seed) so that the
-    # threads get a mix of cheap and expensive regions while each leaf keeps its locality
+    # the traversals take consecutive blocks of this order, one block per thread at a time: shuffle the k-d leaves
+    # (fixed seed) so that each block mixes cheap and expensive regions while each leaf keeps its locality
     first = (1 << depth) - 1
     leaf_of_row = np.repeat(np.arange(1 << depth), hi[first:] - lo[first:])
     rank = np.random.default_rng(0).permutation(1 << depth)
@@ -225,10 +226,17 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
     if tree.n_sources == 0 or len(recv) == 0:
         M, E, counts = np.zeros((len(recv), 3)), np.zeros((len(recv), 3)), np.zeros((len(recv), 4), np.int64)
     else:
-        M, E, counts = traverse(recv, _receiver_order(recv), tree.positions, tree.power, tree.node_lo,
-                                   tree.node_hi, tree.first_leaf, tree.node_power, tree.node_centroid,
-                                   tree.node_radius, tree.node_q, tree.node_m3, rn, cut, st, al, mu, zv, float(rel_tol),
-                                   float(budget_share), *_near_ratio_args(near_ratio))
+        order = _receiver_order(recv)
+        nl = _near_ratio_args(near_ratio)
+
+        def block(a, b):
+            return traverse(recv, order[a:b], tree.positions, tree.power, tree.node_lo, tree.node_hi,
+                            tree.first_leaf, tree.node_power, tree.node_centroid, tree.node_radius, tree.node_q,
+                            tree.node_m3, rn, cut, st, al, mu, zv, float(rel_tol), float(budget_share), *nl)
+
+        res = run_in_blocks(block, len(recv), min_block=64)   # serial loops on the pacing threads
+        M, E, counts = (np.concatenate([r[i] for r in res]) for i in range(3))
+        M[order], E[order], counts[order] = M.copy(), E.copy(), counts.copy()   # receivers back in their order
     tot = counts.sum(axis=0)
     stats = {"pairs_exact": int(tot[0]), "clusters_accepted": int(tot[1]), "nodes_visited": int(tot[2]),
              "clusters_from_budget": int(tot[3]),

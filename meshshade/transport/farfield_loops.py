@@ -31,7 +31,7 @@ r <= d_z give ``T(r) = alpha'/(4 pi) sum_z z tau(d_z(r))`` with ``tau(d) = w d^3
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
 
@@ -153,7 +153,7 @@ def kd_permutation(pos, depth, lo, hi):
     return perm
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def node_moments(pos, power, lo, hi):
     """Per node and channel: total power P, power-weighted centroid C, bounding radius A about C (exact max
     distance to the node's points), second-moment tensor Q = sum_j P_j (y_j - C)(y_j - C)^T as
@@ -169,7 +169,7 @@ def node_moments(pos, power, lo, hi):
     A = np.zeros((n_nodes, nc))
     Q = np.zeros((n_nodes, nc, 6))
     M3 = np.zeros((n_nodes, nc))
-    for i in prange(n_nodes):
+    for i in range(n_nodes):
         a, b = lo[i], hi[i]
         if b <= a:
             continue
@@ -215,10 +215,11 @@ def node_moments(pos, power, lo, hi):
 
 
 # --------------------------------------------------------------------------------------------------------------
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near, cutoff, st, al, mu, zv, tau,
              budget_share, nlog, nl0, nstep):
-    """Clustered far-field sum for each receiver (rows of ``recv``, processed in ``order`` for locality).
+    """Clustered far-field sum for the receivers ``recv[order]`` (a block of them, in an order with locality; the
+    caller runs blocks on the pacing threads, :func:`meshshade.pacing.run_in_blocks`).
 
     A cluster wholly inside the annulus r_near < r <= cutoff is accepted when its Taylor remainder bound E is at
     most ``(1 - budget_share) tau`` times its own lower bound P R(d + a), or, failing that, at most its share of
@@ -232,11 +233,11 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
     nl0 + i nstep: per pair at leaves, at the centroid distance for an accepted cluster (its bound, that of the
     dipole, scaled alike).
 
-    Returns M (n, 3) W/mm^2, the summed error bounds of the accepted clusters (n, 3) W/mm^2, and per receiver
-    counts (n, 4): exact pair evaluations at leaves, clusters accepted (channel-wise), nodes visited, clusters
-    accepted from the budget.
+    Returns, per receiver of ``order`` (n = len(order)): M (n, 3) W/mm^2, the summed error bounds of the accepted
+    clusters (n, 3) W/mm^2, and counts (n, 4): exact pair evaluations at leaves, clusters accepted
+    (channel-wise), nodes visited, clusters accepted from the budget.
     """
-    n = recv.shape[0]
+    n = order.shape[0]
     nc = power.shape[1]
     M = np.zeros((n, nc))
     E = np.zeros((n, nc))
@@ -258,7 +259,7 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
     tau_own = (1.0 - budget_share) * tau
     full = (1 << nc) - 1
     use_n = nlog.shape[1] > 0
-    for t in prange(n):
+    for t in range(n):
         o = order[t]
         x0, x1, x2 = recv[o, 0], recv[o, 1], recv[o, 2]
         stack_node = np.empty(STACK_SIZE, np.int64)
@@ -335,9 +336,9 @@ def traverse(recv, order, pos, power, lo, hi, first_leaf, P, C, A, Q, M3, r_near
                 stack_node[top + 1], stack_mask[top + 1] = near, open_mask
                 top += 2
         for c in range(nc):
-            M[o, c] = m_acc[c]
-            E[o, c] = e_acc[c]
-        counts[o, 0], counts[o, 1], counts[o, 2], counts[o, 3] = n_pairs, n_clusters, n_visits, n_budget
+            M[t, c] = m_acc[c]
+            E[t, c] = e_acc[c]
+        counts[t, 0], counts[t, 1], counts[t, 2], counts[t, 3] = n_pairs, n_clusters, n_visits, n_budget
     return M, E, counts
 
 

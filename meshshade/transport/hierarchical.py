@@ -35,7 +35,8 @@ from meshshade.errors import MeshshadeError, ParameterError
 from meshshade.geometry.curvature import principal_curvatures
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.materials import Material
-from meshshade.progress import Progress, kernel_interrupts
+from meshshade.pacing import Pacer, default_threads, run_paced
+from meshshade.progress import Progress
 from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
 from meshshade.transport.farfield import _receiver_order
 from meshshade.transport.farfield_loops import kd_permutation, node_ranges, tree_depth
@@ -74,8 +75,12 @@ THETA = 0.3
 CONE_MIN = 0.8
 #: sources per leaf of the trees
 LEAF_SIZE = 16
-#: receivers per traversal call (progress and Ctrl-C between calls)
+#: the most receivers per traversal call (calls are paced to about pacing.BLOCK_SECONDS; progress and Ctrl-C
+#: between calls)
 RECEIVER_BLOCK = 16384
+#: seconds per receiver of the far-field traversal assumed before a call has been timed (pacing.Pacer's prior): about
+#: 0.4 ms on one thread on a pebble of 41k vertices under a directional light, less on smaller meshes
+PRIOR_SECONDS_PER_RECEIVER = 4e-4
 
 
 class FarFieldUnsupported(MeshshadeError):
@@ -262,7 +267,8 @@ class SurfaceTransport:
         if not 0.0 < float(theta) < 1.0:
             raise ParameterError(f"theta (cluster opening criterion) must lie in (0, 1), got {theta!r}")
         if near_patch_radii is not None and not PATCH_AVERAGE_RADII <= float(near_patch_radii) <= 1e3:
-            raise ParameterError(f"near_patch_radii must lie in [{PATCH_AVERAGE_RADII:g}, 1000], got {near_patch_radii!r}")
+            raise ParameterError(f"near_patch_radii must lie in [{PATCH_AVERAGE_RADII:g}, 1000], "
+                                 f"got {near_patch_radii!r}")
         timings: dict = {}
         t0 = time.perf_counter()
         curv = curvature if curvature is not None else principal_curvatures(mesh.vertices, mesh.faces,
@@ -453,14 +459,21 @@ class SurfaceTransport:
                                      np.ascontiguousarray(self.sphere_row[r]), tree.lo, tree.hi, tree.first_leaf)
                 far = FarFactors(*_drift_args(None if chan is None else d_mm[r], power, tree), dslope, dlog0,
                                  dlogstep, dst, nlog)
-                for a in range(0, n, RECEIVER_BLOCK):
-                    blk = order[a:a + RECEIVER_BLOCK]
-                    with kernel_interrupts():
-                        Mf, cnt = FAR_TRAVERSE[int(k)](recv, rnrm, blk, sources, geo, opening, rep, self.params,
-                                                       far)
-                    M[blk] += Mf[blk]
-                    counts += cnt[blk].sum(axis=0)
-                    bar.update(blk.size)
+                traverse = FAR_TRAVERSE[int(k)]
+                done = [0]
+
+                def block(a, b, traverse=traverse, sources=sources, geo=geo, far=far):
+                    return traverse(recv, rnrm, order[a:b], sources, geo, opening, rep, self.params, far)
+
+                def advance(d, _total, done=done):
+                    bar.update(d - done[0])
+                    done[0] = d
+
+                # blocks of receivers of about pacing.BLOCK_SECONDS on the worker threads (Ctrl-C between blocks)
+                pacer = Pacer(np.ones(n), prior=PRIOR_SECONDS_PER_RECEIVER, min_block=64, max_block=RECEIVER_BLOCK)
+                res = run_paced(block, pacer, n, n_threads=default_threads(), progress=advance)
+                M[order] += np.concatenate([r[0] for r in res])
+                counts += np.concatenate([r[1] for r in res]).sum(axis=0)
         timings["far field"] = time.perf_counter() - t0
         stats = {"far_pairs": int(counts[0]), "far_clusters": int(counts[1]), "timings": timings}
         return M, stats

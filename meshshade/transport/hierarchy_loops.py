@@ -21,7 +21,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from meshshade.transport.farfield_loops import log_grid_interp, near_factor
 from meshshade.transport.kernel_evaluation import FITTED, kernel_value, per_kernel
@@ -325,8 +325,8 @@ def _traverse_of(kind):
     code is typed and compiled; :func:`~meshshade.transport.kernel_evaluation.per_kernel`)."""
 
     def far_traverse(recv, rnrm, order, tree, clusters, opening, rep, params, factors):
-        """Far-field exitance M (n, 3) [W/mm^2] at receivers ``recv`` (normals ``rnrm``), processed in
-        ``order``, from the sources of one :class:`TreeSources` (``tree``, all of kernel ``kind``) and their
+        """Far-field exitance M (len(order), 3) [W/mm^2] at the receivers ``recv[order]`` (normals ``rnrm``),
+        from the sources of one :class:`TreeSources` (``tree``, all of kernel ``kind``) and their
         :class:`Clusters`, with the :class:`Opening` criteria, the kernel's
         :class:`~meshshade.transport.kernel_evaluation.KernelParams` and the near-field model's :class:`FarFactors`.
 
@@ -344,23 +344,23 @@ def _traverse_of(kind):
         ``dlog0 + i dlogstep`` of ln(r sigma_t'), ``dst`` that channel's sigma_t' (one channel per pass: the others'
         columns are not used). The near field's pair factor (docs/physics.md eq. (80), N(s) = R_near(s) / R_d(s)):
         with ``nlog`` (3, m) non-empty, each channel's kernel is multiplied by exp(nlog[c]) interpolated at
-        ln(s sigma_t'[c]) on the same grid as ``dslope``. Returns M and per-receiver counts (n, 2): kernel
-        evaluations at leaves, clusters used.
+        ln(s sigma_t'[c]) on the same grid as ``dslope``. Returns M and per-receiver counts (len(order), 2):
+        kernel evaluations at leaves, clusters used. Serial, without the GIL: the caller runs blocks of receivers
+        on the pacing threads (:func:`meshshade.pacing.run_paced`); each receiver is computed on its own.
         """
         pos, nrm, shape, power, near, sph, lo, hi, first_leaf = tree
         P, sig, nsig, ssig, nmean, cone, Smean, rad, rn, srow = clusters
         cutoff, theta, cone_min = opening
         drift, ndrift, dslope, dlog0, dlogstep, dst, nlog = factors
-        n = recv.shape[0]
-        M = np.zeros((n, 3))
-        counts = np.zeros((n, 2), np.int64)
+        M = np.zeros((order.shape[0], 3))
+        counts = np.zeros((order.shape[0], 2), np.int64)
         use_drift = dslope.shape[0] > 0
         use_n = nlog.shape[1] > 0
         full = 0
         for c in range(3):
             if rep[c] == c:
                 full |= 1 << c
-        for t in prange(order.shape[0]):
+        for t in range(order.shape[0]):
             o = order[t]
             x0, x1, x2 = recv[o, 0], recv[o, 1], recv[o, 2]
             nx0, nx1, nx2 = rnrm[o, 0], rnrm[o, 1], rnrm[o, 2]
@@ -448,14 +448,14 @@ def _traverse_of(kind):
                 stack[top + 1], smask[top + 1] = 2 * node + 2, open_mask
                 top += 2
             for c in range(3):
-                M[o, c] = acc[rep[c]]
-            counts[o, 0] = n_leaf
-            counts[o, 1] = n_clu
+                M[t, c] = acc[rep[c]]
+            counts[t, 0] = n_leaf
+            counts[t, 1] = n_clu
         return M, counts
 
     return far_traverse
 
 
-#: the far-field traversal compiled per kernel kind (parallel over receivers), each on its first use:
+#: the far-field traversal compiled per kernel kind (serial over a block of receivers), each on its first use:
 #: ``FAR_TRAVERSE[kind](recv, rnrm, order, tree, clusters, opening, rep, params, factors)``
-FAR_TRAVERSE = per_kernel(_traverse_of, parallel=True)
+FAR_TRAVERSE = per_kernel(_traverse_of, nogil=True)

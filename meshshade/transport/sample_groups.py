@@ -25,9 +25,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from meshshade.geometry.geodesics.neighbourhoods import tangent_azimuth
+from meshshade.pacing import run_in_blocks
 
 #: members whose normal deviates more than this (cosine) from the centre's form their own group
 NORMAL_COS = 0.9
@@ -163,7 +164,7 @@ def _centre_rows(src_c, centres):
 def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
                      max_distance: float = np.inf):
     """Member pairs from their group centre's geodesic pairs (module docstring): the numba version of
-    :func:`expand_far_pairs_reference` (same arguments, same pairs in the same order), parallel over members, with
+    :func:`expand_far_pairs_reference` (same arguments, same pairs in the same order), blocks of members on the pacing threads, with
     no intermediate arrays of all member x centre-pair candidates."""
     src_c, vtx, s_c, _, phi_c = centre_pairs
     members, centres = (np.asarray(a, dtype=np.int64) for a in member_of_row)
@@ -178,12 +179,13 @@ def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *
             np.ascontiguousarray(vertices, dtype=np.float64), f.normals, f.d1, f.d2, f.k1, f.k2, keys,
             np.int64(len(vertices)), float(max_distance))
     counts = np.zeros(members.size, dtype=np.int64)
-    _expand(*args, counts, True, counts, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0),
-            np.zeros(0))
+    none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0))
+    # serial loops over blocks of members on the pacing threads (each member writes its own slots)
+    run_in_blocks(lambda a, b: _expand(*args, counts, True, counts, *none, a, b), members.size)
     offsets = np.r_[0, np.cumsum(counts)].astype(np.int64)
     m = int(offsets[-1])
     out = (np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m), np.empty(m), np.empty(m))
-    _expand(*args, counts, False, offsets, *out)
+    run_in_blocks(lambda a, b: _expand(*args, counts, False, offsets, *out, a, b), members.size)
     return out
 
 
@@ -202,10 +204,11 @@ def _law_of_cosines_1(sc, d, t_dot_dx, dx_len, K):
     return math.sqrt(max(sc * sc - 2.0 * sc * d * cosg + d * d, 0.0))
 
 
-@njit(parallel=True, cache=True)
+@njit(nogil=True, cache=True)
 def _expand(members, centres, lo, hi, by_c, vtx, s_c, phi_c, P, V, N, D1, D2, K1, K2, keys, n, max_d, counts,
-            count_only, offsets, o_src, o_v, o_s, o_ch, o_phi):
-    for a in prange(members.size):
+            count_only, offsets, o_src, o_v, o_s, o_ch, o_phi, a_lo, a_hi):
+    """Members ``a_lo:a_hi``: their pair counts (``count_only``) or their pairs written from ``offsets``."""
+    for a in range(a_lo, a_hi):
         i, c = members[a], centres[a]
         dx0, dx1, dx2 = P[i, 0] - P[c, 0], P[i, 1] - P[c, 1], P[i, 2] - P[c, 2]
         d = math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2)

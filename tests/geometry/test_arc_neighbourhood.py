@@ -172,3 +172,16 @@ def test_arc_overflow_rerun_and_blocks_consistent():
     assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.vertex, b.vertex)
     assert np.array_equal(a.distance, b.distance)
     assert s.stats["pairs"] == b.n_pairs
+
+
+def test_arc_results_do_not_depend_on_threads_or_blocks():
+    """The arc loop is serial over a block of sources, the blocks on the pacing threads: one thread in blocks of 3
+    sources and two threads in paced blocks give the same neighbourhoods, bit for bit."""
+    V, F = icosphere(10.0, 3)
+    N = _normals(V, F)
+    src = np.arange(0, len(V), 5)
+    one = ArcGeodesicNeighbourhoods(V, F, N, n_threads=1).query(None, None, None, src, None, 6.0, block_size=3)
+    two = ArcGeodesicNeighbourhoods(V, F, N, n_threads=2).query(None, None, None, src, None, 6.0)
+    assert one.vertex.size > 10 * src.size
+    for name in ("indptr", "vertex", "distance", "chord"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(two, name))

@@ -229,3 +229,28 @@ def test_the_far_field_verification_sees_the_arc_errors_of_a_lit_configuration(s
     v = verify_far_field(core, M, pv)
     assert v["mean"] > 5 * VERIFY_TOL[0]
     assert bake(mesh, SKIN, [SUN], model="dipole").stats["transport"].startswith("direct (")
+
+
+def test_far_field_does_not_depend_on_threads_or_blocks(sphere3, monkeypatch):
+    """The far-field traversal is a serial loop run on blocks of receivers by the pacing threads: one thread with
+    the default blocks and two threads with blocks of 64 receivers must give the same bits (each receiver is
+    computed on its own; a scratch value carried from one receiver to the next within a block would differ)."""
+    import numba
+
+    from meshshade.transport import hierarchical
+
+    core = SurfaceTransport.build(sphere3, SKIN, "curved")
+    rng = np.random.default_rng(5)
+    pv = rng.random(sphere3.n_vertices) * (rng.random(sphere3.n_vertices) < 0.3)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        M1, s1 = core.exitance(pv)
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        monkeypatch.setattr(hierarchical, "RECEIVER_BLOCK", 64)
+        M2, s2 = core.exitance(pv)
+    finally:
+        numba.set_num_threads(before)
+    assert s1["far_pairs"] > 0 and s1["far_clusters"] > 0
+    assert (s1["far_pairs"], s1["far_clusters"]) == (s2["far_pairs"], s2["far_clusters"])
+    np.testing.assert_array_equal(M1, M2)

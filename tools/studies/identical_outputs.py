@@ -37,6 +37,9 @@ def outputs() -> dict:
                 print(f"bake {name} {model} {near}", flush=True)
         res = bake(mesh, MATERIAL, [light], model="curved", transport="direct")
         out[f"bake/{name}/curved/direct"] = res.radiance
+        for model in ("dipole", "curved"):   # the arc geodesics (the demo's dipole bake takes them)
+            res = bake(mesh, MATERIAL, [light], model=model, geodesic="arc")
+            out[f"bake/{name}/{model}/arc"] = res.radiance
     s = profile_distances(20.0, 41)
     for shape in SHAPES:
         for model in PROFILE_MODELS:

@@ -2,8 +2,9 @@
 
 Same query and result (:class:`~meshshade.geometry.geodesics.neighbourhoods.Neighbourhoods`) as
 :class:`~meshshade.geometry.geodesics.neighbourhoods.GeodesicNeighbourhoods`, about 4-5x faster per pair in bakes
-(tools/benchmarks/bench_bake.py).  Per source x_i (numba, ``prange`` over threads, each thread with its own stamp-marked
-scratch arrays, so nothing is cleared between sources and no work is O(N^2)):
+(tools/benchmarks/bench_bake.py).  Per source x_i (a serial compiled loop over a block of sources with its own
+stamp-marked scratch arrays, so nothing is cleared between sources and no work is O(N^2); the blocks run on
+worker threads, :func:`meshshade.pacing.run_paced`):
 
 1. Topology.  A Dijkstra over mesh edges from the source vertex (or the three corners of its face), entering only
    vertices inside the ball ``|x_o - x_i| <= cutoff`` and with edge-path length ``d_graph <= 1.6 cutoff``.
@@ -52,7 +53,7 @@ Speed: ``tools/benchmarks/bench_arc_neighbourhood.py`` (see the commit message f
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from meshshade.geometry.geodesics.neighbourhoods import (PRIOR_SECONDS_PER_PAIR, GeodesicNeighbourhoods,
                                                            Neighbourhoods, assemble_neighbourhoods, expected_work)
@@ -139,9 +140,10 @@ def _heap_pop(hv, hk, pos, size):
     return v, size
 
 
-@njit(cache=True, parallel=True)
-def _arc_block(src_v, src_corner, src_pt, src_n, cut, X, N, e_ptr, e_nbr, e_len, cap, r_max, eps, tau, nthreads):
+@njit(cache=True, nogil=True)
+def _arc_block(src_v, src_corner, src_pt, src_n, cut, X, N, e_ptr, e_nbr, e_len, cap, r_max, eps, tau):
     """Neighbourhoods of k sources written into (k, cap) slots; counts may exceed cap (caller re-runs those).
+    Serial, without the GIL: blocks of sources run on the pacing threads.
 
     src_v: (k,) source vertex or -1; src_corner: (k, 3) face corners (used when src_v < 0);
     src_pt / src_n: (k, 3) position and unit normal used for the arc; returns counts, vertex, dist, fallbacks.
@@ -152,107 +154,106 @@ def _arc_block(src_v, src_corner, src_pt, src_n, cut, X, N, e_ptr, e_nbr, e_len,
     nfall = np.zeros(k, np.int64)
     out_v = np.empty((k, cap), np.int32)
     out_d = np.empty((k, cap), np.float64)
-    for t in prange(nthreads):
-        stamp = np.full(n, -1, np.int64)
-        pos = np.empty(n, np.int64)
-        dg = np.empty(n, np.float64)
-        est = np.empty(n, np.float64)
-        par = np.empty(n, np.int64)
-        hv = np.empty(n, np.int64)
-        hk = np.empty(n, np.float64)
-        for i in range(t, k, nthreads):
-            sx, sy, sz = src_pt[i, 0], src_pt[i, 1], src_pt[i, 2]
-            snx, sny, snz = src_n[i, 0], src_n[i, 1], src_n[i, 2]
-            R = cut[i]
-            R2 = R * R
-            dmax = _PRUNE * R
-            size = np.int64(0)   # not the literal 0: numba would compile _heap_push for Literal[int](0) too
-            cnt = 0
-            fb = 0
-            if src_v[i] >= 0:
-                v = src_v[i]
-                stamp[v] = i
-                pos[v] = -1
-                dg[v] = 0.0
-                par[v] = -1
-                size = _heap_push(hv, hk, pos, size, v, 0.0)
+    stamp = np.full(n, -1, np.int64)
+    pos = np.empty(n, np.int64)
+    dg = np.empty(n, np.float64)
+    est = np.empty(n, np.float64)
+    par = np.empty(n, np.int64)
+    hv = np.empty(n, np.int64)
+    hk = np.empty(n, np.float64)
+    for i in range(k):
+        sx, sy, sz = src_pt[i, 0], src_pt[i, 1], src_pt[i, 2]
+        snx, sny, snz = src_n[i, 0], src_n[i, 1], src_n[i, 2]
+        R = cut[i]
+        R2 = R * R
+        dmax = _PRUNE * R
+        size = np.int64(0)   # not the literal 0: numba would compile _heap_push for Literal[int](0) too
+        cnt = 0
+        fb = 0
+        if src_v[i] >= 0:
+            v = src_v[i]
+            stamp[v] = i
+            pos[v] = -1
+            dg[v] = 0.0
+            par[v] = -1
+            size = _heap_push(hv, hk, pos, size, v, 0.0)
+        else:
+            for j in range(3):
+                v = src_corner[i, j]
+                dx, dy, dz = X[v, 0] - sx, X[v, 1] - sy, X[v, 2] - sz
+                d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if d > R:
+                    continue
+                if stamp[v] != i:
+                    stamp[v] = i
+                    pos[v] = -1
+                    dg[v] = d
+                    par[v] = -1
+                    size = _heap_push(hv, hk, pos, size, v, d)
+        while size > 0:
+            v, size = _heap_pop(hv, hk, pos, size)
+            d = dg[v]
+            # distance estimate
+            c, s = _arc(sx, sy, sz, snx, sny, snz, X[v, 0], X[v, 1], X[v, 2], N[v, 0], N[v, 1], N[v, 2])
+            fbk = 0
+            if c == 0.0:
+                e = 0.0
+            elif s > 0.0 and s <= d * (1.0 + eps) and d <= r_max * s:
+                e = s
+                # midpoint test: the arc through the tree path's midpoint m must not be much longer
+                a = par[v]
+                while a >= 0 and dg[a] > 0.5 * d:
+                    a = par[a]
+                if a >= 0 and dg[a] > 0.0:
+                    ca, sa = _arc(X[a, 0], X[a, 1], X[a, 2], N[a, 0], N[a, 1], N[a, 2],
+                                  X[v, 0], X[v, 1], X[v, 2], N[v, 0], N[v, 1], N[v, 2])
+                    if sa < 0.0:
+                        sa = d - dg[a]
+                    if est[a] + sa > (1.0 + tau) * s:
+                        e = est[a] + sa
+                        fbk = 1
             else:
-                for j in range(3):
-                    v = src_corner[i, j]
-                    dx, dy, dz = X[v, 0] - sx, X[v, 1] - sy, X[v, 2] - sz
-                    d = np.sqrt(dx * dx + dy * dy + dz * dz)
-                    if d > R:
+                fbk = 1
+                e = d
+                a = par[v]
+                m = 0
+                while a >= 0 and m < _ANCESTORS:
+                    ca, sa = _arc(X[a, 0], X[a, 1], X[a, 2], N[a, 0], N[a, 1], N[a, 2],
+                                  X[v, 0], X[v, 1], X[v, 2], N[v, 0], N[v, 1], N[v, 2])
+                    dd = d - dg[a]
+                    if sa > 0.0 and sa <= dd * (1.0 + eps) and dd <= r_max * sa and est[a] + sa < e:
+                        e = est[a] + sa
+                    a = par[a]
+                    m += 1
+                if e < c:
+                    e = c
+            est[v] = e
+            if e <= R:
+                fb += fbk
+                if cnt < cap:
+                    out_v[i, cnt] = v
+                    out_d[i, cnt] = e
+                cnt += 1
+            # relax
+            for q in range(e_ptr[v], e_ptr[v + 1]):
+                w = e_nbr[q]
+                nd = d + e_len[q]
+                if nd > dmax:
+                    continue
+                if stamp[w] == i:
+                    if pos[w] == -2 or nd >= dg[w]:
                         continue
-                    if stamp[v] != i:
-                        stamp[v] = i
-                        pos[v] = -1
-                        dg[v] = d
-                        par[v] = -1
-                        size = _heap_push(hv, hk, pos, size, v, d)
-            while size > 0:
-                v, size = _heap_pop(hv, hk, pos, size)
-                d = dg[v]
-                # distance estimate
-                c, s = _arc(sx, sy, sz, snx, sny, snz, X[v, 0], X[v, 1], X[v, 2], N[v, 0], N[v, 1], N[v, 2])
-                fbk = 0
-                if c == 0.0:
-                    e = 0.0
-                elif s > 0.0 and s <= d * (1.0 + eps) and d <= r_max * s:
-                    e = s
-                    # midpoint test: the arc through the tree path's midpoint m must not be much longer
-                    a = par[v]
-                    while a >= 0 and dg[a] > 0.5 * d:
-                        a = par[a]
-                    if a >= 0 and dg[a] > 0.0:
-                        ca, sa = _arc(X[a, 0], X[a, 1], X[a, 2], N[a, 0], N[a, 1], N[a, 2],
-                                      X[v, 0], X[v, 1], X[v, 2], N[v, 0], N[v, 1], N[v, 2])
-                        if sa < 0.0:
-                            sa = d - dg[a]
-                        if est[a] + sa > (1.0 + tau) * s:
-                            e = est[a] + sa
-                            fbk = 1
                 else:
-                    fbk = 1
-                    e = d
-                    a = par[v]
-                    m = 0
-                    while a >= 0 and m < _ANCESTORS:
-                        ca, sa = _arc(X[a, 0], X[a, 1], X[a, 2], N[a, 0], N[a, 1], N[a, 2],
-                                      X[v, 0], X[v, 1], X[v, 2], N[v, 0], N[v, 1], N[v, 2])
-                        dd = d - dg[a]
-                        if sa > 0.0 and sa <= dd * (1.0 + eps) and dd <= r_max * sa and est[a] + sa < e:
-                            e = est[a] + sa
-                        a = par[a]
-                        m += 1
-                    if e < c:
-                        e = c
-                est[v] = e
-                if e <= R:
-                    fb += fbk
-                    if cnt < cap:
-                        out_v[i, cnt] = v
-                        out_d[i, cnt] = e
-                    cnt += 1
-                # relax
-                for q in range(e_ptr[v], e_ptr[v + 1]):
-                    w = e_nbr[q]
-                    nd = d + e_len[q]
-                    if nd > dmax:
+                    dx, dy, dz = X[w, 0] - sx, X[w, 1] - sy, X[w, 2] - sz
+                    if dx * dx + dy * dy + dz * dz > R2:
                         continue
-                    if stamp[w] == i:
-                        if pos[w] == -2 or nd >= dg[w]:
-                            continue
-                    else:
-                        dx, dy, dz = X[w, 0] - sx, X[w, 1] - sy, X[w, 2] - sz
-                        if dx * dx + dy * dy + dz * dz > R2:
-                            continue
-                        stamp[w] = i
-                        pos[w] = -1
-                    dg[w] = nd
-                    par[w] = v
-                    size = _heap_push(hv, hk, pos, size, w, nd)
-            counts[i] = cnt
-            nfall[i] = fb
+                    stamp[w] = i
+                    pos[w] = -1
+                dg[w] = nd
+                par[w] = v
+                size = _heap_push(hv, hk, pos, size, w, nd)
+        counts[i] = cnt
+        nfall[i] = fb
     return counts, out_v, out_d, nfall
 
 
@@ -309,23 +310,18 @@ class ArcGeodesicNeighbourhoods:
                 f"r_max={self.r_max:g}, threads={self.n_threads})")
 
     def _run(self, sv, corners, pts, nrm, cut):
-        """One kernel call with capacity re-runs for overflowing rows; returns counts, vertex, dist, fallbacks."""
+        """One kernel call with capacity re-runs for overflowing rows; returns counts, vertex, dist, fallbacks.
+        Runs on the pacing threads: the slot capacity (``self._cap``) only sizes the slots, never a result."""
         k = sv.shape[0]
-        if self._cap is None:
-            fin = cut[np.isfinite(cut)]
-            rmax = float(fin.max()) if fin.size else np.inf
-            self._cap = int(min(self.n_vertices, max(64, 1.5 * np.pi * rmax ** 2 / max(self._area_per_vertex,
-                                                                                      1e-300))))
         cap = self._cap
         args = (self._X, self._N, *self._e)
-        counts, ov, od, fb = _arc_block(sv, corners, pts, nrm, cut, *args, cap, self.r_max, self.eps, self.tau,
-                                        self.n_threads)
+        counts, ov, od, fb = _arc_block(sv, corners, pts, nrm, cut, *args, cap, self.r_max, self.eps, self.tau)
         over = np.flatnonzero(counts > cap)
         if over.size:  # rows longer than the slot capacity: re-run them with enough room
             cap2 = int(counts[over].max())
             self._cap = int(min(self.n_vertices, 1.25 * cap2))
             _, ov2, od2, _ = _arc_block(sv[over], corners[over], pts[over], nrm[over], cut[over], *args, cap2,
-                                        self.r_max, self.eps, self.tau, min(self.n_threads, over.size))
+                                        self.r_max, self.eps, self.tau)
             where = np.full(k, -1)
             where[over] = np.arange(over.size)
             vv = [ov[j, :counts[j]] if where[j] < 0 else ov2[where[j], :counts[j]] for j in range(k)]
@@ -357,16 +353,20 @@ class ArcGeodesicNeighbourhoods:
         # arc normal: the vertex normal, or the barycentric blend of the face's vertex normals
         an = np.where(on_face[:, None], np.einsum("kj,kjc->kc", bary, NV[fc]), NV[np.maximum(sv, 0)])
         an /= np.where((ln := np.linalg.norm(an, axis=1, keepdims=True)) > 0, ln, 1.0)
-        # each call is parallel over the threads and takes about pacing.BLOCK_SECONDS (Ctrl-C acts between calls)
+        if self._cap is None:  # slots per source, from the first query's largest cutoff (grown on overflow)
+            fin = cut[np.isfinite(cut)]
+            rmax = float(fin.max()) if fin.size else np.inf
+            self._cap = int(min(self.n_vertices, max(64, 1.5 * np.pi * rmax ** 2 / max(self._area_per_vertex,
+                                                                                      1e-300))))
+        # blocks of sources of about pacing.BLOCK_SECONDS each on the worker threads (Ctrl-C acts between calls)
         if block_size:
             pacer = Pacer(np.ones(k), seconds=np.inf, min_block=int(block_size), max_block=int(block_size))
         else:
-            work = expected_work(cut, self.n_vertices, self._area_per_vertex) / self.n_threads
-            pacer = Pacer(work, pace_rate(self._pace, work), prior=PRIOR_SECONDS_PER_PAIR, min_block=self.n_threads,
-                          max_block=4096)
+            work = expected_work(cut, self.n_vertices, self._area_per_vertex)
+            pacer = Pacer(work, pace_rate(self._pace, work), prior=PRIOR_SECONDS_PER_PAIR, max_block=4096)
         res = run_paced(lambda a, b: self._run(psv[a:b], corners[a:b], np.ascontiguousarray(pts[a:b]),
                                                np.ascontiguousarray(an[a:b]), cut[a:b]),
-                        pacer, k, progress=progress)
+                        pacer, k, n_threads=self.n_threads, progress=progress)
         counts = np.concatenate([r[0] for r in res]) if res else np.zeros(0, np.int64)
         vertex = (self._vperm[np.concatenate([r[1] for r in res])].astype(np.int32) if res
                   else np.zeros(0, np.int32))
