@@ -10,8 +10,10 @@ matrix: symmetric positive definite (sigma_a > 0 or a boundary), depending on me
 source of power P at x (eq. (91)) contributes P lambda_i(x) to the nodes i of the tetrahedron holding x (its
 barycentric coordinates lambda). The exitance on the boundary is M = phi / (2A) (eq. (92)).
 
-No Python loop over elements or nodes: the assembly's element loop is compiled (numba), the rest vectorised
-numpy; :func:`tet_geometry` is the vectorised form of the same element geometry (tests compare the two).
+No Python loop over elements or nodes: the assembly's row loops are compiled (numba), serial over a range of
+rows and run on blocks of the rows by the pacing threads (:func:`meshshade.pacing.run_in_blocks`; each row is
+computed on its own), the rest vectorised numpy; :func:`tet_geometry` is the vectorised form of the same element
+geometry (tests compare the two).
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError
+from meshshade.pacing import run_in_blocks
 from meshshade.volume.locate import FACE_NODES, tet_neighbours, walk_locate
 
 __all__ = ["tet_geometry", "boundary_faces", "assemble_diffusion", "assemble_channels", "locate_points",
@@ -84,8 +87,10 @@ def assemble_channels(nodes, tets, faces, *, D, sigma_a, A, lumped=False):
     (indptr (N+1,), indices (nnz,), data (nnz, k)), rows sorted (see :func:`assemble_diffusion`).
 
     The pattern comes from the tetrahedra's edges (every node keeps its diagonal); the element matrices are
-    formed and added in place by a compiled loop (:func:`_add_elements`), so memory stays at the matrix's own
-    size.
+    formed and added in place by compiled loops (:func:`_add_elements` over blocks of rows on the pacing threads,
+    then :func:`_add_faces`), so memory stays at the matrix's own size. A degenerate tetrahedron raises
+    MeshshadeError naming the first one met in row order, whatever the blocks: of those with the lowest
+    smallest node, the lowest index.
     """
     D, sigma_a, A = (np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (D, sigma_a, A))
     if not (np.all(D > 0.0) and np.all(sigma_a >= 0.0) and np.all(A >= 1.0)):
@@ -95,10 +100,17 @@ def assemble_channels(nodes, tets, faces, *, D, sigma_a, A, lumped=False):
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     indptr, indices, tet_ptr, tet_of = _pattern(tets, N)
     parts = np.zeros((3, indices.size))              # stiffness, volume mass, boundary mass
-    status = _add_elements(np.ascontiguousarray(nodes, dtype=np.float64), tets, tet_ptr, tet_of, faces, indptr,
-                           indices, bool(lumped), parts)
-    if status >= 0:
-        raise MeshshadeError(f"degenerate tetrahedron {status} (zero volume)")
+    nodes = np.ascontiguousarray(nodes, dtype=np.float64)
+    lumped = bool(lumped)
+
+    def rows(a, b):
+        """Rows a:b (each node adds its own tetrahedra into its own row); run on blocks by the pacing threads."""
+        return _add_elements(nodes, tets, tet_ptr, tet_of, indptr, indices, lumped, parts, a, b)
+
+    bad = [int(t) for t in run_in_blocks(rows, N) if t >= 0]
+    if bad:   # the first block's: the first met in row order, whatever the blocks
+        raise MeshshadeError(f"degenerate tetrahedron {bad[0]} (zero volume)")
+    _add_faces(nodes, faces, indptr, indices, lumped, parts)
     data = parts[0][:, None] * D[None, :] + parts[1][:, None] * sigma_a[None, :] + parts[2][:, None] / (2.0 * A)
     isolated = np.ones(N, dtype=bool)            # a node of no element gets 1 on its diagonal
     isolated[tets.reshape(-1)] = False
@@ -112,11 +124,13 @@ def _pattern(tets, N):
     sorted; with the node-to-tetrahedra incidence (tet_ptr, tet_of) it was built from."""
     tet_ptr, tet_of = _incidence(tets, N)
     counts = np.zeros(N, dtype=np.int64)
-    _row_neighbours(tets, tet_ptr, tet_of, np.zeros(1, dtype=np.int64), counts, True)
+    none = np.zeros(1, dtype=np.int64)
+    # each row on its own: blocks of rows on the pacing threads, a count pass then a fill pass
+    run_in_blocks(lambda a, b: _row_neighbours(tets, tet_ptr, tet_of, none, counts, True, a, b), N)
     indptr = np.zeros(N + 1, dtype=np.int64)
     np.cumsum(counts, out=indptr[1:])
     indices = np.empty(indptr[-1], dtype=np.int64)
-    _row_neighbours(tets, tet_ptr, tet_of, indptr, indices, False)
+    run_in_blocks(lambda a, b: _row_neighbours(tets, tet_ptr, tet_of, indptr, indices, False, a, b), N)
     return indptr, indices, tet_ptr, tet_of
 
 
@@ -138,38 +152,39 @@ def _incidence(tets, N):
     return ptr, out
 
 
-@numba.njit(cache=True, parallel=True)
-def _row_neighbours(tets, tet_ptr, tet_of, indptr, out, count_only):
-    """Each node's distinct neighbours through its tetrahedra, itself included: their count in ``out`` (N,)
-    (``count_only``), or the sorted columns in ``out[indptr[i]:indptr[i+1]]``."""
-    N = tet_ptr.size - 1
-    blocks = 64
-    size = (N + blocks - 1) // blocks
-    for b in numba.prange(blocks):
-        row = np.empty(256, dtype=np.int64)
-        for i in range(b * size, min(N, (b + 1) * size)):
-            m = 1
-            row[0] = i                  # the diagonal, even for a node of no tetrahedron
-            for q in range(tet_ptr[i], tet_ptr[i + 1]):
-                t = tet_of[q]
-                for k in range(4):
-                    j = tets[t, k]
-                    seen = False
-                    for r in range(m):
-                        if row[r] == j:
-                            seen = True
-                            break
-                    if not seen:
-                        if m == row.size:
-                            grown = np.empty(2 * row.size, dtype=np.int64)
-                            grown[:m] = row[:m]
-                            row = grown
-                        row[m] = j
-                        m += 1
-            if count_only:
-                out[i] = m
-            else:
-                out[indptr[i]:indptr[i] + m] = np.sort(row[:m])
+@numba.njit(cache=True, nogil=True)
+def _row_neighbours(tets, tet_ptr, tet_of, indptr, out, count_only, lo, hi):
+    """Nodes ``lo:hi``: each one's distinct neighbours through its tetrahedra, itself included: their count in
+    ``out`` (N,) (``count_only``), or the sorted columns in ``out[indptr[i]:indptr[i+1]]``; serial, without the
+    GIL. A row is kept sorted as it is collected (insertion: rows are short) and copied element by element:
+    ``np.sort`` and slice assignments would cost seconds to compile."""
+    row = np.empty(256, dtype=np.int64)
+    for i in range(lo, hi):
+        m = 1
+        row[0] = i                  # the diagonal, even for a node of no tetrahedron
+        for q in range(tet_ptr[i], tet_ptr[i + 1]):
+            t = tet_of[q]
+            for k in range(4):
+                j = tets[t, k]
+                r = m                   # row[:m] is sorted: j goes to row[r], after those below it
+                while r > 0 and row[r - 1] > j:
+                    r -= 1
+                if r > 0 and row[r - 1] == j:
+                    continue
+                if m == row.size:
+                    grown = np.empty(2 * row.size, dtype=np.int64)
+                    for u in range(m):
+                        grown[u] = row[u]
+                    row = grown
+                for u in range(m, r, -1):
+                    row[u] = row[u - 1]
+                row[r] = j
+                m += 1
+        if count_only:
+            out[i] = m
+        else:
+            for u in range(m):
+                out[indptr[i] + u] = row[u]
 
 
 @numba.njit(cache=True)
@@ -193,53 +208,57 @@ def _diagonal_positions(indptr, indices):
     return out
 
 
-@numba.njit(cache=True, parallel=True)
-def _add_elements(nodes, tets, tet_ptr, tet_of, faces, indptr, indices, lumped, parts):
-    """Add every tetrahedron's stiffness vol grad_i . grad_j and mass vol (1 + delta_ij) / 20 (lumped: vol / 4
-    on the diagonal) into ``parts[0]`` and ``parts[1]`` (nnz,) at the pattern's positions, row by row (each node
-    sums over its own tetrahedra: no two threads write one entry), then every boundary face's mass
-    area (1 + delta_ij) / 12 (lumped: area / 3) into ``parts[2]``. Returns -1, or a tetrahedron of zero volume."""
-    N = tet_ptr.size - 1
-    blocks = 64
-    size = (N + blocks - 1) // blocks
-    bad = np.full(blocks, -1, dtype=np.int64)
-    for b in numba.prange(blocks):
-        g = np.empty((4, 3))
-        E = np.empty((3, 3))
-        for node in range(b * size, min(N, (b + 1) * size)):
-            for q in range(tet_ptr[node], tet_ptr[node + 1]):
-                t = tet_of[q]
-                a = tets[t, 0]
-                for r in range(3):
-                    for d in range(3):
-                        E[r, d] = nodes[tets[t, r + 1], d] - nodes[a, d]
-                e00, e01, e02, e10, e11, e12 = E[0, 0], E[0, 1], E[0, 2], E[1, 0], E[1, 1], E[1, 2]
-                e20, e21, e22 = E[2, 0], E[2, 1], E[2, 2]
-                # rows of E are the edges; grad lambda_{k+1} is column k of E^-1: row k of the cofactors / det
-                c00, c01, c02 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
-                c10, c11, c12 = e02 * e21 - e01 * e22, e00 * e22 - e02 * e20, e01 * e20 - e00 * e21
-                c20, c21, c22 = e01 * e12 - e02 * e11, e02 * e10 - e00 * e12, e00 * e11 - e01 * e10
-                det = e00 * c00 + e01 * c01 + e02 * c02
-                vol = abs(det) / 6.0
-                if not vol > 1e-300:
-                    bad[b] = t
-                    continue
-                g[1, 0], g[1, 1], g[1, 2] = c00 / det, c01 / det, c02 / det
-                g[2, 0], g[2, 1], g[2, 2] = c10 / det, c11 / det, c12 / det
-                g[3, 0], g[3, 1], g[3, 2] = c20 / det, c21 / det, c22 / det
+@numba.njit(cache=True, nogil=True)
+def _add_elements(nodes, tets, tet_ptr, tet_of, indptr, indices, lumped, parts, lo, hi):
+    """Rows ``lo:hi``: add each node's tetrahedra's stiffness vol grad_i . grad_j and mass vol (1 + delta_ij) / 20
+    (lumped: vol / 4 on the diagonal) into the node's own row of ``parts[0]`` and ``parts[1]`` (nnz,) at the
+    pattern's positions (no two rows share an entry); serial, without the GIL. Returns -1, or the first
+    tetrahedron of zero volume met (rows in order, each row's tetrahedra in ``tet_of`` order), which is skipped."""
+    g = np.empty((4, 3))
+    E = np.empty((3, 3))
+    bad = -1
+    for node in range(lo, hi):
+        for q in range(tet_ptr[node], tet_ptr[node + 1]):
+            t = tet_of[q]
+            a = tets[t, 0]
+            for r in range(3):
                 for d in range(3):
-                    g[0, d] = -(g[1, d] + g[2, d] + g[3, d])
-                i = 0
-                while tets[t, i] != node:
-                    i += 1
-                for j in range(4):
-                    p = _position(indptr, indices, node, tets[t, j])
-                    parts[0, p] += vol * (g[i, 0] * g[j, 0] + g[i, 1] * g[j, 1] + g[i, 2] * g[j, 2])
-                    if lumped:
-                        if i == j:
-                            parts[1, p] += 0.25 * vol
-                    else:
-                        parts[1, p] += vol * (2.0 if i == j else 1.0) / 20.0
+                    E[r, d] = nodes[tets[t, r + 1], d] - nodes[a, d]
+            e00, e01, e02, e10, e11, e12 = E[0, 0], E[0, 1], E[0, 2], E[1, 0], E[1, 1], E[1, 2]
+            e20, e21, e22 = E[2, 0], E[2, 1], E[2, 2]
+            # rows of E are the edges; grad lambda_{k+1} is column k of E^-1: row k of the cofactors / det
+            c00, c01, c02 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
+            c10, c11, c12 = e02 * e21 - e01 * e22, e00 * e22 - e02 * e20, e01 * e20 - e00 * e21
+            c20, c21, c22 = e01 * e12 - e02 * e11, e02 * e10 - e00 * e12, e00 * e11 - e01 * e10
+            det = e00 * c00 + e01 * c01 + e02 * c02
+            vol = abs(det) / 6.0
+            if not vol > 1e-300:
+                if bad < 0:
+                    bad = t
+                continue
+            g[1, 0], g[1, 1], g[1, 2] = c00 / det, c01 / det, c02 / det
+            g[2, 0], g[2, 1], g[2, 2] = c10 / det, c11 / det, c12 / det
+            g[3, 0], g[3, 1], g[3, 2] = c20 / det, c21 / det, c22 / det
+            for d in range(3):
+                g[0, d] = -(g[1, d] + g[2, d] + g[3, d])
+            i = 0
+            while tets[t, i] != node:
+                i += 1
+            for j in range(4):
+                p = _position(indptr, indices, node, tets[t, j])
+                parts[0, p] += vol * (g[i, 0] * g[j, 0] + g[i, 1] * g[j, 1] + g[i, 2] * g[j, 2])
+                if lumped:
+                    if i == j:
+                        parts[1, p] += 0.25 * vol
+                else:
+                    parts[1, p] += vol * (2.0 if i == j else 1.0) / 20.0
+    return bad
+
+
+@numba.njit(cache=True)
+def _add_faces(nodes, faces, indptr, indices, lumped, parts):
+    """Add every boundary face's mass area (1 + delta_ij) / 12 (lumped: area / 3) into ``parts[2]`` (nnz,) at the
+    pattern's positions, faces in order (faces share entries: one serial loop)."""
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
         u0, u1, u2 = nodes[b, 0] - nodes[a, 0], nodes[b, 1] - nodes[a, 1], nodes[b, 2] - nodes[a, 2]
@@ -254,10 +273,6 @@ def _add_elements(nodes, tets, tet_ptr, tet_of, faces, indptr, indices, lumped, 
                 else:
                     parts[2, _position(indptr, indices, faces[f, i], faces[f, j])] += \
                         area * (2.0 if i == j else 1.0) / 12.0
-    for b in range(blocks):
-        if bad[b] >= 0:
-            return bad[b]
-    return -1
 
 
 def locate_points(nodes, tets, points, *, tree=None, neighbours=None, walk=True):

@@ -2,14 +2,17 @@
 
 Each point starts in the tetrahedron whose centroid is nearest (a ``cKDTree``) and walks across the face opposite
 its most negative barycentric coordinate until every coordinate is >= -``INSIDE_TOL`` (found) or the face is on
-the boundary (the point is outside). Points are walked in parallel (numba ``prange``), each on its own. A point
+the boundary (the point is outside). Each point is walked on its own: a serial compiled loop over a range of
+points, run on blocks of the points by the pacing threads (:func:`meshshade.pacing.run_in_blocks`). A point
 the walk does not settle within ``MAX_STEPS`` (a cycle, possible on degenerate meshes) is handed to the
 candidate search of :func:`meshshade.volume.fem.locate_points`, which also serves as this walk's test oracle.
 """
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
+
+from meshshade.pacing import run_in_blocks
 
 __all__ = ["FACE_NODES", "tet_neighbours", "walk_locate", "INSIDE_TOL", "MAX_STEPS"]
 
@@ -59,13 +62,23 @@ def _bary(nodes, tets, t, px, py, pz):
     return 1.0 - l1 - l2 - l3, l1, l2, l3
 
 
-@njit(parallel=True, nogil=True, cache=True)
 def walk_locate(nodes, tets, neighbours, points, start, tet_out, bary_out):
     """Walk every point from ``start`` (k,); writes ``tet_out`` (k,) and ``bary_out`` (k, 4) and returns a (k,)
-    int8 status: 1 found, 0 outside the mesh (stopped at a boundary face), -1 not settled in MAX_STEPS."""
-    k = points.shape[0]
-    status = np.zeros(k, dtype=np.int8)
-    for i in prange(k):
+    int8 status: 1 found, 0 outside the mesh (stopped at a boundary face), -1 not settled in MAX_STEPS.
+
+    The points are walked in blocks on the pacing threads (:func:`meshshade.pacing.run_in_blocks`), each point on
+    its own, so the result does not depend on the threads or the blocks."""
+    status = np.zeros(points.shape[0], dtype=np.int8)
+    run_in_blocks(lambda a, b: _walk(nodes, tets, neighbours, points, start, tet_out, bary_out, status, a, b),
+                  points.shape[0])
+    return status
+
+
+@njit(nogil=True, cache=True)
+def _walk(nodes, tets, neighbours, points, start, tet_out, bary_out, status, lo, hi):
+    """:func:`walk_locate` of points ``lo:hi``, writing their rows of ``tet_out``, ``bary_out`` and ``status``;
+    serial, without the GIL."""
+    for i in range(lo, hi):
         t = start[i]
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         status[i] = -1
@@ -88,4 +101,3 @@ def walk_locate(nodes, tets, neighbours, points, start, tet_out, bary_out):
                 status[i] = 0
                 break
             t = nt
-    return status

@@ -18,7 +18,8 @@ signed energy is kept at the entry point) whose normals face the same way (pairs
 volume's alone). A pair within PATCH_RADII patch radii takes Delta R averaged over the source's disc of radius a
 (a vertex sample stands for its patch; for a beam's point entry, the receiver's patch).
 
-Pure array work (tables in numpy, the pair sum compiled); no I/O.
+Pure array work (tables in numpy, the pair values compiled: a serial loop over a range of pairs, run on blocks
+of each chunk's pairs by the pacing threads, :func:`meshshade.pacing.run_in_blocks`); no I/O.
 """
 from __future__ import annotations
 
@@ -32,6 +33,7 @@ from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.kernels.near_field import incidence_gain, near_field_profile, near_field_ring, near_field_total
 from meshshade.kernels.robin_halfspace import (robin_point_source_disc, robin_point_source_exitance,
                                                robin_point_source_total)
+from meshshade.pacing import run_in_blocks
 from meshshade.volume.sources import line_source_rule
 
 __all__ = ["NearFieldCorrection", "TAIL_TOL", "PATCH_RADII"]
@@ -142,9 +144,11 @@ class NearFieldCorrection:
             o = np.ascontiguousarray(pairs["j"], dtype=np.int64)
             s = np.ascontiguousarray(pairs["v"], dtype=np.float64)
             del pairs
-            vals = _pair_values(i, o, s, *arrays, self._f, self._cum, self._rest, self._cos, self._n_r,
-                                self._log_r0, _LOG_R[1] - _LOG_R[0], self.radius_mm, _TH_NODES, _TH_WEIGHTS,
-                                PATCH_RADII)
+            vals = np.zeros((i.size, 3))
+            tables = (self._f, self._cum, self._rest, self._cos, self._n_r, self._log_r0, _LOG_R[1] - _LOG_R[0],
+                      self.radius_mm, _TH_NODES, _TH_WEIGHTS, PATCH_RADII)
+            # each pair's value on its own: blocks of pairs on the pacing threads, written into their rows of vals
+            run_in_blocks(lambda a, b: _pair_values(i, o, s, *arrays, *tables, vals, a, b), i.size)
             for c in range(3):
                 out[:, c] += np.bincount(o, weights=vals[:, c], minlength=n)
             total += int(i.size)
@@ -170,13 +174,12 @@ def _lookup(tab, c, k, frac, x, log_r0, dlog, n_r, beyond_zero):
     return (1.0 - frac) * lo + frac * hi
 
 
-@numba.njit(cache=True, parallel=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _pair_values(i, o, s, src_n, rec_n, power, cos_t, src_a, rec_a, f, cum, rest, cosg, n_r, log_r0, dlog,
-                 radius, th_x, th_w, patch_radii):
-    """(P, 3): each pair's Delta R times the source's power (0 for pairs facing away or beyond the radius)."""
-    P = i.size
-    out = np.zeros((P, 3))
-    for p in numba.prange(P):
+                 radius, th_x, th_w, patch_radii, out, p_lo, p_hi):
+    """Pairs ``p_lo:p_hi`` of (i, o, s): each pair's Delta R times the source's power written to its row of
+    ``out`` (P, 3) (left as it is, zero, for pairs facing away or beyond the radius); serial, without the GIL."""
+    for p in range(p_lo, p_hi):
         a_src, b = i[p], o[p]
         if (src_n[a_src, 0] * rec_n[b, 0] + src_n[a_src, 1] * rec_n[b, 1] + src_n[a_src, 2] * rec_n[b, 2]) <= 0.0:
             continue
@@ -212,4 +215,3 @@ def _pair_values(i, o, s, src_n, rec_n, power, cos_t, src_a, rec_a, f, cum, rest
                         acc += wgt * _lookup(f, c, k, frac, rho, log_r0[c], dlog, nr, True)
                 v = acc / (math.pi * a * a)
             out[p, c] = power[a_src] * v
-    return out
