@@ -196,7 +196,8 @@ def format_check(report: dict) -> str:
             f"{_g(ch['diffusion_length_mm'])} mm; mean edge = {ch['mean_edge_over_z_r']:.3g} z_r "
             f"({ch['resolution']}); first order holds at {100 * ch['fraction_first_order_valid']:.1f}% of "
             f"vertices (rho {ch['validity_rho_mm']:.4g} mm, radius of curvature >= "
-            f"{ch['min_valid_radius_of_curvature_mm']:.4g} mm), {100 * ch['fraction_first_order_valid_at_bake_cutoff']:.1f}% "
+            f"{ch['min_valid_radius_of_curvature_mm']:.4g} mm), "
+            f"{100 * ch['fraction_first_order_valid_at_bake_cutoff']:.1f}% "
             f"at the bake cutoff {ch['bake_cutoff_mm']:.4g} mm; it holds out to a distance of "
             f"{ch['first_order_distance_mm']['percentiles']['50']:.3g} mm from the median vertex "
             f"(5th percentile {ch['first_order_distance_mm']['percentiles']['5']:.3g} mm)")

@@ -34,7 +34,8 @@ exact      each of the beam's sources with the exact sphere's or cylinder's Gree
 curved     the half-space near field at s times the k1/k2 kernel's curvature factor R_curved(s) / R_d(s) (eq. (79))
 =========  ========================================================================================================
 
-``mc`` is Monte Carlo on the exact plane, sphere, cylinder, cavity or bore (:func:`meshshade.montecarlo.shapes.shape_mc_profile`:
+``mc`` is Monte Carlo on the exact plane, sphere, cylinder, cavity or bore
+(:func:`meshshade.montecarlo.shapes.shape_mc_profile`:
 exact exit distances, rings of half-width max(0.1 s, 0.05 / min sigma_t'), a pencil beam at normal incidence,
 ``photons`` per channel, reproducible for a ``seed``); its rows carry the standard error.
 """
@@ -340,7 +341,8 @@ def profile_rows(material: Material, distances_mm, *, models, shapes, azimuths_d
         s = s_all
         if shape.kind in ("sphere", "cavity") and np.any(s_all > np.pi * shape.radius_mm):
             s = s_all[s_all <= np.pi * shape.radius_mm]  # no point on a sphere is further than half its girth
-            warnings.warn(f"{shape.kind} of radius {shape.radius_mm:g} mm: distances beyond {np.pi * shape.radius_mm:.4g} mm "
+            warnings.warn(f"{shape.kind} of radius {shape.radius_mm:g} mm: "
+                          f"distances beyond {np.pi * shape.radius_mm:.4g} mm "
                           "(half the circumference) are left out of its curves", stacklevel=2)
             if s.size == 0:
                 raise ParameterError(f"no requested distance lies on the {shape.kind} of radius {shape.radius_mm:g} mm")

@@ -5,7 +5,8 @@ numba, the standard library, :mod:`meshshade.errors` and each other.
 
 Errors
 ------
-* A material parameter outside its domain (albedo_prime not finite or outside [0, 1], eta not finite or outside [1, 2.5],
+* A material parameter outside its domain (albedo_prime not finite or outside [0, 1],
+  eta not finite or outside [1, 2.5],
   or a non-number or array where a kernel takes one material) raises :class:`~meshshade.errors.MaterialError`
   in every kernel (:func:`meshshade.kernels.optics.check_material`; the cylinder also needs albedo_prime > 0).
 * Any other bad argument (negative or non-finite distances, angles out of range, non-finite curvatures,

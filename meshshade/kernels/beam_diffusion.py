@@ -24,7 +24,8 @@ reflectance (:func:`fresnel_moments`).
 
 Quadrature. Pointwise (:func:`beam_diffusion_profile`), with t = r sinh x the real-source terms are smooth and
 decay double-exponentially in x at any r > 0 (at r = 0 the profile is infinite: the source density reaches the
-surface); the image terms are smooth in t. Over a ring (:func:`beam_diffusion_ring`), the real-source terms are done in polar
+surface); the image terms are smooth in t. Over a ring (:func:`beam_diffusion_ring`),
+the real-source terms are done in polar
 coordinates (r, t) = rho (sin a, cos a), where the rho integral is exact; the image terms by Gauss-Legendre in r
 and Gauss-Laguerre in t. :func:`beam_diffusion_total` is the closed form of int R_beam 2 pi r dr.
 """

@@ -36,7 +36,8 @@ width ``min(2, 8/z_v, 16/max|z|)`` (so that ``cos(q z)`` is resolved), and conti
 integral. The n-series at each node is summed until the geometric tail bound ``2 |G_N| rho/(1 - rho)``,
 ``rho = max(|G_N/G_{N-1}|, r' R0/R^2)`` (the term ratios decrease towards ``r' R0/R^2`` from above), is below
 ``eps`` times the running absolute sum. The count is ``~ (R0/z_v) ln(1/eps)`` at small k (the sphere's rule,
-docs/physics.md eq. (31)) and ``~ R0 sqrt(2 k ln(1/eps)/z_v)`` at large k, where the terms are Gaussian in n. The angular
+docs/physics.md eq. (31)) and ``~ R0 sqrt(2 k ln(1/eps)/z_v)`` at large k,
+where the terms are Gaussian in n. The angular
 sum uses ``e^{i n theta}`` by rotation, re-synchronised with exact cos/sin every 32 orders.
 ``eps = 1e-4 rtol`` (clipped to [1e-16, 1e-3]).
 

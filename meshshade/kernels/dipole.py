@@ -108,7 +108,8 @@ def dipole_tail_reflectance(r_opt, *, albedo_prime, eta):
     """Reflectance of the planar dipole beyond distance ``r_opt``: ``int_r^inf R_d 2 pi r' dr'``.
 
     Defined as ``(alpha'/2) [z_r exp(-mu d_r)/d_r + z_v exp(-mu d_v)/d_v]`` with ``d = sqrt(r^2 + z^2)``,
-    from ``d/dr [exp(-mu d)/d] = -r g(d)`` (docs/physics.md §4.2, eq. (16)). Equals :func:`dipole_total_reflectance` at r = 0.
+    from ``d/dr [exp(-mu d)/d] = -r g(d)`` (docs/physics.md §4.2, eq. (16)).
+    Equals :func:`dipole_total_reflectance` at r = 0.
     """
     return _tail_reflectance(r_opt, diffusion_params(*check_material(albedo_prime, eta)))
 

@@ -40,7 +40,7 @@ import numba
 import numpy as np
 
 from meshshade.kernels import fitted_curvature_table as table
-from meshshade.kernels.curvature import CurvatureTable, curvature_ratios
+from meshshade.kernels.curvature import CurvatureTable
 from meshshade.kernels.curvature.coefficients import ratios_direct
 from meshshade.kernels.curvature.table import (MU_RHO_ZERO, PER_UNIT, PHI_MAX, cheb_to_monomial,
                                                dipole_exp_block, piece_pair)
@@ -269,8 +269,8 @@ def pair_exponent(ka, kc, t2, ra, rb, ra1, rb1, g, e2, th):
     """S(delta + Q) of eq. (82) for one pair (compiled; the loop below and the hierarchical far field): normal
     curvatures along and across ka, kc, squared twist t2, first-order ratios ra, rb of the material and ra1, rb1 of
     its matched boundary, the near-source functions g, e2 at the pair's distance (:func:`near_source_functions`),
-    all optical units; ``th`` the 16 effective coefficients (:func:`effective_coefficients`; an array or a tuple). The two switches
-    share one division. NaN in, NaN out."""
+    all optical units; ``th`` the 16 effective coefficients (:func:`effective_coefficients`; an array or a tuple).
+    The two switches share one division. NaN in, NaN out."""
     H = 0.5 * (ka + kc)
     u = ka * ra
     v = kc * ra

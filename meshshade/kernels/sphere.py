@@ -20,7 +20,8 @@ ratios
     tt_m(x) = I_{nu+1}(x) / (x I_nu(x))      backward:  tt_{m-1} = 1 / ((2m+1) + x^2 tt_m)
     uu_m(x) = x K_{nu+1}(x) / K_nu(x)        forward:   uu_m = x^2 / uu_{m-1} + (2m+1),  uu_0 = 1 + x
 
-(``t = x tt`` and ``u = uu/x`` are the ``t_nu``, ``u_nu`` of docs/physics.md eq. (26)). Their x -> 0 limits are finite and are
+(``t = x tt`` and ``u = uu/x`` are the ``t_nu``, ``u_nu`` of docs/physics.md eq. (26)).
+Their x -> 0 limits are finite and are
 reached by the same recurrences without a branch: ``tt_m -> 1/(2m+3)``, ``uu_m -> 2m+1``. The coefficients
 are then
 
@@ -34,7 +35,8 @@ with ``f(x) = (1 - e^{-2x})/(2x)`` (``f(0) = 1``). At mu = 0 this gives ``c_m = 
 image of Laplace's equation, and ``c_0 = 0``: there is no 0/0 anywhere. The ``tt`` tables are built once per
 call by backward recurrence from ``max(M, ceil(xR)) + 64`` (``M`` the term budget), where the error of the
 start guess is damped by at least ``t^2 <= (sqrt 2 - 1)^2 ~ 0.17`` per step, i.e. 1e-49 after 64 steps (a
-tighter start than the ``M + 60 + 2x`` of docs/physics.md §5.4, checked against mpmath). The tables are streamed in blocks
+tighter start than the ``M + 60 + 2x`` of docs/physics.md §5.4, checked against mpmath).
+The tables are streamed in blocks
 from checkpoints, so memory stays O(M/512) even for 10^7 terms. Legendre polynomials come from the forward
 recurrence rewritten for ``D_m = P_m - P_{m-1}`` with ``y = 2 sin^2(theta/2)``
 (``D_{m+1} = (m D_m - (2m+1) y P_m)/(m+1)``), so angles near 0 are not rounded through ``cos theta``
@@ -411,7 +413,8 @@ def sphere_total_reflectance(*, R0_opt, albedo_prime, eta):
 
 
 def sphere_chord_dipole_profile(theta, *, R0_opt, albedo_prime, eta):
-    """Jensen's usage on a sphere: the planar dipole at the chord, ``R_d(2 R0 sin(theta/2))`` (docs/physics.md eq. (18)).
+    """Jensen's usage on a sphere: the planar dipole at the chord, ``R_d(2 R0 sin(theta/2))``
+    (docs/physics.md eq. (18)).
 
     theta in [0, pi] as for :func:`sphere_series_profile`; returns ``R_d / sigma_t'**2``, shape of theta.
     """
@@ -423,8 +426,8 @@ def _sphere_fluence(r_opt, theta, *, R0_opt, albedo_prime, eta, rtol=1e-14):
     """Fluence Psi(r, theta) per unit source (S = 1) in optical units, for r' < r <= R (private; for tests).
 
     ``Psi = 1/(4 pi D) [e^{-mu d}/d - sum_m (2m+1) I_nu(mu r') I_nu(mu r) K_nu(mu R)/(I_nu(mu R) sqrt(r r'))
-    P_m]``, ``d^2 = (r - r')^2 + 4 r r' sin^2(theta/2)`` (docs/physics.md eq. (22)), with the same ratio recurrences as the
-    reflectance. Vanishes on r = R = R0 + z_b. D = 1/3 in optical units.
+    P_m]``, ``d^2 = (r - r')^2 + 4 r r' sin^2(theta/2)`` (docs/physics.md eq. (22)),
+    with the same ratio recurrences as the reflectance. Vanishes on r = R = R0 + z_b. D = 1/3 in optical units.
     """
     _, mu, z_r, z_b = _material(albedo_prime, eta)
     R0, delta, r_src = _geometry(R0_opt, z_r)

@@ -132,7 +132,8 @@ def entry_samples(vertices, faces, vertex_normals, vertex_areas, lights, scene=N
     vertex_areas : (n,) float64 mm^2, the area each vertex represents (sums to the surface area)
     lights : a light or a sequence of :class:`BeamLight`, :class:`DirectionalLight`, :class:`PointLight`
     scene : EmbreeScene or NumpyScene of the same mesh, or None to build an Embree scene only if a ray is needed
-    eta : float in [1, 2.5], relative index of the medium (outside is index 1; :func:`~meshshade.kernels.optics.check_eta`)
+    eta : float in [1, 2.5], relative index of the medium
+        (outside is index 1; :func:`~meshshade.kernels.optics.check_eta`)
 
     Returns
     -------

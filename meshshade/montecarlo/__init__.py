@@ -2,7 +2,8 @@
 
 Modules: :mod:`~meshshade.montecarlo.simulation` (``simulate``, ``MCResult``), :mod:`~meshshade.montecarlo.tallies`
 (profiles, summary; the files are written by :mod:`meshshade.output.mc_file`),
-:mod:`~meshshade.montecarlo.sampling` (roulette constants, HG scattering, refraction), :mod:`~meshshade.montecarlo.emitter` (photons from the lights), :mod:`~meshshade.montecarlo.engine`
+:mod:`~meshshade.montecarlo.sampling` (roulette constants, HG scattering, refraction),
+:mod:`~meshshade.montecarlo.emitter` (photons from the lights), :mod:`~meshshade.montecarlo.engine`
 with :mod:`~meshshade.montecarlo.loops`, :mod:`~meshshade.montecarlo.fused_walk` and
 :mod:`~meshshade.montecarlo.interior` (the pooled engine), :mod:`~meshshade.montecarlo.wavefront_oracle` (the
 numpy baseline, a test and benchmark oracle).

@@ -40,7 +40,8 @@ from meshshade.montecarlo.loops import _OPTS, _uniform, fresnel_out, photon_key,
 from meshshade.montecarlo.sampling import ROULETTE_BOOST, ROULETTE_THRESHOLD
 from meshshade.montecarlo.simulation import DEFAULT_BATCHES, batch_stats
 
-__all__ = ["SHAPE_KINDS", "ShapeProfile", "shape_mc_profile", "shape_mc_profiles", "ring_halfwidth", "ring_area", "walk_shape"]
+__all__ = ["SHAPE_KINDS", "ShapeProfile", "shape_mc_profile", "shape_mc_profiles",
+           "ring_halfwidth", "ring_area", "walk_shape"]
 
 #: the exact shapes, in the order of the kernel's ``kind`` code
 SHAPE_KINDS = ("plane", "sphere", "cylinder", "cavity", "bore")

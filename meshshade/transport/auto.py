@@ -4,7 +4,8 @@ Every entry sample i (where light enters, with principal curvatures k1 >= k2 and
 rho_c of each channel c) gets two decisions, both from closed-form bounds, never from a trial evaluation:
 
 **Kernel.** The first-order kernel's relative correction is ``delta = k_n(phi) a(rho) + k_n(phi + pi/2) b(rho)``
-(docs/physics.md eq. (51)), so over the whole neighbourhood ``|delta| <= kmax (|a| + |b|)`` with ``kmax = max(|k1|, |k2|)``
+(docs/physics.md eq. (51)), so over the whole neighbourhood ``|delta| <= kmax (|a| + |b|)``
+with ``kmax = max(|k1|, |k2|)``
 and ``|a| + |b|`` taken at its largest on [0, rho_c] (:func:`curvature_bound_mm`; for a sphere it is C(rho_c),
 the issue's ``|k| C(rho_cut)``). Then
 

@@ -28,8 +28,8 @@ same near field as the factor of eq. (79):
   absorb any (:meth:`NearFieldFactors.drift_factor`).
 
 Tables per channel: N and the slope lambda in log-log on a grid of r sigma_t' in [1e-4, 1e3] (beyond, its end
-values), G as a bicubic spline of ln G over (s/a, ln(a sigma_t')) on [0, PATCH_AVERAGE_RADII] x [1e-3, 8] (beyond: N(s) below 1e-3, the
-quadrature above 8). Built once per material (:func:`near_field_factors`, ~1 s).
+values), G as a bicubic spline of ln G over (s/a, ln(a sigma_t')) on [0, PATCH_AVERAGE_RADII] x [1e-3, 8]
+(beyond: N(s) below 1e-3, the quadrature above 8). Built once per material (:func:`near_field_factors`, ~1 s).
 
 Pure array work; no I/O.
 """

@@ -164,8 +164,8 @@ def _centre_rows(src_c, centres):
 def expand_far_pairs(centre_pairs, member_of_row, positions, vertices, frames, *, exclude_keys=None,
                      max_distance: float = np.inf):
     """Member pairs from their group centre's geodesic pairs (module docstring): the numba version of
-    :func:`expand_far_pairs_reference` (same arguments, same pairs in the same order), blocks of members on the pacing threads, with
-    no intermediate arrays of all member x centre-pair candidates."""
+    :func:`expand_far_pairs_reference` (same arguments, same pairs in the same order),
+    blocks of members on the pacing threads, with no intermediate arrays of all member x centre-pair candidates."""
     src_c, vtx, s_c, _, phi_c = centre_pairs
     members, centres = (np.asarray(a, dtype=np.int64) for a in member_of_row)
     if src_c.size == 0 or members.size == 0:
@@ -241,7 +241,8 @@ def _expand(members, centres, lo, hi, by_c, vtx, s_c, phi_c, P, V, N, D1, D2, K1
             ul = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
             if ul > 0.0:
                 u0, u1, u2 = u0 / ul, u1 / ul, u2 / ul
-            phi = math.atan2(u0 * D2[i, 0] + u1 * D2[i, 1] + u2 * D2[i, 2], u0 * D1[i, 0] + u1 * D1[i, 1] + u2 * D1[i, 2])
+            phi = math.atan2(u0 * D2[i, 0] + u1 * D2[i, 1] + u2 * D2[i, 2],
+                             u0 * D1[i, 0] + u1 * D1[i, 1] + u2 * D1[i, 2])
             cs, sn = math.cos(phi), math.sin(phi)
             kn = K1[i] * cs * cs + K2[i] * sn * sn
             phi = phi - (s * s / 6.0) * kn * (K1[i] - K2[i]) * sn * cs  # tangent_azimuth's geodesic correction

@@ -307,7 +307,8 @@ def test_a_failing_job_is_one_line_and_the_rest_finish(scene, tmp_path, dask_cli
 def test_batch_command_line_exit_code_1_when_a_job_failed(scene, tmp_path, cli):
     (tmp_path / "jobs.toml").write_text(
         f'[[job]]\nname = "ok"\ncommand = "profile"\nmaterial = "skin1"\n'
-        f'[[job]]\nname = "bad"\ncommand = "bake"\nmaterial = "skin1"\nmesh = "{scene / "missing.ply"}"\nlight = "directional:0,0,-1"\n')
+        f'[[job]]\nname = "bad"\ncommand = "bake"\nmaterial = "skin1"\nmesh = "{scene / "missing.ply"}"\n'
+        'light = "directional:0,0,-1"\n')
     rc, out, err = cli.run(["batch", tmp_path / "jobs.toml", "--out", tmp_path / "res", "--workers", "1"])
     assert rc == 1, err
     assert "meshshade: batch: job bad failed: mesh file not found" in err and "Traceback" not in err

@@ -34,7 +34,8 @@ def tiny_result():
 
 # ------------------------------------------------------------------------------------------------ references
 def test_sphere_directional_reference_energy_matches_closed_form():
-    """Integral of the quadrature reference over the sphere = entering power x alpha' T (docs/physics.md eq. (33), closed
+    """Integral of the quadrature reference over the sphere = entering power x alpha' T
+    (docs/physics.md eq. (33), closed
     form in sphere_total_reflectance); entering power E 2 pi R^2 int c F_t(c) dc by 64-point Gauss-Legendre."""
     R = 20.0
     spline = br.sphere_directional_table(R_mm=R, material=SKIN)

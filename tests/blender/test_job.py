@@ -7,9 +7,7 @@ process on the same mesh and lights, the colour groups summed by the test.
 from __future__ import annotations
 
 import math
-import os
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest

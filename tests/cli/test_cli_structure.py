@@ -21,8 +21,8 @@ from meshshade.transport import MODELS
 ROOT = Path(__file__).resolve().parents[2]
 CLI = ROOT / "meshshade" / "cli"
 BENCH = ROOT / "meshshade" / "bench"
-MODULES = {"bake": bake, "batch": batch, "blender": blender, "bench": bench, "check": check, "compare": compare, "demo": demo, "materials": materials, "mc": mc,
-           "profile": profile, "render": render}
+MODULES = {"bake": bake, "batch": batch, "blender": blender, "bench": bench, "check": check, "compare": compare,
+           "demo": demo, "materials": materials, "mc": mc, "profile": profile, "render": render}
 
 
 def test_commands_are_the_subcommand_modules():

@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 
 from meshshade.geometry import curvature, procedural
-from meshshade.geometry.mesh import MeshDefectWarning
 from meshshade.geometry.topology import vertex_adjacency
 
 ROOT = Path(__file__).resolve().parents[2]

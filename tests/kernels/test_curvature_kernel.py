@@ -24,7 +24,9 @@ from hypothesis import strategies as st
 from scipy import special
 
 from meshshade.kernels import curvature as cv
-from meshshade.kernels.curvature import CurvatureTable, aux_integral, aux_integral_drho_over_rho, curvature_coefficients, curvature_factor, curvature_profile, curvature_ratios, curvature_relative_coefficient, curvature_validity
+from meshshade.kernels.curvature import (CurvatureTable, aux_integral, aux_integral_drho_over_rho,
+                                         curvature_coefficients, curvature_factor, curvature_profile, curvature_ratios,
+                                         curvature_relative_coefficient, curvature_validity)
 from meshshade.kernels.cylinder import cylinder_exact_profile_geodesic
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.optics import diffusion_params
@@ -445,7 +447,8 @@ def test_curvature_factor_is_identity_to_first_order(policy):
 
 
 def test_soft_policy_stays_within_e_to_the_two_of_the_dipole():
-    """The "soft" policy (the default of every bake): f = exp(delta/sqrt(1 + (delta/2)^2)). The exponent is odd, increasing
+    """The "soft" policy (the default of every bake): f = exp(delta/sqrt(1 + (delta/2)^2)).
+    The exponent is odd, increasing
     and bounded by 2 in magnitude, so f lies in [e^-2, e^2] for every delta and tends to e^{+-2} as delta -> +-inf:
     at delta = 1e6 the exponent is 2/sqrt(1 + 4e-12) = 2 (1 - 2e-12), f = e^2 (1 - 4e-12)."""
     e2 = math.exp(2.0)  # 7.389056098930650
@@ -618,7 +621,8 @@ def test_curved_kernel_converges_like_inverse_square_radius(kind, policy):
 
 
 def test_curved_kernel_matches_physics_md_sphere_residuals():
-    """docs/physics.md §11.7 table d1 = (R_exact - R_d - R1)/R_d at R0 = 100 mm: 1.6e-5, 9.7e-5, 4.0e-4 (s = 1, 2, 5)."""
+    """docs/physics.md §11.7 table d1 = (R_exact - R_d - R1)/R_d at R0 = 100 mm:
+    1.6e-5, 9.7e-5, 4.0e-4 (s = 1, 2, 5)."""
     s = S_MM * ST
     R0 = 100 * ST
     exact = _sphere(s / R0, R0)

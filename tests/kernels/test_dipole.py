@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 from scipy import integrate
 
 from meshshade.errors import DiffusionValidityWarning
-from meshshade.kernels.dipole import dipole_cutoff_radius, dipole_diffuse_reflectance, dipole_profile, dipole_tail_reflectance, dipole_total_reflectance
+from meshshade.kernels.dipole import (dipole_cutoff_radius, dipole_diffuse_reflectance, dipole_profile,
+                                      dipole_tail_reflectance, dipole_total_reflectance)
 from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
 
@@ -100,7 +101,8 @@ def test_dipole_total_reflectance_matches_mpmath_quadrature(reference):
         (1.0, 0.01, 1.3, 0.6458266279762992),   # docs/physics.md §11.2: skin, eta 1.3
         (1.0, 0.01, 1.0, 0.7475659848543464),   # docs/physics.md §11.2: eta 1.0
         (0.55, 0.12, 1.3, 0.2127065470419267),  # docs/physics.md §11.2: potato B
-        # the original notes gave 0.8301914562772948 for "marble R" without its eta (docs/physics.md §11.2). The mpmath generator shows it is
+        # the original notes gave 0.8301914562772948 for "marble R" without its eta (docs/physics.md §11.2).
+        # The mpmath generator shows it is
         # the eta = 1.5 value (eta = 1.3, the Jensen 2001 preset index, gives 0.866540582666390).
         (2.19, 0.0021, 1.5, 0.8301914562772948),
     ],

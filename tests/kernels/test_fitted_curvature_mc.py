@@ -78,5 +78,6 @@ def test_hollow_shapes_tend_to_the_half_space():
     plane = shape_mc_profile(m, s, shape="plane", photons=200_000, seed=SEED)
     for shape in ("cavity", "bore"):
         p = shape_mc_profile(m, s, shape=shape, radius_mm=1e4, photons=200_000, seed=SEED)
-        assert np.all(np.abs(p.reflectance[0] - plane.reflectance[0]) <= 3.0 * p.stderr[0] + 1e-3 * plane.reflectance[0])
+        assert np.all(np.abs(p.reflectance[0] - plane.reflectance[0])
+                      <= 3.0 * p.stderr[0] + 1e-3 * plane.reflectance[0])
         assert p.total[0] == pytest.approx(plane.total[0], abs=3 * plane.total_stderr[0] + 1e-3)

@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 
 from meshshade.errors import MaterialError, MeshshadeError
-from meshshade.kernels.curvature import CurvatureTable, curvature_coefficients, curvature_profile, curvature_ratios, curvature_relative_coefficient, curvature_validity
+from meshshade.kernels.curvature import (CurvatureTable, curvature_coefficients, curvature_profile, curvature_ratios,
+                                         curvature_relative_coefficient, curvature_validity)
 from meshshade.kernels.cylinder import cylinder_exact_profile, cylinder_exact_profile_geodesic
-from meshshade.kernels.dipole import dipole_cutoff_radius, dipole_profile, dipole_tail_reflectance, dipole_total_reflectance
+from meshshade.kernels.dipole import (dipole_cutoff_radius, dipole_profile, dipole_tail_reflectance,
+                                      dipole_total_reflectance)
 from meshshade.kernels.optics import check_material
 from meshshade.kernels.sphere import sphere_chord_dipole_profile, sphere_series_profile, sphere_total_reflectance
 

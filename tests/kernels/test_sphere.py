@@ -1,4 +1,5 @@
-"""Exact-sphere kernel (meshshade.kernels.sphere) against mpmath references, analytic limits and docs/physics.md §11 tables.
+"""Exact-sphere kernel (meshshade.kernels.sphere) against mpmath references, analytic limits and
+docs/physics.md §11 tables.
 
 References: tests/data/sphere_reference.csv, written offline by tools/references/precompute_references.py (the series in
 its original I_nu/K_nu form at 38-193 digits; provenance in the CSV header). Tables quoted from docs/physics.md
@@ -18,7 +19,8 @@ from hypothesis import strategies as st
 from meshshade.errors import MaterialError
 from meshshade.kernels.dipole import dipole_profile, dipole_total_reflectance
 from meshshade.kernels.optics import diffusion_params
-from meshshade.kernels.sphere import _energy_T, _flux_profile, _sphere_fluence, sphere_chord_dipole_profile, sphere_series_profile, sphere_series_terms, sphere_total_reflectance
+from meshshade.kernels.sphere import (_energy_T, _flux_profile, _sphere_fluence, sphere_chord_dipole_profile,
+                                      sphere_series_profile, sphere_series_terms, sphere_total_reflectance)
 
 ST = 1.01  # sigma_t' of the skin test case [1/mm]
 SKIN = {"albedo_prime": 1.0 / 1.01, "eta": 1.3}

@@ -171,7 +171,8 @@ def test_profile_command_takes_mc_on_plane_sphere_and_cylinder(tmp_path, capsys)
     np.testing.assert_allclose([float(r[4]) for r in mc], direct.stderr[0], rtol=1e-5)
     assert all(ln.split(",")[4] == "" for ln in lines[1:] if ln.startswith("dipole,"))
     capsys.readouterr()
-    for shape in (["--shape", "sphere", "--radius", "10"], ["--shape", "cylinder", "--radius", "10", "--azimuth", "90"]):
+    for shape in (["--shape", "sphere", "--radius", "10"],
+                  ["--shape", "cylinder", "--radius", "10", "--azimuth", "90"]):
         assert main(["profile", "--material", "marble", "--models", "mc", "--distances", "1,2", "--photons", "5000",
                      *shape]) == 0
         assert "±" in capsys.readouterr().out

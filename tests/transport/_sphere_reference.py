@@ -95,7 +95,8 @@ def sphere_directional_exitance(beta, *, R_mm: float, material, channel: int = 0
     half_turn = np.pi * R_mm
     graded = [0.0, 0.125, 0.25, 0.5, 1.0]
     uniform = np.arange(2.0, UNIFORM_MM + 1e-9, STEP_MM)
-    grown = UNIFORM_MM * GROWTH ** np.arange(1, int(np.ceil(np.log(max(half_turn / UNIFORM_MM, 1.0)) / np.log(GROWTH))) + 1)
+    grown = UNIFORM_MM * GROWTH ** np.arange(
+        1, int(np.ceil(np.log(max(half_turn / UNIFORM_MM, 1.0)) / np.log(GROWTH))) + 1)
     s_breaks = np.unique(np.concatenate([graded, uniform, grown, [half_turn]]))
     s_breaks = s_breaks[s_breaks <= half_turn] / R_mm
     xp, wp = np.polynomial.legendre.leggauss(n_psi)

@@ -127,7 +127,8 @@ def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     assert zones.groups_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
     for far_geodesic, zone, max_tol, median_tol in (("shared", "zone_exact_near_shared_far", 0.01, 2e-4),
                                                    ("arc", "zone_exact_near_arc_far", 0.025, 2e-3)):
-        split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic, transport="direct")
+        split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic,
+                               transport="direct")
         assert split.stats[zone] == split.stats["entry_samples"]
         if far_geodesic == "shared":  # one exact far query per group instead of per sample
             assert split.stats["geodesic_pairs_computed"] < 0.6 * ref.stats["geodesic_pairs_computed"]
@@ -210,7 +211,8 @@ def test_far_field_dipole_model_matches_no_far_field(sphere40):
     is lit only through the shell, it is not small (measured up to 8 %), and the test says nothing there."""
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
     off = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", transport="direct")
-    direct = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="pairwise", transport="direct")
+    direct = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="pairwise",
+                            transport="direct")
     clustered = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="clustered",
                                far_rel_tol=1e-2)
     assert direct.stats["zone_arc_near"] == direct.stats["entry_samples"]
@@ -230,7 +232,8 @@ def test_auto_uses_clustered_far_field_only_where_flat(sphere40):
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
     r = transport.bake(sphere40, MARBLE, light, model="auto", transport="direct")
     assert r.stats.get("zone_exact_near", 0) + r.stats.get("zone_arc_near", 0) == 0
-    flat = transport.bake(sphere40, MARBLE, light, model="auto", auto_options=dict(curvature_tol=np.inf), transport="direct")
+    flat = transport.bake(sphere40, MARBLE, light, model="auto", auto_options=dict(curvature_tol=np.inf),
+                          transport="direct")
     assert flat.stats.get("zone_exact_near", 0) + flat.stats.get("zone_arc_near", 0) == flat.stats["entry_samples"]
     # the clustered far field covers every (vertex, source, channel) pair with near_c < chord <= cutoff_c: an
     # independent brute-force count (numpy, all pairs) equals the leaf pairs when no cluster is accepted (rel_tol

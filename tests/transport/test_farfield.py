@@ -1,6 +1,7 @@
 """Clustered far-field dipole sum (meshshade/transport/farfield.py, transport/farfield_loops.py).
 
-References: the dipole and its t-derivatives from an mpmath implementation of Jensen's formula (docs/physics.md eq. (15))
+References: the dipole and its t-derivatives from an mpmath implementation of Jensen's formula
+(docs/physics.md eq. (15))
 differentiated by mpmath; the far-field sums from a brute-force numpy double loop over all pairs with
 kernels/dipole.py:dipole_profile (tiny inputs) and from the cKDTree direct twin (larger inputs, itself checked
 against the brute force). The error bound ``|M - M_exact| <= error_bound <= rel_tol * M_exact`` is the claim

@@ -20,7 +20,8 @@ from meshshade.light import BeamLight, DirectionalLight, entry_samples
 from meshshade.materials import material_from_options
 from meshshade.transport.baking import bake
 from meshshade.transport.farfield_loops import kd_permutation, node_ranges, tree_depth
-from meshshade.transport.hierarchical import VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field, vertex_power
+from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
+                                              vertex_power)
 from meshshade.transport.hierarchy_loops import cluster_geometry
 
 SKIN = material_from_options("skin1")

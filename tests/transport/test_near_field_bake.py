@@ -115,16 +115,19 @@ def test_cli_near_field_switch(tmp_path):
     for nf in ("point", "beam"):
         out = tmp_path / f"{nf}.ply"
         npz = tmp_path / f"{nf}.npz"
-        assert main(["bake", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1", "--model",
+        assert main(["bake", str(src), "--units", "mm", "--material", "skin1",
+                     "--light", "directional:0,0,-1", "--model",
                      "curved", "--source-model", nf, "--out", str(out), "--npz", str(npz), "--quiet"]) == 0
         outs[nf] = np.load(npz)["radiance"]
     assert not np.allclose(outs["point"], outs["beam"])
-    assert main(["compare", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1", "--models",
+    assert main(["compare", str(src), "--units", "mm", "--material", "skin1",
+                 "--light", "directional:0,0,-1", "--models",
                  "curved,curved", "--source-model", "point,beam", "--width", "32", "--height", "32", "--spp", "1",
                  "--out", str(tmp_path / "cmp"), "--quiet"]) == 0
     stats = json.loads((tmp_path / "cmp" / "stats.json").read_text())
     assert stats["models"] == ["curved", "curved+beam"] and (tmp_path / "cmp" / "curved+beam.exr").exists()
-    assert main(["compare", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1", "--models",
+    assert main(["compare", str(src), "--units", "mm", "--material", "skin1",
+                 "--light", "directional:0,0,-1", "--models",
                  "curved,curved", "--out", str(tmp_path / "cmp2"), "--quiet"]) == 2
     assert main(["render", str(src), "--units", "mm", "--material", "skin1", "--light", "directional:0,0,-1",
                  "--source-model", "beam", "--width", "32", "--height", "32", "--spp", "1", "--out",

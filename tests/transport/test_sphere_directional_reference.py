@@ -171,7 +171,8 @@ def test_level4_meets_the_issue_target():
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="the direct sum's shadow side follows the quadric fit's local radius "
                    "(geometry/curvature.py: 19.91 mm for 20 mm at level 4), +0.3 to +1.8 % from the terminator to "
-                   "the antipode: mean 0.59 %, max 1.81 % (lit side 0.35 %/1.55 %); with the exact radius 0.23 %/1.61 %")
+                   "the antipode: mean 0.59 %, max 1.81 % (lit side 0.35 %/1.55 %); "
+                   "with the exact radius 0.23 %/1.61 %")
 def test_level4_direct_sum_meets_the_issue_target():
     mesh = Mesh(*icosphere(R, 4))   # ~40 s: every pair of 2562 vertices with exact polyhedral geodesics
     res = bake(mesh, MAT, [SUN], model="exact-sphere", cutoff_tol=FULL_CUTOFF, transport="direct")

@@ -146,7 +146,8 @@ def test_bake_energy_with_edges_much_longer_than_transport_length():
     out = (res.radiance[:, 0] * mesh.vertex_areas).sum()
     entering = res.samples.power.sum()
     assert out <= entering
-    # a unit beam anywhere on the sphere returns alpha' T of its power (docs/physics.md eq. (33)); uniform light likewise
+    # a unit beam anywhere on the sphere returns alpha' T of its power (docs/physics.md eq. (33));
+    # uniform light likewise
     expect = sphere_total_reflectance(R0_opt=R * 5.02, albedo_prime=5 / 5.02, eta=1.3)
     assert out / entering == pytest.approx(float(expect), rel=0.05)
 

@@ -18,8 +18,8 @@ processes affects all of them alike. Variants:
 * ``fitted_pairs``: ``fitted_dipole_pairs``, the bake's form (curvatures along and across and the twist given per
   pair; the compiled loop alone).
 
-Ratios are curved time / dipole time per evaluation, and fitted time / curved time (the issue's budget: 1.5). Also reports the table build time and its measured
-interpolation error.
+Ratios are curved time / dipole time per evaluation, and fitted time / curved time (the issue's budget: 1.5).
+Also reports the table build time and its measured interpolation error.
 
 Usage:  python tools/benchmarks/bench_curvature.py [--n 1000000] [--repeat 7] [--out bench.json]
 """

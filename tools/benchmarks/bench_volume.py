@@ -12,7 +12,8 @@ Rows (JSON, one object per line on stdout):
   from scratch and its peak resident memory (each size in a fresh process), and the fitted cost exponent.
 
 Scenes (the sun along (0.3, -0.4, -0.866) unless said): sphere20 (an icosphere of radius 20 mm, level 5, 10k
-vertices, skin1, the sun from above), spot50 (spot.obj at 50 mm, skin1), head200 (the head scan at 200 mm, skin1), blub80 (blub.obj at
+vertices, skin1, the sun from above), spot50 (spot.obj at 50 mm, skin1), head200 (the head scan at 200 mm, skin1),
+blub80 (blub.obj at
 80 mm, marble). The meshes other than the sphere come from ../shared/meshes (skipped with a note without it).
 
     python tools/benchmarks/bench_volume.py [--scenes sphere20,spot50] [--reference-photons 2e7] [--scaling --levels 2]

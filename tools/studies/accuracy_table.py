@@ -1,6 +1,7 @@
 """Error of the dipole and the first-order curved kernel against the exact sphere and cylinder, per radius.
 
-Skin-like case of docs/physics.md §11 (sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3). Relative errors (model - exact)/exact
+Skin-like case of docs/physics.md §11 (sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3).
+Relative errors (model - exact)/exact
 at geodesic distances s = 1, 2, 5, 10 mm; "dipole" is Jensen's chord dipole on the curved shape, "curved" the
 first-order k1/k2 kernel with its default positivity policy. Prints a markdown table (for README) and, with
 --json, the raw numbers.

@@ -145,12 +145,14 @@ def main(argv=None) -> int:
                     ring, total = model_rings(model, mc.lo, mc.hi, m, ch)
                 rel = ring / ref - 1.0
                 rel_total = total / mc.total[ch] - 1.0 if total is not None else float("nan")
-                far, near = np.abs(rel[DISTANCES >= 0.5]).max(), np.abs(rel[(DISTANCES >= 0.1) & (DISTANCES < 0.5)]).max()
+                far, near = (np.abs(rel[DISTANCES >= 0.5]).max(),
+                             np.abs(rel[(DISTANCES >= 0.1) & (DISTANCES < 0.5)]).max())
                 w = worst[model]
                 w[0], w[1] = max(w[0], far), max(w[1], near)
                 if total is not None:
                     w[2] = max(w[2], abs(rel_total))
-                row = {"shape": args.shape, "radius_mm": args.radius if sphere else None, "medium": name, "channel": "rgb"[ch], "model": model, "s_mm": DISTANCES.tolist(),
+                row = {"shape": args.shape, "radius_mm": args.radius if sphere else None, "medium": name,
+                       "channel": "rgb"[ch], "model": model, "s_mm": DISTANCES.tolist(),
                        "rel_error": [round(float(x), 4) for x in rel],
                        "mc_rel_stderr": [round(float(x), 4) for x in err / ref],
                        "total_rel_error": round(rel_total, 4), "mc_total": round(float(mc.total[ch]), 5),

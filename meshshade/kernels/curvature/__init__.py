@@ -1,4 +1,5 @@
-"""First-order curvature kernel (docs/physics.md eqs. (49)-(50)), in optical units (lengths x sigma_t', curvatures / sigma_t').
+"""First-order curvature kernel (docs/physics.md eqs. (49)-(50)),
+in optical units (lengths x sigma_t', curvatures / sigma_t').
 
 One concept per module, each importing only the ones above it:
 
@@ -15,7 +16,9 @@ One concept per module, each importing only the ones above it:
 The names below are re-exported here: ``from meshshade.kernels.curvature import curvature_profile``.
 """
 from meshshade.kernels.curvature.auxiliary import aux_integral, aux_integral_drho_over_rho
-from meshshade.kernels.curvature.coefficients import VALIDITY_TOL, _coeffs_scaled, curvature_coefficients, curvature_ratios, curvature_relative_coefficient, curvature_validity
+from meshshade.kernels.curvature.coefficients import (VALIDITY_TOL, _coeffs_scaled, curvature_coefficients,
+                                                      curvature_ratios, curvature_relative_coefficient,
+                                                      curvature_validity)
 from meshshade.kernels.curvature.policies import DELTA_SAT, POLICIES, curvature_factor
 from meshshade.kernels.curvature.profile import curvature_profile
 from meshshade.kernels.curvature.table import CurvatureTable, _cos_many

@@ -1,4 +1,5 @@
-"""First-order curvature coefficients (docs/physics.md eqs. (49)-(50)), optical units (lengths x sigma_t', curvatures / sigma_t').
+"""First-order curvature coefficients (docs/physics.md eqs. (49)-(50)),
+optical units (lengths x sigma_t', curvatures / sigma_t').
 
 The reflectance of a slightly curved surface, expanded at the entry point, with the exit point at geodesic
 distance ``rho`` in direction ``phi`` from the first principal direction (principal curvatures k1, k2; k > 0

@@ -1,4 +1,5 @@
-"""Curved-surface diffuse reflectance, first order in the principal curvatures (docs/physics.md eqs. (49)-(50)), in optical units.
+"""Curved-surface diffuse reflectance, first order in the principal curvatures (docs/physics.md eqs. (49)-(50)),
+in optical units.
 
 :func:`curvature_profile` returns ``R = R_d(rho) f(delta)``: the planar dipole at geodesic distance ``rho`` times a
 positive function of the first-order relative correction
