@@ -7,8 +7,9 @@ and says nothing. meshshade has about 90 cached functions and 50 inlined helpers
 
 So importing meshshade points numba's cache (``NUMBA_CACHE_DIR``) at ``<user cache>/meshshade/numba/<key>``,
 before any meshshade module imports numba. The key is :func:`source_hash` (sha256 over the relative path and
-bytes of every ``.py`` file of the package) followed by the Python, numba and numpy versions. Any change to any
-source file gives a new, empty folder, and every kernel is compiled again on its first use. The user cache is
+bytes of every ``.py`` file of the package and of its data tables, ``.csv``) followed by the Python, numba and
+numpy versions. Any change to any source file or table gives a new, empty folder, and every kernel is compiled
+again on its first use. The user cache is
 ``$XDG_CACHE_HOME``, else ``%LOCALAPPDATA%`` (Windows), ``~/Library/Caches`` (macOS) or ``~/.cache``. When it
 cannot be written, a private folder under the system temporary directory is used instead.
 
@@ -59,7 +60,9 @@ _in_use_fd: int | None = None  # this process's lock on its folder, held until e
 
 
 def source_hash(package_dir: str | os.PathLike = PACKAGE_DIR) -> str:
-    """sha256 over the sorted relative paths and bytes of every ``*.py`` file under ``package_dir``.
+    """sha256 over the sorted relative paths and bytes of every ``*.py`` and ``*.csv`` file under ``package_dir``
+    (the sources and the runtime tables of ``kernels/data``: a table is read at import, and a compiled function
+    that took one of its arrays as a global would keep the old numbers).
 
     The first 16 hex digits. Modification times do not count; ``__pycache__`` folders are skipped.
     """
@@ -68,7 +71,8 @@ def source_hash(package_dir: str | os.PathLike = PACKAGE_DIR) -> str:
     for folder, subfolders, names in os.walk(root):
         subfolders[:] = [d for d in subfolders if d != "__pycache__"]
         rel = os.path.relpath(folder, root).replace(os.sep, "/")
-        files += [(n if rel == "." else f"{rel}/{n}", os.path.join(folder, n)) for n in names if n.endswith(".py")]
+        files += [(n if rel == "." else f"{rel}/{n}", os.path.join(folder, n)) for n in names
+                  if n.endswith((".py", ".csv"))]
     digest = hashlib.sha256()
     for rel, path in sorted(files):
         with open(path, "rb") as fh:

@@ -163,6 +163,13 @@ def test_source_hash_changes_with_any_source_change_only(tmp_path):
     (pkg / "new.py").write_text("")  # a new file, even empty
     assert source_hash(pkg) != h0
     (pkg / "new.py").unlink()
+    (pkg / "sub" / "table.csv").write_text("x\n1.0\n")  # a runtime table (kernels/data/*.csv)
+    h_table = source_hash(pkg)
+    assert h_table != h0
+    (pkg / "sub" / "table.csv").write_text("x\n1.5\n")
+    assert source_hash(pkg) != h_table
+    (pkg / "sub" / "table.csv").unlink()
+    assert source_hash(pkg) == h0
     helper.rename(pkg / "sub" / "helper2.py")  # a rename
     assert source_hash(pkg) != h0
 
