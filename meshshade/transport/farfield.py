@@ -235,8 +235,9 @@ def far_field_exitance(sources, receivers, material: Material, r_near_mm, cutoff
                             tree.node_m3, rn, cut, st, al, mu, zv, float(rel_tol), float(budget_share), *nl)
 
         res = run_in_blocks(block, len(recv), min_block=64)   # serial loops on the pacing threads
-        M, E, counts = (np.concatenate([r[i] for r in res]) for i in range(3))
-        M[order], E[order], counts[order] = M.copy(), E.copy(), counts.copy()   # receivers back in their order
+        back = np.empty_like(order)   # the row of each receiver in the traversal's order
+        back[order] = np.arange(order.size)
+        M, E, counts = (np.concatenate([r[i] for r in res])[back] for i in range(3))
     tot = counts.sum(axis=0)
     stats = {"pairs_exact": int(tot[0]), "clusters_accepted": int(tot[1]), "nodes_visited": int(tot[2]),
              "clusters_from_budget": int(tot[3]),

@@ -137,6 +137,8 @@ class NearFieldCorrection:
         blocks = max(1, int(math.ceil(order.size * per_source / PAIR_BLOCK)))
         arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (src_normal, rec_normal, src_power, src_cos_t,
                                                                         src_radius, rec_radius)]
+        tables = (self._f, self._cum, self._rest, self._cos, self._n_r, self._log_r0, _LOG_R[1] - _LOG_R[0],
+                  self.radius_mm, _TH_NODES, _TH_WEIGHTS, PATCH_RADII)
         total = 0
         for chunk in np.array_split(order, blocks):
             pairs = cKDTree(src_pos[chunk]).sparse_distance_matrix(tree_r, radius, output_type="ndarray")
@@ -145,8 +147,6 @@ class NearFieldCorrection:
             s = np.ascontiguousarray(pairs["v"], dtype=np.float64)
             del pairs
             vals = np.zeros((i.size, 3))
-            tables = (self._f, self._cum, self._rest, self._cos, self._n_r, self._log_r0, _LOG_R[1] - _LOG_R[0],
-                      self.radius_mm, _TH_NODES, _TH_WEIGHTS, PATCH_RADII)
             # each pair's value on its own: blocks of pairs on the pacing threads, written into their rows of vals
             run_in_blocks(lambda a, b: _pair_values(i, o, s, *arrays, *tables, vals, a, b), i.size)
             for c in range(3):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 
 import numba
 import numpy as np
@@ -22,21 +21,13 @@ from meshshade.materials import Material
 from meshshade.transport.auto import AutoPlan
 from meshshade.transport.pair_kernel import PairKernel, SourceFrames
 
+from bench_kernels import best_time  # noqa: E402  (tools/ is not a package: this script's folder is on sys.path)
+
 
 @numba.njit(cache=True)
 def _bare_dipole(s, st, al, mu, zr, zv, out):
     for j in range(s.size):
         out[j] = dipole_diffuse_reflectance(s[j] * st, al, mu, zr, zv) * st * st
-
-
-def _best(f, repeat):
-    f()
-    ts = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        f()
-        ts.append(time.perf_counter() - t)
-    return min(ts)
 
 
 def main(argv=None):
@@ -52,13 +43,13 @@ def main(argv=None):
     src, s, phi = rng.integers(0, n, p), rng.uniform(0.0, 20.0, p), rng.uniform(-3.0, 3.0, p)
     out = np.empty(p)
     d = diffusion_params(1.0 / 1.01, 1.3)
-    base = _best(lambda: _bare_dipole(s, 1.01, float(d.albedo_prime), float(d.mu), float(d.z_r), float(d.z_v), out),
+    base = best_time(lambda: _bare_dipole(s, 1.01, float(d.albedo_prime), float(d.mu), float(d.z_r), float(d.z_v), out),
                  a.repeat) / p * 1e9
     plan = AutoPlan(rng.integers(0, 4, n).astype(np.int8), np.ones(n, bool), np.zeros(n, bool))
     rows = {}
     for model in ("dipole", "curved", "fitted", "exact-sphere", "auto"):
         pk = PairKernel(model, mat, frames, plan=plan if model == "auto" else None, reach_mm=20.0)
-        ns = _best(lambda: pk.evaluate(0, src, s, s, phi), a.repeat) / p * 1e9
+        ns = best_time(lambda: pk.evaluate(0, src, s, s, phi), a.repeat) / p * 1e9
         rows[model] = {"ns_per_pair": round(ns, 1), "ratio": round(ns / base, 2)}
     print(json.dumps({"pairs": p, "baseline_bare_dipole_ns_per_pair": round(base, 1), "models": rows}, indent=1))
 
