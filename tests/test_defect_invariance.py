@@ -1,0 +1,80 @@
+"""Defect invariance of the default bake (issue 41): a scanned hand (../shared/meshes/hand.obj, 190 mm long, skin1,
+a sun travelling from the wrist towards the fingers) made imperfect by tools/benchmarks/mesh_defects.py, exactly
+as tools/benchmarks/bench_defects.py makes it, must keep the volume model and the clean bake's exitance away from
+the defects: mean |M_defect / M_clean - 1| <= 2 % and p99 <= 6 % per channel on the vertices farther than
+EXCLUDE_MM from every defect (whose clean exitance is above 1e-3 of the channel's peak).
+
+Slow (a bake each, minutes where the bake leaves the volume model). Expected to fail on the code of 2ded9bb, whose
+volume transport needs a closed mesh: those cases are xfail (not strict) until the new transport lands; then
+remove the marks. Flipped faces are repaired by the mesh validation into the clean mesh, so that case holds today.
+"""
+from __future__ import annotations
+
+import importlib.util
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from meshshade.geometry.mesh import Mesh
+from meshshade.light import DirectionalLight
+from meshshade.materials import Material
+from meshshade.transport import bake
+
+ROOT = Path(__file__).resolve().parents[1]
+#: the issue's "more than 10-25 mm from the defect": the lenient end; tighten once the targets are met
+EXCLUDE_MM = 25.0
+TARGET_MEAN, TARGET_P99 = 0.02, 0.06
+REWRITE = pytest.mark.xfail(strict=False, reason="issue 41: the volume transport on defective meshes is being "
+                                                 "rewritten")
+
+
+def _tool(name: str):
+    """A module of tools/benchmarks/ (tools/ is not a package), loaded once."""
+    key = f"_tools_benchmarks_{name}"
+    if key not in sys.modules:
+        spec = importlib.util.spec_from_file_location(key, ROOT / "tools" / "benchmarks" / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[key] = module
+        spec.loader.exec_module(module)
+    return sys.modules[key]
+
+
+bench = _tool("bench_defects")
+md = _tool("mesh_defects")
+
+pytestmark = pytest.mark.slow
+
+
+def _bake(V, F, sun):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mesh = Mesh.from_arrays(V, F)
+        return bake(mesh, Material.preset("skin1"), [DirectionalLight(sun, 1.0)])
+
+
+@pytest.fixture(scope="module")
+def hand(shared_meshes):
+    V, F, sun = bench.scene_arrays("hand190")
+    clean = _bake(V, F, sun)
+    assert clean.model == "volume" and clean.stats["transport"] == "volume"
+    return V, F, sun, np.asarray(clean.radiance)
+
+
+@pytest.mark.parametrize("defect", [pytest.param(d, marks=REWRITE) for d in ("holes6", "dup5", "ball6", "fin",
+                                                                             "stray10")] + ["flip10"])
+def test_default_bake_of_a_defective_scan_matches_the_clean_one_away_from_the_defects(hand, defect):
+    V, F, sun, clean = hand
+    d = bench.defective(defect, V, F, sun)
+    res = _bake(d.vertices, d.faces, sun)
+    assert res.model == "volume" and res.stats["transport"] == "volume", res.stats["transport"]
+    n = V.shape[0]
+    referenced = np.zeros(d.vertices.shape[0], dtype=bool)
+    referenced[d.faces.reshape(-1)] = True
+    keep = md.far_from(V, d.points, EXCLUDE_MM) & referenced[:n]
+    got = md.relative_change(np.asarray(res.radiance)[:n], clean, keep)
+    assert got["finite"] and min(got["count"]) > n // 3
+    assert max(got["mean"]) <= TARGET_MEAN, got
+    assert max(got["p99"]) <= TARGET_P99, got
