@@ -3,7 +3,8 @@
 Imported only inside Blender (it needs ``bpy``); everything it computes goes through
 :mod:`meshshade.blender.convert` (units and lights) and :mod:`meshshade.blender.job` (the bake in a child
 process). What it reads from the scene: the active mesh object (its base mesh, triangulated, with its world
-transform), the scene's unit scale, and every sun, point and spot light that renders. What it writes: the float
+transform), the scene's unit scale, every sun, point, spot and area light that renders, and the World (an
+Environment Texture or a constant colour into its Background: :func:`scene_world`). What it writes: the float
 colour attribute :data:`RADIANCE_ATTRIBUTE` (linear exitance, W/mm²) and the byte colour attribute
 :data:`DISPLAY_ATTRIBUTE` (tone-mapped, made the active and render colour), optionally a material
 :data:`MATERIAL_NAME` that shows the exitance. With "Bake to texture", also a float image ``meshshade <object>``
@@ -21,8 +22,8 @@ import numpy as np
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from meshshade.blender.convert import (BlenderLight, colour_groups, convert_lights, mm_per_blender_unit,
-                                       world_faces, world_vertices_mm)
+from meshshade.blender.convert import (BlenderLight, BlenderWorld, colour_groups, convert_lights,
+                                       mm_per_blender_unit, world_faces, world_vertices_mm)
 from meshshade.blender.job import BakeJob, BakeSettings
 from meshshade import io
 from meshshade.errors import MeshshadeError
@@ -147,8 +148,54 @@ def scene_lights(context) -> list[BlenderLight]:
         out.append(BlenderLight(name=ob.name, kind=lt.type, energy=energy, color=tuple(lt.color),
                                 matrix=np.array(ob.matrix_world, dtype=np.float64),
                                 spot_size=float(getattr(lt, "spot_size", math.pi)),
-                                spot_blend=float(getattr(lt, "spot_blend", 0.0))))
+                                spot_blend=float(getattr(lt, "spot_blend", 0.0)),
+                                shape=str(getattr(lt, "shape", "SQUARE")), size=float(getattr(lt, "size", 1.0)),
+                                size_y=float(getattr(lt, "size_y", 1.0)), spread=float(getattr(lt, "spread", math.pi))))
     return out
+
+
+def _linked(socket):
+    """The node feeding ``socket`` (None when unlinked)."""
+    return socket.links[0].from_node if socket.is_linked else None
+
+
+def scene_world(context) -> BlenderWorld | None:
+    """The scene's World as :class:`BlenderWorld`: its Background's strength and colour and, when an Environment
+    Texture feeds the colour, the image's absolute path, projection and the Mapping node before it; None without a
+    World or a node tree with a Background into the World Output."""
+    world = context.scene.world
+    if world is None or not getattr(world, "use_nodes", True) or world.node_tree is None:   # 5.0: always nodes
+        return None
+    nodes = world.node_tree.nodes
+    out = next((n for n in nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None) or \
+        next((n for n in nodes if n.type == "OUTPUT_WORLD"), None)
+    bg = _linked(out.inputs["Surface"]) if out is not None else None
+    if bg is None:
+        return None
+    if bg.type != "BACKGROUND":
+        return BlenderWorld(other=f"a {bg.bl_label} node into the World Output")
+    strength_in, colour_in = bg.inputs["Strength"], bg.inputs["Color"]
+    strength = float(strength_in.default_value)
+    if strength_in.is_linked:
+        return BlenderWorld(other="a node feeding the Background's strength")
+    tex = _linked(colour_in)
+    if tex is None:
+        return BlenderWorld(strength=strength, color=tuple(colour_in.default_value)[:3])
+    if tex.type != "TEX_ENVIRONMENT":
+        return BlenderWorld(strength=strength, other=f"a {tex.bl_label} node into the Background's colour")
+    image = tex.image
+    path = "" if image is None or image.packed_file is not None or not image.filepath else \
+        bpy.path.abspath(image.filepath, library=image.library)
+    mapping = _linked(tex.inputs["Vector"])
+    if mapping is not None and mapping.type != "MAPPING":
+        return BlenderWorld(strength=strength, other=f"a {mapping.bl_label} node into the texture's vector")
+    kw = {}
+    if mapping is not None:
+        kw = {"mapping": mapping.vector_type, "rotation": tuple(mapping.inputs["Rotation"].default_value),
+              "location": tuple(mapping.inputs["Location"].default_value)
+              if "Location" in mapping.inputs else (0.0, 0.0, 0.0),
+              "scale": tuple(mapping.inputs["Scale"].default_value) if "Scale" in mapping.inputs else (1.0, 1.0, 1.0)}
+    return BlenderWorld(strength=strength, image=path, projection=tex.projection, **kw)
 
 
 def mesh_arrays(ob) -> tuple[np.ndarray, np.ndarray]:
@@ -188,7 +235,7 @@ def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJo
         raise MeshshadeError(f"{ob.name}: the mesh has no faces")
     mpu = mm_per_blender_unit(context.scene.unit_settings.scale_length)
     M = np.array(ob.matrix_world, dtype=np.float64)
-    lights, notes = convert_lights(scene_lights(context), mpu)
+    lights, notes = convert_lights(scene_lights(context), mpu, world=scene_world(context))
     mods = [m.name for m in ob.modifiers if m.show_render]
     if mods:
         notes.append(f"{ob.name}: baked on the base mesh; modifiers ({', '.join(mods)}) interpolate the result")

@@ -27,7 +27,21 @@ Colour
     result channel by channel. Lights of one colour are baked together; each further colour is one more bake
     (:func:`colour_groups`).
 
-Area lights and the world (environment) light have no counterpart in meshshade; they are left out with a note.
+Area
+    A Blender area light of *power* P W is a one-sided Lambertian emitter (Cycles: radiance P / (pi A) towards every
+    direction in front of it, the default *spread* of 180 degrees) facing its local −Z, of size ``size`` along its
+    local X and ``size_y`` along Y (SQUARE: size x size; DISK: diameter size; ELLIPSE: diameters size and size_y),
+    the object's scale applied: meshshade's :class:`~meshshade.light.sources.AreaLight` with the local Y axis as its
+    ``up`` (:func:`area_light`). A spread below 180 degrees (a narrower beam) is not modelled: noted.
+
+World
+    The World's Background shader emits radiance ``strength x colour`` W/(m² sr) from every direction. Fed by an
+    Environment Texture (equirectangular), that is the image's pixel values times the strength: meshshade's
+    :class:`~meshshade.light.sources.EnvironmentLight` of the same file, strength × 1e-6 (W/(mm² sr) per W/(m² sr)),
+    ``up = "z"`` (the add-on passes Blender's world coordinates), rotated by the Mapping node's Z rotation (type
+    Point; type Texture rotates the other way: :func:`convert_world`). A constant colour is a ``uniform`` light of
+    that colour. Other setups (a Sky Texture, a mirror-ball projection, rotations about X or Y) are left out with a
+    note.
 """
 from __future__ import annotations
 
@@ -37,15 +51,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from meshshade.errors import LightError, UnitsError
-from meshshade.light.sources import DirectionalLight, PointLight, Spot
+from meshshade.light.sources import AreaLight, DirectionalLight, EnvironmentLight, PointLight, Spot
+from meshshade.light.spec import parse_light_spec
 
-__all__ = ["BlenderLight", "mm_per_blender_unit", "world_vertices_mm", "world_faces", "light_direction",
-           "sun_irradiance", "point_intensity", "convert_lights", "colour_groups"]
+__all__ = ["BlenderLight", "BlenderWorld", "mm_per_blender_unit", "world_vertices_mm", "world_faces",
+           "light_direction", "sun_irradiance", "point_intensity", "area_light", "convert_world", "convert_lights",
+           "colour_groups", "RADIANCE_PER_W_PER_M2_SR"]
 
 #: W/mm² per W/m²
 W_PER_MM2_PER_W_PER_M2 = 1e-6
 #: mm per metre
 MM_PER_METRE = 1000.0
+#: W/(mm² sr) per W/(m² sr)
+RADIANCE_PER_W_PER_M2_SR = 1e-6
 
 
 def mm_per_blender_unit(scale_length: float) -> float:
@@ -108,20 +126,105 @@ class BlenderLight:
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
     spot_size: float = math.pi
     spot_blend: float = 0.0
+    shape: str = "SQUARE"
+    size: float = 1.0
+    size_y: float = 1.0
+    spread: float = math.pi
 
 
-def convert_lights(lights, mm_per_unit: float) -> tuple[list, list[str]]:
-    """``([(meshshade light, (3,) colour), ...], notes)`` for the scene's ``lights`` (:class:`BlenderLight`).
+@dataclass
+class BlenderWorld:
+    """What the add-on reads from the scene's World: the Background's ``strength`` and ``color``; ``image`` the
+    absolute path of the Environment Texture feeding its colour (None: a constant colour; ``""``: a texture whose
+    image has no file, e.g. packed into the .blend), its ``projection``; the Mapping node before it (``mapping``
+    its type, "POINT", "TEXTURE", ... or None without one; ``rotation`` radians XYZ, ``location``, ``scale``);
+    ``other``: a description of anything else feeding the Background (a Sky Texture ...), or None."""
 
-    Area lights, lights of zero strength or black colour are left out with a note each. No light left:
-    :class:`~meshshade.errors.LightError` (one line, naming what was found).
+    strength: float = 1.0
+    color: tuple = (0.05, 0.05, 0.05)
+    image: str | None = None
+    projection: str = "EQUIRECTANGULAR"
+    mapping: str | None = None
+    rotation: tuple = (0.0, 0.0, 0.0)
+    location: tuple = (0.0, 0.0, 0.0)
+    scale: tuple = (1.0, 1.0, 1.0)
+    other: str | None = None
+
+
+def area_light(lt: BlenderLight, mm_per_unit: float) -> AreaLight:
+    """The :class:`~meshshade.light.sources.AreaLight` of a Blender area light (module docstring): centre, −Z
+    normal and local Y ``up`` from its world matrix, sizes in mm with the object's scale, power in W."""
+    M = _matrix(lt.matrix)
+    sx, sy = (float(np.linalg.norm(M[:3, k])) * float(mm_per_unit) for k in (0, 1))
+    shape = lt.shape.upper()
+    a = float(lt.size) * sx
+    b = (float(lt.size_y) if shape in ("RECTANGLE", "ELLIPSE") else float(lt.size)) * sy
+    up = M[:3, 1] / max(float(np.linalg.norm(M[:3, 1])), 1e-300)
+    if shape in ("DISK", "ELLIPSE"):
+        return AreaLight(tuple(M[:3, 3] * float(mm_per_unit)), tuple(light_direction(M)), "disc", (a / 2, b / 2),
+                         float(lt.energy), up=tuple(up))
+    return AreaLight(tuple(M[:3, 3] * float(mm_per_unit)), tuple(light_direction(M)), "rect", (a, b),
+                     float(lt.energy), up=tuple(up))
+
+
+def convert_world(world: BlenderWorld | None) -> tuple[list, list[str]]:
+    """``([(light, colour)] or [], notes)``: the World as an environment light (module docstring).
+
+    An Environment Texture gives ``env:<image>:<strength x 1e-6>:<rotation deg>:z`` (the map is read, and checked,
+    here: a bad file is a :class:`~meshshade.errors.LightError`); a constant colour a ``uniform`` light of that
+    colour; a zero strength, a black colour or an unsupported setup nothing, with a note."""
+    if world is None:
+        return [], []
+    strength = float(world.strength)
+    if not (math.isfinite(strength) and strength >= 0.0):
+        raise LightError(f"the World's strength {world.strength!r} must be finite and >= 0")
+    colour = np.asarray(world.color, dtype=np.float64).reshape(3)
+    if world.other is not None:
+        return [], [f"the World left out: {world.other} has no counterpart in meshshade (an Environment Texture "
+                    "or a constant colour into the Background has)"]
+    if strength == 0.0:
+        return [], ["the World left out: its strength is zero"]
+    if world.image is None:
+        if not (np.all(np.isfinite(colour)) and np.all(colour >= 0.0)) or not np.any(colour > 0.0):
+            return [], ["the World left out: its colour is black"]
+        return [(EnvironmentLight.uniform(strength * RADIANCE_PER_W_PER_M2_SR), colour)], []
+    if not world.image:
+        return [], ["the World left out: its Environment Texture's image has no file (packed into the .blend? "
+                    "unpack it: File > External Data > Unpack Resources)"]
+    if world.projection.upper() != "EQUIRECTANGULAR":
+        return [], [f"the World left out: its Environment Texture's projection is {world.projection}, meshshade "
+                    "reads equirectangular maps"]
+    notes = []
+    rx, ry, rz = (float(x) for x in world.rotation)
+    rotation = 0.0
+    if world.mapping is not None:
+        if world.mapping.upper() not in ("POINT", "TEXTURE"):
+            notes.append(f"the World's Mapping node of type {world.mapping} is ignored (Point and Texture are read)")
+        else:
+            rotation = math.degrees(rz) if world.mapping.upper() == "POINT" else -math.degrees(rz)
+            if abs(rx) > 1e-9 or abs(ry) > 1e-9:
+                notes.append("the World's Mapping rotation about X and Y is ignored (only Z, about the up axis, is "
+                             "read)")
+            if any(abs(x) > 1e-9 for x in world.location) or any(abs(x - 1.0) > 1e-9 for x in world.scale):
+                notes.append("the World's Mapping location and scale are ignored (they do not move a direction's "
+                             "lookup as a rotation does)")
+    spec = f"env:{world.image}:{strength * RADIANCE_PER_W_PER_M2_SR!r}:{rotation!r}:z"
+    return [(parse_light_spec(spec), np.ones(3))], notes
+
+
+def convert_lights(lights, mm_per_unit: float, world: BlenderWorld | None = None) -> tuple[list, list[str]]:
+    """``([(meshshade light, (3,) colour), ...], notes)`` for the scene's ``lights`` (:class:`BlenderLight`) and its
+    ``world`` (:func:`convert_world`).
+
+    Lights of zero strength or black colour, and setups meshshade cannot read, are left out with a note each. No
+    light left: :class:`~meshshade.errors.LightError` (one line, naming what was found).
     """
     out, notes = [], []
     for lt in lights:
         colour = np.asarray(lt.color, dtype=np.float64).reshape(3)
         what = f"{lt.kind.lower()} light {lt.name!r}"
-        if lt.kind not in ("SUN", "POINT", "SPOT"):
-            notes.append(f"{what} left out: meshshade has sun, point and spot lights only")
+        if lt.kind not in ("SUN", "POINT", "SPOT", "AREA"):
+            notes.append(f"{what} left out: meshshade has sun, point, spot and area lights only")
             continue
         if not (math.isfinite(lt.energy) and lt.energy >= 0.0) or not np.all(np.isfinite(colour) & (colour >= 0)):
             raise LightError(f"{what}: strength {lt.energy!r} and colour {tuple(colour)} must be finite and >= 0")
@@ -129,6 +232,11 @@ def convert_lights(lights, mm_per_unit: float) -> tuple[list, list[str]]:
             notes.append(f"{what} left out: its strength or colour is zero")
             continue
         M = _matrix(lt.matrix)
+        if lt.kind == "AREA":
+            if float(lt.spread) < math.pi - 1e-6:
+                notes.append(f"{what}: its spread ({math.degrees(lt.spread):.3g} deg) is taken as 180 (Lambertian)")
+            out.append((area_light(lt, mm_per_unit), colour))
+            continue
         if lt.kind == "SUN":
             light = DirectionalLight(tuple(light_direction(M)), sun_irradiance(lt.energy))
         else:
@@ -136,9 +244,13 @@ def convert_lights(lights, mm_per_unit: float) -> tuple[list, list[str]]:
                     if lt.kind == "SPOT" else None)
             light = PointLight(tuple(M[:3, 3] * float(mm_per_unit)), point_intensity(lt.energy), spot=spot)
         out.append((light, colour))
+    sky, sky_notes = convert_world(world)
+    out += sky
+    notes += sky_notes
     if not out:
         found = ", ".join(f"{lt.kind.lower()} {lt.name!r}" for lt in lights) or "none"
-        raise LightError(f"no sun, point or spot light with a strength above zero in the scene (found: {found})")
+        raise LightError(f"no sun, point, spot or area light with a strength above zero and no World to light the "
+                         f"scene (found: {found})")
     return out, notes
 
 

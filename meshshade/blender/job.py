@@ -31,7 +31,7 @@ import numpy as np
 from meshshade import io
 from meshshade.transport.models import DEFAULT_MODEL
 from meshshade.errors import MeshshadeError
-from meshshade.light.sources import BeamLight, DirectionalLight, PointLight
+from meshshade.light.sources import AreaLight, BeamLight, DirectionalLight, EnvironmentLight, PointLight
 
 __all__ = ["BakeSettings", "BakeJob", "BakeJobError", "light_spec", "CANCEL_GRACE"]
 
@@ -67,6 +67,16 @@ def light_spec(light) -> str:
                 f"{_num(np.degrees(sp.angle))}:{_num(sp.blend)}")
     if isinstance(light, BeamLight):
         return f"beam:{_vec(light.origin)}:{_vec(light.direction)}:{_num(light.power)}:{_num(light.radius)}"
+    if isinstance(light, EnvironmentLight):
+        if light.path is not None:
+            return f"env:{light.path}:{_num(light.strength)}:{_num(light.rotation_deg)}:{light.up}"
+        if light.is_uniform:
+            return f"uniform:{_num(light.strength * float(light.radiance.max()))}"
+        raise MeshshadeError("an environment map given as an array has no --light spec (write it to an EXR file)")
+    if isinstance(light, AreaLight):
+        up = "" if light.up is None else f":{_vec(light.up)}"
+        return (f"area:{_vec(light.position)}:{_vec(light.normal)}:{light.shape}:{_vec(light.size)}:"
+                f"{_num(light.power)}{up}")
     raise MeshshadeError(f"not a meshshade light: {light!r}")
 
 

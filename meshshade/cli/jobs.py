@@ -16,7 +16,7 @@ Job file (TOML)::
     [[job]]
     name = "spot-sun"               # the job's folder; default: the command and a hash of its options
     command = "bake"
-    mesh = "meshes/spot.obj"        # relative to the job file
+    mesh = "meshes/spot.obj"        # relative to the job file (so is an environment map: "env:maps/studio.exr")
     light = "directional:0,0,-1"    # a repeatable option takes a list: ["beam:...", "point:..."]
     out = "spot.ply"                # default: bake.ply
 
@@ -174,6 +174,8 @@ def _normalise(command: str, options: dict, where: str, base: Path) -> dict:
             value = _scalar_text(value, f"{where}: {key}")
         if key == "mesh":
             value = str((base / value).resolve()) if not Path(value).is_absolute() else value
+        if key == "light":   # an environment map's file is relative to the job file, as the mesh
+            value = [_resolve_map(v, base) for v in value]
         out[key] = value
     for key, default in OUTPUTS[command].items():
         if key not in out and default is not None:
@@ -184,6 +186,20 @@ def _normalise(command: str, options: dict, where: str, base: Path) -> dict:
                 raise JobFileError(f"{where}: {key} {name!r} must be a plain file name (it is written in the job's "
                                    "own folder)")
     return out
+
+
+def _resolve_map(spec: str, base: Path) -> str:
+    """``env:FILE...`` with a relative FILE resolved against ``base`` (where the file is, if the spec's optional
+    fields are taken off); any other light spec as it is."""
+    if not spec.lower().startswith("env:"):
+        return spec
+    rest = spec[4:]
+    parts = rest.split(":")
+    for k in range(len(parts), 0, -1):           # the longest head that names a file next to the job file
+        head = ":".join(parts[:k])
+        if head and not Path(head).is_absolute() and (base / head).is_file():
+            return "env:" + ":".join([str((base / head).resolve()), *parts[k:]])
+    return spec
 
 
 def _job_name(command: str, options: dict, template: str | None, varied: dict, where: str) -> str:

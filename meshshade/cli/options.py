@@ -6,14 +6,15 @@ through :mod:`meshshade.io` only.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 from meshshade.cli.arguments.common import LIGHT_HELP
-from meshshade.errors import MeshshadeError
+from meshshade.errors import LightError, MeshshadeError
 from meshshade.geometry.mesh import Mesh
 from meshshade.io import load_mesh
-from meshshade.light import parse_light_spec
+from meshshade.light import AreaLight, EnvironmentLight, parse_light_spec
 from meshshade.materials import Material, material_from_options
 from meshshade.output.render import Camera, parse_camera
 from meshshade.transport import describe_scale
@@ -72,7 +73,21 @@ def lights_from_args(args, mesh: Mesh | None = None) -> list:
     if not args.light:
         raise MeshshadeError("give at least one light: --light SPEC (" + LIGHT_HELP.split(": ", 1)[1] + ")")
     scale = mesh.mm_per_unit if mesh is not None else mm_per_unit(args.units)
-    return [parse_light_spec(s, mm_per_unit=scale) for s in args.light]
+    lights = [parse_light_spec(s, mm_per_unit=scale) for s in args.light]
+    error = getattr(args, "light_error", None)
+    return [with_light_error(light, error) for light in lights]
+
+
+def with_light_error(light, error):
+    """``light`` with the ``--light-error`` (an environment or area light's target relative error); other lights,
+    or ``error`` None, as they are."""
+    if error is None or not isinstance(light, (EnvironmentLight, AreaLight)):
+        return light
+    try:
+        return dataclasses.replace(light, error=error)
+    except LightError as exc:
+        raise LightError(f"--light-error: {exc}".replace("environment error", "the error")
+                         .replace("area light error", "the error")) from None
 
 
 # --- images (render, compare) ------------------------------------------------------------------------

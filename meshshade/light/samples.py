@@ -26,9 +26,10 @@ from meshshade.errors import LightError, MeshValidationError
 from meshshade.geometry.mesh import face_normals
 from meshshade.kernels.fresnel import fresnel_reflectance, fresnel_transmittance_entry
 from meshshade.kernels.optics import check_eta
+from meshshade.light.incidence import incidence_part
 from meshshade.light.shadows import ShadowCuller
-from meshshade.light.sources import (BeamLight, DirectionalLight, PointLight, check_outside_mesh, describe_light,
-                                     light_list)
+from meshshade.light.sources import (AreaLight, BeamLight, DirectionalLight, EnvironmentLight, PointLight,
+                                     check_outside_mesh, describe_light, light_list)
 from meshshade.raycast import make_scene
 
 __all__ = ["EntrySamples", "entry_samples", "beam_footprint", "check_lights_reach", "check_exitance"]
@@ -146,7 +147,10 @@ def entry_samples(vertices, faces, vertex_normals, vertex_areas, lights, scene=N
         * directional: one sample per vertex facing the light (``n . (-d) > 0``) and not shadowed, power
           ``E cos F_t(cos) A_v``;
         * point: likewise with ``E = I / dist**2`` (the irradiance across the ray; ``E cos`` on the surface) and
-          the shadow ray stopped at the light.
+          the shadow ray stopped at the light;
+        * environment and area lights: up to four samples per lit vertex carrying the power of the vertex's whole
+          fan of directions, or one per (vertex, direction) (:func:`meshshade.light.incidence.incidence_part`);
+          ``stats["quadrature"]`` lists, per such light, the directions per vertex and the error left.
 
     Raises
     ------
@@ -186,6 +190,9 @@ def entry_samples(vertices, faces, vertex_normals, vertex_areas, lights, scene=N
         if isinstance(light, BeamLight):
             part = _beam_samples(light, i, V, F, N, A, get_scene, eta)
             stats["beam_rays"] += int(part.pop("rays"))
+        elif isinstance(light, (EnvironmentLight, AreaLight)):   # many directions per vertex: light.incidence
+            check_outside_mesh(light, i, V, F)
+            part = incidence_part(light, i, V, F, N, A, get_scene, eta, stats)
         else:
             part = _vertex_samples(light, i, V, F, N, A, culler, eta, stats)
         incident[i] = part.pop("incident")
@@ -236,6 +243,10 @@ def _unreached_reason(light, V, N, A, get_scene) -> str:
         return why
     if isinstance(light, PointLight):
         return "every vertex faces away from it or is shadowed"
+    if isinstance(light, AreaLight):
+        return "every vertex lies behind the emitter, faces away from it or is shadowed from it"
+    if isinstance(light, EnvironmentLight):
+        return "every vertex is shadowed from every direction the map lights"
     why = "" if light.radius == 0.0 else ": no part of it lies unshadowed in the beam's cylinder"
     o, d = np.array(light.origin), np.array(light.direction)
     back = get_scene().first_hit(o, -d)

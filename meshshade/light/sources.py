@@ -1,10 +1,15 @@
-"""Light sources: beam, directional and point lights, validated when they are built.
+"""Light sources: beam, directional, point, environment and area lights, validated when they are built.
 
 Positions are in mm, directions are unit vectors stored as tuples (normalised on construction), powers in W,
-irradiance in W/mm^2, intensity in W/sr. A light that exists is valid: its constructor rejects non-finite or
-malformed vectors, zero directions, and a power/irradiance/intensity that is not a finite number in
-(0, ``MAX_LIGHT_STRENGTH``] = (0, 1e20], with a :class:`~meshshade.errors.LightError`. What depends on the mesh
-(a beam or point light inside it) is checked by :func:`check_outside_mesh`.
+irradiance in W/mm^2, intensity in W/sr, radiance W/(mm^2 sr). An :class:`EnvironmentLight` (an equirectangular
+map, or ``uniform:L``) and an :class:`AreaLight` (a Lambertian rectangle or disc) light the surface from many
+directions; what they deposit is estimated by :mod:`meshshade.light.incidence` (the map's directions and
+importance sampling: :mod:`meshshade.light.environment`; the emitter's points: :mod:`meshshade.light.area`).
+
+A light that exists is valid: its constructor rejects non-finite or malformed vectors, zero directions, and a
+power/irradiance/intensity/radiance that is not a finite number in (0, ``MAX_LIGHT_STRENGTH``] = (0, 1e20], with a
+:class:`~meshshade.errors.LightError`. What depends on the mesh (a beam, point or area light inside it) is checked
+by :func:`check_outside_mesh`.
 
 Why 1e20: no physical source comes near it in any of the three units (the Sun emits 3.8e26 W in all directions,
 i.e. 3e25 W/sr; the most intense focused lasers reach ~1e21 W/mm^2 for femtoseconds), and it keeps every result
@@ -14,8 +19,9 @@ the PLY and EXR outputs. Zero is refused: a light that carries nothing would giv
 """
 from __future__ import annotations
 
+import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Union
 
 import numpy as np
@@ -23,8 +29,9 @@ import numpy as np
 from meshshade.errors import LightError
 from meshshade.geometry.topology import winding_number
 
-__all__ = ["BEAM_SAMPLES", "MAX_LIGHT_STRENGTH", "BeamLight", "DirectionalLight", "PointLight", "Spot", "Light",
-           "LIGHT_TYPES", "light_list", "check_outside_mesh", "describe_light"]
+__all__ = ["BEAM_SAMPLES", "MAX_LIGHT_STRENGTH", "BeamLight", "DirectionalLight", "PointLight", "Spot",
+           "EnvironmentLight", "AreaLight", "Light", "LIGHT_TYPES", "light_list", "check_outside_mesh",
+           "describe_light", "MAX_DIRECTIONS", "ENV_UP_AXES", "AREA_SHAPES"]
 
 #: upper bound of a light's power [W], irradiance [W/mm^2] or intensity [W/sr] (module docstring)
 MAX_LIGHT_STRENGTH = 1e20
@@ -208,10 +215,167 @@ class PointLight:
         return self.intensity * self.spot.towards(delta)
 
 
-Light = Union[BeamLight, DirectionalLight, PointLight]
+#: the most directions (environment) or emitter points (area light) a lit vertex's estimate may take
+MAX_DIRECTIONS = 4096
+#: the up axes an environment map may be given in: ``y`` (glTF, OBJ and meshshade's meshes), ``z`` (Blender's world)
+ENV_UP_AXES = ("y", "z")
+AREA_SHAPES = ("rect", "disc")
+
+
+def _quadrature_knobs(light, what: str) -> None:
+    """Check (and store as plain numbers) the ``error``, ``max_directions``, ``seed`` and ``aggregate`` of an
+    environment or area light."""
+    error = _number(light.error, f"{what} error")
+    if not 1e-4 <= error <= 0.5:
+        raise LightError(f"{what} error must be in [1e-4, 0.5] (a relative standard error), got {error!r}")
+    k = light.max_directions
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 16 <= int(k) <= MAX_DIRECTIONS:
+        raise LightError(f"{what} max_directions must be a whole number in [16, {MAX_DIRECTIONS}], got {k!r}")
+    seed = light.seed
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or int(seed) < 0:
+        raise LightError(f"{what} seed must be a whole number >= 0, got {seed!r}")
+    object.__setattr__(light, "error", error)
+    object.__setattr__(light, "max_directions", int(k))
+    object.__setattr__(light, "seed", int(seed))
+    object.__setattr__(light, "aggregate", bool(light.aggregate))
+
+
+@dataclass(frozen=True)
+class EnvironmentLight:
+    """Light arriving from every direction, as an equirectangular map of radiance (an HDRI; ``uniform:L``).
+
+    ``radiance`` (H, W) float64 with W = 2H, >= 0, finite, not all zero: radiance in W/(mm^2 sr) per unit
+    ``strength`` (so the light's radiance is ``strength x radiance``), row 0 at the zenith, piecewise constant over
+    the pixels (:mod:`meshshade.light.environment`: which direction each pixel covers, ``up``, ``rotation_deg``
+    about the up axis as Blender's Mapping node). A light read from a file keeps its ``path`` (for messages and
+    specs); :meth:`uniform` is a constant sky of radiance L (the furnace test).
+
+    The light a lit vertex receives is estimated from ``max_directions`` directions at most, as many as needed
+    for a relative standard ``error`` of its entering power (:mod:`meshshade.light.incidence`), drawn from random
+    streams keyed by ``seed``. ``aggregate``: one entry sample per lit vertex (its power along the power-weighted
+    mean refracted direction) rather than one per (vertex, direction).
+    """
+
+    radiance: np.ndarray = field(repr=False, compare=False)
+    strength: float = 1.0
+    rotation_deg: float = 0.0
+    up: str = "y"
+    path: str | None = None
+    error: float = 0.005
+    max_directions: int = 1024
+    seed: int = 0
+    aggregate: bool = True
+    digest: str = field(init=False, repr=False, default="")
+
+    def __post_init__(self):
+        try:
+            Y = np.array(self.radiance, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise LightError("an environment map must be an (H, 2H) array of numbers") from None
+        if Y.ndim != 2 or Y.shape[0] < 1 or Y.shape[1] != 2 * Y.shape[0]:
+            raise LightError(f"an environment map must be an (H, 2H) array (360 by 180 degrees), got shape {Y.shape}")
+        if not np.all(np.isfinite(Y)) or Y.min() < 0.0:
+            raise LightError("an environment map's radiance must be finite and >= 0")
+        if not Y.max() > 0.0:
+            raise LightError("an environment map that is black everywhere lights nothing")
+        Y.setflags(write=False)
+        object.__setattr__(self, "radiance", Y)
+        strength = _strength(self.strength, "environment strength", "W/(mm^2 sr)")
+        if strength * float(Y.max()) > MAX_LIGHT_STRENGTH:
+            raise LightError(f"environment radiance must be at most {MAX_LIGHT_STRENGTH:.0e} W/(mm^2 sr): strength "
+                             f"{strength:.6g} x the map's brightest pixel {float(Y.max()):.6g}".replace("e+", "e"))
+        object.__setattr__(self, "strength", strength)
+        object.__setattr__(self, "rotation_deg", _number(self.rotation_deg, "environment rotation"))
+        if self.up not in ENV_UP_AXES:
+            raise LightError(f"environment up axis must be one of {', '.join(ENV_UP_AXES)}, got {self.up!r}")
+        if self.path is not None:
+            object.__setattr__(self, "path", str(self.path))
+        _quadrature_knobs(self, "environment")
+        h = hashlib.sha256(np.ascontiguousarray(Y).tobytes() + repr(Y.shape).encode()).hexdigest()[:16]
+        object.__setattr__(self, "digest", h)
+
+    @classmethod
+    def uniform(cls, radiance: float = 1.0, **knobs) -> "EnvironmentLight":
+        """A constant sky of ``radiance`` W/(mm^2 sr) from every direction (``uniform:L``)."""
+        return cls(np.ones((1, 2)), strength=_strength(radiance, "uniform radiance", "W/(mm^2 sr)"), **knobs)
+
+    @property
+    def is_uniform(self) -> bool:
+        """Whether the sky is the same radiance in every direction."""
+        return bool(self.radiance.min() == self.radiance.max())
+
+
+@dataclass(frozen=True)
+class AreaLight:
+    """A one-sided Lambertian emitter of ``power`` W: a rectangle or a disc (ellipse) centred at ``position`` (mm),
+    emitting into the half-space its unit ``normal`` points to, with radiance ``power / (pi area)`` W/(mm^2 sr).
+
+    ``shape`` "rect": ``size`` = (width, height) mm along its axes u and v; "disc": ``size`` = (radius along u,
+    radius along v) mm (a circle when equal). The axes (:meth:`axes`): v is ``up`` projected on the emitter's
+    plane (default +Y, or +Z for a normal along +-Y), u = v x normal (so u, v, normal are right-handed). ``error``,
+    ``max_directions`` (emitter points per lit vertex), ``seed`` and ``aggregate`` as for
+    :class:`EnvironmentLight`.
+    """
+
+    position: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    shape: str = "rect"
+    size: tuple = (1.0, 1.0)
+    power: float = 1.0
+    up: tuple | None = None
+    error: float = 0.005
+    max_directions: int = 1024
+    seed: int = 0
+    aggregate: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "position", _vec3(self.position, "area light position"))
+        object.__setattr__(self, "normal", _direction(self.normal, "area light normal"))
+        if self.shape not in AREA_SHAPES:
+            raise LightError(f"area light shape must be rect or disc, got {self.shape!r}")
+        try:
+            size = tuple(float(x) for x in np.atleast_1d(np.asarray(self.size, dtype=np.float64)))
+        except (TypeError, ValueError):
+            raise LightError(f"area light size must be 1 or 2 numbers, got {self.size!r}") from None
+        size = size * 2 if len(size) == 1 else size
+        if len(size) != 2 or not all(math.isfinite(x) and x > 0.0 for x in size):
+            raise LightError(f"area light size must be 1 or 2 finite numbers > 0 (mm), got {self.size!r}")
+        object.__setattr__(self, "size", size)
+        object.__setattr__(self, "power", _strength(self.power, "area light power", "W"))
+        if self.up is not None:
+            up = _direction(self.up, "area light up")
+            if abs(float(np.dot(up, self.normal))) > 1.0 - 1e-9:
+                raise LightError("area light up must not be parallel to its normal")
+            object.__setattr__(self, "up", up)
+        _quadrature_knobs(self, "area light")
+
+    def axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v): the emitter's in-plane unit axes (width/first radius along u, height/second radius along v)."""
+        n = np.array(self.normal)
+        if self.up is not None:
+            ref = np.array(self.up)
+        else:
+            ref = np.array([0.0, 0.0, 1.0]) if abs(n[1]) > 1.0 - 1e-9 else np.array([0.0, 1.0, 0.0])
+        v = ref - (ref @ n) * n
+        v /= np.linalg.norm(v)
+        return np.cross(v, n), v
+
+    @property
+    def area(self) -> float:
+        """Emitting area in mm^2."""
+        a, b = self.size
+        return a * b if self.shape == "rect" else math.pi * a * b
+
+    @property
+    def radiance(self) -> float:
+        """Radiance of the Lambertian emitter, W/(mm^2 sr): power / (pi area)."""
+        return self.power / (math.pi * self.area)
+
+
+Light = Union[BeamLight, DirectionalLight, PointLight, EnvironmentLight, AreaLight]
 
 #: the light classes, for ``isinstance`` checks
-LIGHT_TYPES = (BeamLight, DirectionalLight, PointLight)
+LIGHT_TYPES = (BeamLight, DirectionalLight, PointLight, EnvironmentLight, AreaLight)
 
 
 def light_list(lights) -> list[Light]:
@@ -222,14 +386,15 @@ def light_list(lights) -> list[Light]:
     Raises
     ------
     LightError
-        An element that is not a :class:`BeamLight`, :class:`DirectionalLight` or :class:`PointLight`.
+        An element that is not a light (:data:`LIGHT_TYPES`).
     """
     if isinstance(lights, LIGHT_TYPES):
         return [lights]
     out = list(lights)
     for i, light in enumerate(out):
         if not isinstance(light, LIGHT_TYPES):
-            raise LightError(f"light {i} is not a BeamLight, DirectionalLight or PointLight: {light!r}")
+            raise LightError(f"light {i} is not a BeamLight, DirectionalLight, PointLight, EnvironmentLight or "
+                             f"AreaLight: {light!r}")
     return out
 
 
@@ -247,6 +412,18 @@ def describe_light(light: Light, index: int) -> str:
     if isinstance(light, DirectionalLight):
         return (f"directional light {index} (travelling along {_fmt_vec(light.direction)}, "
                 f"irradiance {light.irradiance:.6g} W/mm^2)")
+    if isinstance(light, EnvironmentLight):
+        if light.is_uniform and light.path is None:
+            return f"uniform light {index} (radiance {light.strength * float(light.radiance.max()):.6g} W/(mm^2 sr))"
+        h, w = light.radiance.shape
+        name = repr(light.path) if light.path is not None else f"a {w}x{h} map"
+        return (f"environment light {index} ({name}, strength {light.strength:.6g}, rotated "
+                f"{light.rotation_deg:.6g} deg about +{light.up})")
+    if isinstance(light, AreaLight):
+        a, b = light.size
+        shape = f"rect {a:.6g} x {b:.6g} mm" if light.shape == "rect" else f"disc of radii {a:.6g}, {b:.6g} mm"
+        return (f"area light {index} ({shape} at {_fmt_vec(light.position)} mm facing {_fmt_vec(light.normal)}, "
+                f"power {light.power:.6g} W)")
     if light.spot is not None:
         sp = light.spot
         return (f"spot light {index} (at {_fmt_vec(light.position)} mm along {_fmt_vec(sp.axis)}, intensity "
@@ -271,3 +448,6 @@ def check_outside_mesh(light: Light, index: int, vertices, faces) -> None:
     elif isinstance(light, PointLight):
         if abs(winding_number(np.array(light.position), vertices, faces)) > 0.5:
             raise LightError(f"point light {index} at {light.position} mm is inside the mesh")
+    elif isinstance(light, AreaLight):
+        if abs(winding_number(np.array(light.position), vertices, faces)) > 0.5:
+            raise LightError(f"area light {index} at {light.position} mm is inside the mesh")

@@ -5,7 +5,9 @@ that the baseline wavefront uses and the tests compare against): a light is chos
 a pencil beam enters at its precomputed first hit; a wide beam starts uniformly on the clipped square of its disc
 and enters where its ray first hits (photons outside the disc or beside the mesh carry nothing); directional and
 point lights pick a face in proportion to the centroid estimate of its incident power, a uniform point on it and
-(point lights) an importance weight; a shadow ray towards the light decides whether the point is lit. At entry
+(point lights) an importance weight; environment and area lights pick a face from the bake's estimate, a point on
+it and a direction (:mod:`meshshade.light.sky_loops`); a shadow ray towards the light decides whether the
+point is lit. At entry
 the Fresnel reflectance F(cos) from index 1 into ``eta`` is split off as specular power and the direction is
 refracted (Snell).
 
@@ -29,8 +31,10 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from meshshade.light import BeamLight, DirectionalLight, PointLight
+from meshshade.light import AreaLight, BeamLight, DirectionalLight, EnvironmentLight, PointLight
 from meshshade.montecarlo import loops as K
+from meshshade.light.sky_loops import (A_AREA, A_N, A_RADIANCE, E_STRENGTH, E_TOTAL, area_point,
+                                       cosine_direction, env_direction, env_pixel, fresnel_in, pack_sky)
 from meshshade.raycast.embree_direct import rayhit_buffer, trace
 
 __all__ = ["EmitterKernel", "emission_base", "fresnel_in", "spot_falloff", "sample_entries", "cast_direct",
@@ -38,7 +42,7 @@ __all__ = ["EmitterKernel", "emission_base", "fresnel_in", "spot_falloff", "samp
 
 _OPTS = K._OPTS
 #: light kinds of the compiled emitter
-PENCIL, DISC, DIRECTIONAL, POINT = 0, 1, 2, 3
+PENCIL, DISC, DIRECTIONAL, POINT, ENVIRONMENT, AREA = 0, 1, 2, 3, 4, 5
 #: rays an entry needs
 NO_RAY, FIRST_HIT, SHADOW = 0, 1, 2
 #: the emission streams' group offset: group k's entries draw from stream_base(seed, k + EMISSION_GROUPS)
@@ -54,21 +58,6 @@ def emission_base(seed: int, group: int) -> np.uint64:
 
 
 @njit(inline="always", **_OPTS)
-def fresnel_in(cos_i, eta):
-    """Unpolarised Fresnel reflectance from index 1 into ``eta`` (scalar twin of kernels.fresnel, eta_i = 1)."""
-    cos_i = min(1.0, max(0.0, cos_i))
-    if eta == 1.0:
-        return 0.0
-    if cos_i == 0.0:
-        return 1.0
-    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
-    cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
-    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
-    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
-    return min(1.0, max(0.0, 0.5 * (rs * rs + rp * rp)))
-
-
-@njit(inline="always", **_OPTS)
 def spot_falloff(cos_theta, c, width):
     """Scalar twin of :meth:`meshshade.light.Spot.falloff`: c = cos(angle / 2), width = (1 - c) * blend."""
     if not width > 0.0:
@@ -78,7 +67,8 @@ def spot_falloff(cos_theta, c, width):
 
 
 def _sample(pid0, k, base, w_photon, light_cdf, kinds, params, rows, cdfs, wfaces, V, F, N, A, center, scale,
-            off_rel, off_abs, light, face, bary, weight, query, ray_o, ray_d, ray_t):
+            off_rel, off_abs, light, face, bary, weight, query, ray_o, ray_d, ray_t, sky_rows, sky_flat, sky_lum,
+            sky_edges):
     """Step 1 for photons pid0 .. pid0 + k - 1 (outputs indexed by j = pid - pid0); see the module docstring."""
     m = F.shape[0]
     for j in prange(k):
@@ -106,7 +96,7 @@ def _sample(pid0, k, base, w_photon, light_cdf, kinds, params, rows, cdfs, wface
                 ray_t[j] = math.inf
             else:
                 w = 0.0
-        elif kind == DIRECTIONAL or kind == POINT:
+        elif kind == DIRECTIONAL or kind == POINT or kind == ENVIRONMENT or kind == AREA:
             row = rows[li]
             u, c = K._uniform(key, c)
             f = min(np.searchsorted(cdfs[row], u, side="right"), m - 1)
@@ -124,6 +114,30 @@ def _sample(pid0, k, base, w_photon, light_cdf, kinds, params, rows, cdfs, wface
             if kind == DIRECTIONAL:
                 dx, dy, dz = p[0], p[1], p[2]
                 t = math.inf
+            elif kind == ENVIRONMENT:   # one-sample MIS of the map and the cosine (light.sky_loops)
+                us, c = K._uniform(key, c)
+                ux, c = K._uniform(key, c)
+                uy, c = K._uniform(key, c)
+                if us < 0.5:
+                    wx, wy, wz = env_direction(p, sky_rows, sky_flat, sky_edges, ux, uy)
+                else:
+                    wx, wy, wz = cosine_direction(N[f, 0], N[f, 1], N[f, 2], ux, uy)
+                cos = max(0.0, wx * N[f, 0] + wy * N[f, 1] + wz * N[f, 2])
+                lum = sky_lum[env_pixel(p, wx, wy, wz)]
+                pdf = 0.5 * lum / p[E_TOTAL] + 0.5 * cos / math.pi
+                w *= p[E_STRENGTH] * lum * cos / pdf * A[f] / wfaces[row, f] if pdf > 0.0 else 0.0
+                dx, dy, dz = -wx, -wy, -wz
+                t = math.inf
+            elif kind == AREA:          # a point uniform on the emitter
+                ux, c = K._uniform(key, c)
+                uy, c = K._uniform(key, c)
+                qx, qy, qz = area_point(p, ux, uy)
+                ex, ey, ez = px - qx, py - qy, pz - qz
+                t = math.sqrt(ex * ex + ey * ey + ez * ez)
+                dx, dy, dz = ex / t, ey / t, ez / t
+                cos = max(0.0, -(N[f, 0] * dx + N[f, 1] * dy + N[f, 2] * dz))
+                cos_e = max(0.0, dx * p[A_N] + dy * p[A_N + 1] + dz * p[A_N + 2])
+                w *= p[A_AREA] * p[A_RADIANCE] * cos * cos_e / (t * t) * A[f] / wfaces[row, f]
             else:
                 ex, ey, ez = px - p[_P], py - p[_P + 1], pz - p[_P + 2]
                 t = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -299,7 +313,11 @@ class EmitterKernel:
                 self.rows[i] = len(cdfs)
                 cdfs.append(cdf)
                 wfaces.append(w_face)
-                if isinstance(lt, DirectionalLight):
+                if isinstance(lt, EnvironmentLight):
+                    self.kinds[i] = ENVIRONMENT
+                elif isinstance(lt, AreaLight):
+                    self.kinds[i] = AREA
+                elif isinstance(lt, DirectionalLight):
                     self.kinds[i] = DIRECTIONAL
                     p[0:3] = lt.direction
                 else:
@@ -309,7 +327,8 @@ class EmitterKernel:
                     if lt.spot is not None:
                         c = math.cos(0.5 * lt.spot.angle)
                         p[_SPOT], p[_AX:_AX + 3], p[_SC], p[_SW] = 1.0, lt.spot.axis, c, (1.0 - c) * lt.spot.blend
-            assert isinstance(light, (BeamLight, DirectionalLight, PointLight))
+            assert isinstance(light, (BeamLight, DirectionalLight, PointLight, EnvironmentLight, AreaLight))
+        self.sky = pack_sky(em.lights, self.params)
         m = em.F.shape[0]
         self.cdfs = np.ascontiguousarray(np.array(cdfs) if cdfs else np.zeros((0, m)))
         self.wfaces = np.ascontiguousarray(np.array(wfaces) if wfaces else np.zeros((0, m)))
@@ -360,7 +379,7 @@ class EmitterKernel:
         sample_entries(pid0, k, base, self.em.total_power / n_total, self.light_cdf, self.kinds, self.params,
                        self.rows, self.cdfs, self.wfaces, self.V, self.F, self.N, self.A, self.center, self.scale,
                        off_rel, off_abs, b["light"], b["face"], b["bary"], b["weight"], b["query"], b["ray_o"],
-                       b["ray_d"], b["ray_t"])
+                       b["ray_d"], b["ray_t"], self.sky.row_cdf, self.sky.flat_cdf, self.sky.lum, self.sky.cos_edges)
         self._cast(b)
         enter_slots(pid0, k, slots, b["query"], b["hit"], b["light"], b["face"], b["bary"], b["weight"],
                     b["ray_o"], b["ray_d"], self.kinds, self.params, self.beam_entry, self.V, self.F, self.N,

@@ -4,8 +4,9 @@ At entry the unpolarised Fresnel reflectance F(cos) (index 1 outside, ``eta`` in
 deterministically as specular power and the rest is refracted (Snell) into the medium. A pencil beam enters at its
 first hit (float64), a beam of radius R > 0 uniformly over its disc; directional and point lights are sampled over
 the faces in proportion to the incident power at the face centroids (point lights then carry an importance
-weight), and shadowed photons carry no power. Which lights reach the mesh is the bake's decision
-(:func:`meshshade.light.samples.entry_samples`).
+weight), and shadowed photons carry no power. Environment and area lights pick a face in proportion to the bake's
+estimate of what enters it, then a direction as the bake's quadrature does (:mod:`meshshade.light.sky_loops`).
+Which lights reach the mesh is the bake's decision (:func:`meshshade.light.samples.entry_samples`).
 """
 from __future__ import annotations
 
@@ -14,8 +15,14 @@ import numpy as np
 from meshshade.errors import LightError
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.light.samples import entry_samples
-from meshshade.light.sources import BeamLight, DirectionalLight, PointLight, light_list
+from meshshade.light.area import emitter_points
+from meshshade.light.environment import map_sampler
+from meshshade.light.sources import AreaLight, BeamLight, DirectionalLight, EnvironmentLight, PointLight, light_list
 from meshshade.montecarlo.sampling import refract_in
+
+#: share of the mean that every face keeps in the face distribution of an environment or area light (defensive
+#: importance sampling: a face the bake's estimate missed can still be drawn, so the estimate stays unbiased)
+DEFENSIVE_SHARE = 0.1
 
 __all__ = ["Emitter"]
 
@@ -39,8 +46,9 @@ class Emitter:
     ----------
     V : (n, 3) float64 mm; F : (m, 3) int64, outward faces
     normals : (m, 3) float64 unit outward face normals; areas : (m,) float64 mm^2 face areas
-    lights : a light or a sequence of BeamLight / DirectionalLight / PointLight (validated by their
-        constructors; anything else raises LightError, see :func:`meshshade.light.sources.light_list`)
+    lights : a light or a sequence of lights (BeamLight, DirectionalLight, PointLight, EnvironmentLight, AreaLight;
+        validated by their constructors; anything else raises LightError, see
+        :func:`meshshade.light.sources.light_list`)
     scene : EmbreeScene or NumpyScene of the mesh; eta : float, relative index of the medium
 
     Raises
@@ -77,6 +85,14 @@ class Emitter:
                     self.parts.append(("disc", f, bary, d, light, rect))
                     power.append(light.power * rect[4] / (np.pi * light.radius ** 2))
                 continue
+            if isinstance(light, (EnvironmentLight, AreaLight)):
+                w = _quadrature_face_weights(reach, i, F, areas, va)
+                total = float(w.sum())
+                if not (reached[i] and total > 0.0):
+                    w, total = np.zeros_like(w), 0.0
+                self.parts.append(("sky", np.cumsum(w) / total if total > 0.0 else w, w, light))
+                power.append(total)
+                continue
             if isinstance(light, DirectionalLight):
                 cos = normals @ (-np.array(light.direction))
                 w = light.irradiance * np.clip(cos, 0.0, None) * areas
@@ -99,7 +115,12 @@ class Emitter:
         # faces whose normal faces each light (diffuse reflectance vs transmittance)
         self.facing = np.zeros((len(self.lights), F.shape[0]), dtype=bool)
         for i, light in enumerate(self.lights):
-            if isinstance(light, PointLight):
+            if isinstance(light, EnvironmentLight):   # light from everywhere: every exit is reflectance
+                self.facing[i] = True
+            elif isinstance(light, AreaLight):        # faces in front of the emitter, turned towards its centre
+                pos, nrm = np.array(light.position), np.array(light.normal)
+                self.facing[i] = ((np.einsum("ij,ij->i", normals, pos - c) > 0.0) & ((c - pos) @ nrm > 0.0))
+            elif isinstance(light, PointLight):
                 self.facing[i] = np.einsum("ij,ij->i", normals, np.array(light.position) - c) > 0.0
             else:
                 self.facing[i] = normals @ (-np.array(light.direction)) > 0.0
@@ -126,6 +147,9 @@ class Emitter:
                 continue
             if part[0] == "disc":
                 self._emit_disc(part, sel, rng, face, points, dirs, Fr, weight)
+                continue
+            if part[0] == "sky":
+                self._emit_sky(part, sel, rng, face, points, dirs, Fr, weight)
                 continue
             _, cdf, w_face, lt = part
             f = np.minimum(np.searchsorted(cdf, rng.random(sel.size), side="right"), cdf.size - 1)
@@ -174,6 +198,46 @@ class Emitter:
             p1, d1, F1 = self._enter(f[idx], bary[idx], np.broadcast_to(d, (idx.size, 3)))
             points[sel[idx]], dirs[sel[idx]], Fr[sel[idx]] = p1, d1, F1
 
+    def _emit_sky(self, part, sel, rng, face, points, dirs, Fr, weight):
+        """Photons ``sel`` of an environment or area light: a face from the light's face distribution, a uniform
+        point on it, a direction as the bake's quadrature draws it (module docstring of
+        :mod:`meshshade.light.sky_loops`), weighted by integrand / density; shadowed ones carry nothing."""
+        _, cdf, w_face, lt = part
+        k = sel.size
+        f = np.minimum(np.searchsorted(cdf, rng.random(k), side="right"), cdf.size - 1)
+        r1, r2 = np.sqrt(rng.random(k)), rng.random(k)
+        b = np.stack([1.0 - r1, r1 * (1.0 - r2), r1 * r2], axis=1)
+        p = np.einsum("ij,ijk->ik", b, self.V[self.F[f]])
+        nf = self.N[f]
+        if isinstance(lt, EnvironmentLight):
+            sampler = map_sampler(lt)
+            strategy = rng.random(k) < 0.5
+            x, y = rng.random(k), rng.random(k)
+            w = np.where(strategy[:, None], sampler.sample(x, y), _cosine(nf, x, y))
+            cos = np.clip(np.einsum("ij,ij->i", w, nf), 0.0, None)
+            pdf = 0.5 * sampler.pdf(w) + 0.5 * cos / np.pi
+            value = sampler.radiance(w) * cos / np.where(pdf > 0.0, pdf, 1.0)
+            t_max = np.inf
+        else:
+            y_pt = emitter_points(lt, rng.random(k), rng.random(k))
+            delta = y_pt - p
+            dist = np.linalg.norm(delta, axis=1)
+            w = delta / dist[:, None]
+            cos = np.clip(np.einsum("ij,ij->i", w, nf), 0.0, None)
+            cos_e = np.clip(-(w @ np.array(lt.normal)), 0.0, None)
+            value = lt.area * lt.radiance * cos * cos_e / dist ** 2
+            t_max = dist
+        weight[sel] *= value * self.A[f] / w_face[f]
+        origin = self.scene.offset_origins(p, nf, sign=1.0)
+        lit = weight[sel] > 0.0
+        shadow = np.zeros(k, dtype=bool)
+        if np.any(lit):
+            tm = t_max if np.isscalar(t_max) else t_max[lit]
+            shadow[lit] = self.scene.occluded(origin[lit], w[lit], tm)
+        weight[sel[shadow]] = 0.0
+        face[sel] = f
+        points[sel], dirs[sel], Fr[sel] = self._enter(f, b, -w)
+
     def _enter(self, face, bary, d_out):
         """Entry of photons arriving along d_out (n, 3) at (face, bary): (point just inside, refracted direction,
         Fresnel reflectance F(cos_i) from index 1 into eta)."""
@@ -182,6 +246,35 @@ class Emitter:
         cos_i = np.clip(-np.einsum("ij,ij->i", d_out, n), 0.0, 1.0)
         Fr = fresnel_reflectance(cos_i, 1.0, self.eta)
         return self.scene.offset_origins(points, n, sign=-1.0), refract_in(d_out, n, self.eta), Fr
+
+
+def _cosine(n, x, y) -> np.ndarray:
+    """(k, 3) cosine-weighted unit directions about the unit normals ``n`` (k, 3) for (x, y) in [0, 1)^2."""
+    s = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (s + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t1 = np.stack([1.0 + s * n[:, 0] ** 2 * a, s * b, -s * n[:, 0]], axis=1)
+    t2 = np.stack([b, s + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+    r, phi = np.sqrt(x), 2.0 * np.pi * y
+    z = np.sqrt(np.clip(1.0 - x, 0.0, None))
+    return (r * np.cos(phi))[:, None] * t1 + (r * np.sin(phi))[:, None] * t2 + z[:, None] * n
+
+
+def _quadrature_face_weights(samples, i, F, face_areas, vertex_areas) -> np.ndarray:
+    """(m,) W: the face distribution of environment or area light ``i``, from the bake's entry samples: each face's
+    area times the mean of its vertices' incident irradiance (entering power over area, scaled by the light's
+    incident over entering power), plus :data:`DEFENSIVE_SHARE` of the area-weighted mean irradiance."""
+    j = samples.light_index == i
+    n = vertex_areas.shape[0]
+    enter = np.bincount(samples.vertex[j], weights=samples.power[j], minlength=n)
+    total = float(enter.sum())
+    if not total > 0.0:
+        return np.zeros(F.shape[0])
+    scale = float(samples.incident_power[i]) / total
+    E = scale * np.divide(enter, vertex_areas, out=np.zeros(n), where=vertex_areas > 0.0)
+    Ef = E[F].mean(axis=1)
+    mean = float(np.sum(Ef * face_areas) / max(float(face_areas.sum()), 1e-300))
+    return face_areas * (Ef + DEFENSIVE_SHARE * mean)
 
 
 def _vertex_normals_areas(V, F, face_normals, face_areas):

@@ -53,6 +53,7 @@ def new_light(name, kind, energy, location=(0, 0, 0), rotation=(0, 0, 0), color=
 
 def build_scene(unit_scale=0.01):
     sc = bpy.context.scene
+    sc.world = None            # no World: its light would join the lamps' (test_world_and_area_light_...)
     sc.unit_settings.scale_length = unit_scale
     bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0, location=(0.2, -0.1, 0.3),
                                           rotation=(0.4, 0.1, 0.7), scale=(1.2, 1.0, 0.9))
@@ -189,14 +190,15 @@ def test_bake_equals_the_cli_bake_of_the_same_scene(registered, tmp_path):
 
 
 def test_errors_are_reports_not_tracebacks(registered):
+    bpy.context.scene.world = None
     bpy.context.scene.unit_settings.scale_length = 0.01
     bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=1.0)
     ob = bpy.context.active_object
     with pytest.raises(RuntimeError) as info:      # bpy turns an operator's ERROR report into a RuntimeError
         bpy.ops.object.meshshade_bake()
-    assert "no sun, point or spot light" in str(info.value) and "Traceback" not in str(info.value)
-    new_light("Area", "AREA", 10.0, location=(0, 0, 5))
-    with pytest.raises(RuntimeError, match=r"no sun, point or spot light .*area 'Area'"):
+    assert "no sun, point, spot or area light" in str(info.value) and "Traceback" not in str(info.value)
+    new_light("Area", "AREA", 0.0, location=(0, 0, 5))
+    with pytest.raises(RuntimeError, match=r"no sun, point, spot or area light .*area 'Area'"):
         bpy.ops.object.meshshade_bake()
     new_light("Sun", "SUN", 1000.0)
     bpy.ops.object.mode_set(mode="EDIT")
@@ -360,3 +362,58 @@ def test_glb_with_a_texture_imports_with_the_texture_bound_as_emission(registere
         out = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
                              env=dict(os.environ, PYTHONHASHSEED=str(seed)))
         assert out.returncode == 0 and "imported" in out.stdout, (seed, out.stderr[-800:])
+
+
+def test_world_and_area_light_bake_equals_the_cli_bake_with_the_same_exr(registered, tmp_path):
+    """Issue 43: a scene lit by its World (an Environment Texture of an EXR through a Mapping node rotated about Z,
+    strength 2) and an area light bakes as ``meshshade bake --light env:FILE:2e-6:ROT:z --light area:...`` of the
+    same world-space mesh (Blender's W/(m^2 sr) -> W/(mm^2 sr); the add-on's meshes are Blender's world, Z up)."""
+    from meshshade.io import write_exr
+    ob = build_scene()
+    for name in ("Sun", "Lamp", "Spot"):
+        bpy.data.objects.remove(bpy.data.objects[name])
+    exr = tmp_path / "sky.exr"
+    img = np.full((32, 64, 3), 0.3, np.float32)
+    img[6:9, 10:14] = 50.0
+    write_exr(exr, img)
+    world = bpy.data.worlds.new("W")
+    if hasattr(world, "use_nodes"):
+        world.use_nodes = True
+    nt = world.node_tree
+    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
+    tex = nt.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(str(exr))
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.vector_type = "POINT"
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(30.0))
+    nt.links.new(nt.nodes.new("ShaderNodeTexCoord").outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 2.0
+    bpy.context.scene.world = world
+    area = new_light("Box", "AREA", 30.0, location=(0.3, -0.2, 4.0), rotation=(0.2, -0.1, 0.4),
+                     shape="RECTANGLE", size=0.8, size_y=0.4)
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.meshshade_bake(material="marble", model="dipole", transport="direct") == {"FINISHED"}
+    got = attribute(ob.data, "meshshade_radiance")
+
+    M = np.array(ob.matrix_world)
+    co = np.array([v.co for v in ob.data.vertices], dtype=np.float64)
+    V = (co @ M[:3, :3].T + M[:3, 3]) * MM_PER_BU
+    ob.data.calc_loop_triangles()
+    F = np.array([t.vertices[:] for t in ob.data.loop_triangles])
+    obj = tmp_path / "world.obj"
+    with open(obj, "w") as fh:
+        fh.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in V)
+        fh.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F)
+    A = np.array(area.matrix_world)
+    vec = lambda v: ",".join(repr(float(x)) for x in v)   # noqa: E731
+    rotation = math.degrees(float(mapping.inputs["Rotation"].default_value[2]))
+    normal = -A[:3, 2] / np.linalg.norm(A[:3, 2])
+    up = A[:3, 1] / np.linalg.norm(A[:3, 1])
+    size = (float(area.data.size) * MM_PER_BU, float(area.data.size_y) * MM_PER_BU)
+    specs = [f"env:{exr}:{2.0 * 1e-6!r}:{rotation!r}:z",
+             f"area:{vec(A[:3, 3] * MM_PER_BU)}:{vec(normal)}:rect:{vec(size)}:{30.0!r}:{vec(up)}"]
+    expected = cli_bake(tmp_path, obj, specs, "sky")
+    assert np.all(expected.max(axis=0) > 0)
+    np.testing.assert_allclose(got[:, :3], expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())

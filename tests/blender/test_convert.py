@@ -11,11 +11,13 @@ import math
 import numpy as np
 import pytest
 
-from meshshade.blender.convert import (BlenderLight, colour_groups, convert_lights, light_direction,
-                                       mm_per_blender_unit, point_intensity, sun_irradiance,
+from meshshade.blender.convert import (BlenderLight, BlenderWorld, colour_groups, convert_lights, convert_world,
+                                       light_direction, mm_per_blender_unit, point_intensity, sun_irradiance,
                                        world_faces, world_vertices_mm)
+from meshshade.blender.job import light_spec
 from meshshade.errors import LightError, UnitsError
-from meshshade.light import DirectionalLight, PointLight
+from meshshade.io import write_exr
+from meshshade.light import AreaLight, DirectionalLight, EnvironmentLight, PointLight, parse_light_spec
 
 
 def rot_x(deg):
@@ -70,7 +72,7 @@ def test_convert_lights_sun_point_spot_and_what_is_left_out():
     lights = [BlenderLight("Sun", "SUN", 500.0, (1.0, 0.5, 0.25), rot_x(90.0)),
               BlenderLight("Lamp", "POINT", 10.0, (1, 1, 1), M),
               BlenderLight("Spot", "SPOT", 10.0, (1, 1, 1), M, spot_size=math.radians(30), spot_blend=0.2),
-              BlenderLight("Area", "AREA", 10.0, (1, 1, 1), M),
+              BlenderLight("Mesh", "MESH", 10.0, (1, 1, 1), M),
               BlenderLight("Off", "POINT", 0.0, (1, 1, 1), M)]
     out, notes = convert_lights(lights, mm_per_unit=10.0)
     assert len(out) == 3 and len(notes) == 2
@@ -82,14 +84,14 @@ def test_convert_lights_sun_point_spot_and_what_is_left_out():
     assert point.position == (0.0, 0.0, 50.0) and point.intensity == pytest.approx(10 / (4 * math.pi))
     assert spot.spot is not None and spot.spot.angle == pytest.approx(math.radians(30))
     assert spot.spot.axis == (0.0, 0.0, -1.0) and spot.intensity == point.intensity
-    assert "area light 'Area' left out" in notes[0] and "'Off' left out" in notes[1]
+    assert "mesh light 'Mesh' left out" in notes[0] and "'Off' left out" in notes[1]
 
 
 def test_no_usable_light_is_one_line_error():
-    with pytest.raises(LightError, match="no sun, point or spot light.*area 'A'"):
-        convert_lights([BlenderLight("A", "AREA", 1.0)], 1.0)
-    with pytest.raises(LightError, match="no sun, point or spot light.*none"):
-        convert_lights([], 1.0)
+    with pytest.raises(LightError, match="no sun, point, spot or area light.*area 'A'"):
+        convert_lights([BlenderLight("A", "AREA", 0.0)], 1.0)
+    with pytest.raises(LightError, match="no sun, point, spot or area light.*none"):
+        convert_lights([], 1.0, world=BlenderWorld(strength=0.0))
     with pytest.raises(LightError, match="must be finite"):
         convert_lights([BlenderLight("S", "SUN", float("nan"))], 1.0)
 
@@ -99,3 +101,83 @@ def test_colour_groups_keep_order_and_merge_equal_colours():
     groups = colour_groups([(a, np.array([1.0, 1, 1])), (b, np.array([1.0, 0, 0])), (c, np.array([1.0, 1, 1]))])
     assert [g[1] for g in groups] == [[a, c], [b]]
     np.testing.assert_array_equal(groups[1][0], [1, 0, 0])
+
+
+# ------------------------------------------------------------------------------------------------ area lights
+def test_area_lights_shape_size_power_and_transform():
+    """Blender's area light faces its local -Z, size along local X, size_y along Y (DISK: size is the diameter),
+    the object's scale applied; power in W as Cycles' Lambertian emitter (radiance P / (pi A))."""
+    M = rot_x(90.0)                      # local -Z -> world +Y, local Y -> world Z
+    M[:3, 0] *= 2.0                      # scaled 2x along its local X
+    M[:3, 3] = (1.0, -3.0, 2.0)
+    cases = [("SQUARE", 0.5, 9.0, "rect", (10.0, 5.0)), ("RECTANGLE", 0.5, 0.25, "rect", (10.0, 2.5)),
+             ("DISK", 0.5, 9.0, "disc", (5.0, 2.5)), ("ELLIPSE", 0.5, 0.25, "disc", (5.0, 1.25))]
+    for shape, size, size_y, kind, mm in cases:
+        out, notes = convert_lights([BlenderLight("A", "AREA", 40.0, (1, 1, 1), M, shape=shape, size=size,
+                                                  size_y=size_y)], mm_per_unit=10.0)
+        (light, colour), = out
+        assert isinstance(light, AreaLight) and not notes
+        assert light.shape == kind and light.size == pytest.approx(mm)
+        assert light.position == pytest.approx((10.0, -30.0, 20.0))
+        np.testing.assert_allclose(light.normal, [0, 1, 0], atol=1e-15)
+        np.testing.assert_allclose(light.up, [0, 0, 1], atol=1e-15)        # local Y: the size_y axis
+        assert light.power == 40.0
+        u, v = light.axes()
+        np.testing.assert_allclose(np.abs(u), [1, 0, 0], atol=1e-15)      # size along local X (scaled)
+    _, notes = convert_lights([BlenderLight("A", "AREA", 40.0, (1, 1, 1), M, spread=math.radians(60))], 10.0)
+    assert "spread" in notes[0]
+
+
+# ------------------------------------------------------------------------------------------------ the World
+def _exr(tmp_path):
+    p = tmp_path / "sky.exr"
+    write_exr(p, np.full((8, 16, 3), 0.5, np.float32))
+    return p
+
+
+def test_world_environment_texture_strength_rotation_and_axes(tmp_path):
+    """Background strength S: W/(m^2 sr) per unit of the image -> S x 1e-6 W/(mm^2 sr); Mapping (Point) Z
+    rotation in degrees, Texture type the other way; the add-on's meshes are Blender's world: up = z."""
+    p = _exr(tmp_path)
+    (light, colour), = convert_world(BlenderWorld(strength=2.0, image=str(p), mapping="POINT",
+                                                  rotation=(0.0, 0.0, math.radians(30.0))))[0]
+    assert isinstance(light, EnvironmentLight) and light.path == str(p)
+    assert light.strength == pytest.approx(2e-6) and light.rotation_deg == pytest.approx(30.0) and light.up == "z"
+    np.testing.assert_array_equal(colour, [1, 1, 1])
+    (light, _), = convert_world(BlenderWorld(strength=1.0, image=str(p), mapping="TEXTURE",
+                                             rotation=(0.0, 0.0, math.radians(30.0))))[0]
+    assert light.rotation_deg == pytest.approx(-30.0)
+    out, notes = convert_world(BlenderWorld(strength=1.0, image=str(p), mapping="POINT",
+                                            rotation=(0.1, 0.0, 0.0), scale=(2.0, 1.0, 1.0)))
+    assert len(out) == 1 and any("X and Y" in n for n in notes) and any("scale" in n for n in notes)
+
+
+def test_world_constant_colour_other_setups_and_bad_files(tmp_path):
+    (light, colour), = convert_world(BlenderWorld(strength=3.0, color=(0.2, 0.4, 0.8)))[0]
+    assert light.is_uniform and light.strength == pytest.approx(3e-6)
+    np.testing.assert_allclose(colour, [0.2, 0.4, 0.8])
+    for world, needle in ((BlenderWorld(strength=0.0), "strength is zero"),
+                          (BlenderWorld(color=(0.0, 0.0, 0.0)), "black"),
+                          (BlenderWorld(other="a Sky Texture node into the Background's colour"), "Sky Texture"),
+                          (BlenderWorld(image=""), "no file"),
+                          (BlenderWorld(image=str(_exr(tmp_path)), projection="MIRROR_BALL"), "equirectangular")):
+        out, notes = convert_world(world)
+        assert out == [] and needle in notes[0]
+    with pytest.raises(LightError, match="does not exist"):
+        convert_world(BlenderWorld(image=str(tmp_path / "missing.exr")))
+    # a World alone lights the scene; with lights it joins them
+    out, _ = convert_lights([], 1.0, world=BlenderWorld(strength=1.0, color=(1, 1, 1)))
+    assert len(out) == 1
+    out, _ = convert_lights([BlenderLight("Sun", "SUN", 1.0)], 1.0, world=BlenderWorld(strength=1.0))
+    assert len(out) == 2
+
+
+def test_light_specs_of_the_new_lights_read_back_as_the_same_lights(tmp_path):
+    p = _exr(tmp_path)
+    env = parse_light_spec(f"env:{p}:2.5e-06:33.5:z")
+    for light in (env, EnvironmentLight.uniform(0.125),
+                  AreaLight((1.5, -2.0, 30.0), (0.0, 0.3, -1.0), "disc", (2.0, 3.0), 4.0, up=(0.0, 1.0, 0.2)),
+                  AreaLight((1.5, -2.0, 30.0), (0.0, 0.3, -1.0), "rect", (2.0, 3.0), 4.0)):
+        assert parse_light_spec(light_spec(light)) == light
+    with pytest.raises(Exception, match="no --light spec"):
+        light_spec(EnvironmentLight(np.arange(1.0, 9.0).reshape(2, 4)))

@@ -80,7 +80,8 @@ def test_parse_light_spec_defaults():
 
 
 @pytest.mark.parametrize("spec, fragment", [
-    ("area:0,0,0:0,0,1", "unknown light type 'area'"),
+    ("sky:0,0,0:0,0,1", "unknown light type 'sky'"),
+    ("area:0,0,0:0,0,1", "must look like area"),
     ("", "empty light spec"),
     ("beam:0,0,0", "must look like beam:ox,oy,oz:dx,dy,dz[:power[:radius]]"),
     ("beam:0,0,0:0,0,1:1:2:3", "must look like beam"),

@@ -18,7 +18,12 @@ from meshshade.names import DEFAULT_MODEL, MODELS
 
 LIGHT_HELP = ("light SPEC (repeatable), positions in the mesh's units: beam:ox,oy,oz:dx,dy,dz[:power W[:radius]] | "
               "directional:dx,dy,dz[:irradiance W/mm^2] | point:x,y,z[:intensity W/sr] | "
-              "spot:x,y,z:dx,dy,dz[:intensity W/sr[:cone deg[:blend]]]")
+              "spot:x,y,z:dx,dy,dz[:intensity W/sr[:cone deg[:blend]]] | "
+              "env:FILE.exr[:strength[:rotation deg[:up y|z]]] (equirectangular HDR, W/(mm^2 sr) per unit strength) | "
+              "uniform[:radiance W/(mm^2 sr)] | area:x,y,z:nx,ny,nz:rect:w,h[:power W[:ux,uy,uz]] | "
+              "area:x,y,z:nx,ny,nz:disc:r[,r2][:power W[:ux,uy,uz]]")
+#: the relative standard error of each vertex's entering power an environment or area light aims for by default
+LIGHT_ERROR_DEFAULT = 0.005
 
 
 # --- numbers ---------------------------------------------------------------------------------------------
@@ -76,6 +81,10 @@ def add_mesh_args(p: argparse.ArgumentParser) -> None:
 
 def add_light_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--light", action="append", default=[], metavar="SPEC", help=LIGHT_HELP)
+    p.add_argument("--light-error", type=number, default=LIGHT_ERROR_DEFAULT, metavar="REL",
+                   help="env, uniform and area lights: the relative standard error of each vertex's entering power "
+                        "that their directions per vertex are chosen for, in [1e-4, 0.5] (default "
+                        f"{LIGHT_ERROR_DEFAULT}; the error left is reported)")
 
 
 # --- transport -----------------------------------------------------------------------------------------
