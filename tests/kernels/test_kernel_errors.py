@@ -3,9 +3,10 @@ in every kernel; other bad arguments raise ValueError (the cylinder: MeshshadeEr
 good material, on the edges of eta's domain too, gives the kernel's value, not just no exception (issue 42).
 
 The values are checked against tests/data/domain_edge_reference.csv, written offline in mpmath by
-tools/references/precompute_domain_edge_references.py (imports nothing from meshshade: closed forms and
-quadratures of physics.md b, the t-integrals of e.3, the Bessel series of the sphere and of the cylinder), and the
-dipole's cutoff radius against a tanh-sinh quadrature of its tail at run time.
+tools/references/precompute_domain_edge_references.py (imports nothing from meshshade: the planar dipole's
+closed forms and quadratures, docs/physics.md eqs. (15)-(16); the t-integrals of the curvature coefficients, eqs.
+(49)-(50); the Bessel series of the sphere and of the cylinder), and the dipole's cutoff radius against a tanh-sinh
+quadrature of its tail at run time.
 """
 from __future__ import annotations
 
