@@ -1,13 +1,25 @@
 """Texture bakes (issue 31): texels against the vertex bake, a beam's peak per texel, and the sun-lit ball's
 texture against its exact solution.
 
-Reference for the ball (independent of the bake's discretisation): the exact Robin ball series of the volume's
-line sources under a continuous sun (tests/volume/test_volume_sun_ball.py, checked there against mpmath) plus the
-continuum limit of the near-field correction, eq. (98) integrated over the exact sphere's lit surface by
-Gauss-Legendre in log angle x midpoint rule in azimuth around each receiver, with the signed remainder beyond the
-radius at the receiver, as the correction keeps it. The correction's table Delta R itself is the model's
-definition (tested against eqs. (93)/(96) in tests/volume and tests/kernels); what is tested here is the mesh,
-the refinement and the evaluation at texels.
+Reference for the ball, independent of the bake's discretisation and of its tables (issue 42):
+
+* the exact Robin ball series of the volume's line sources under a continuous sun
+  (tests/volume/test_volume_sun_ball.py, checked there against mpmath), with d'Eon's D and A of eq. (74) computed
+  here (Fresnel moments C1, C2 by adaptive quadrature of Born & Wolf's Fresnel reflectance);
+* plus the continuum limit of the near-field correction, eq. (98), evaluated from its definition: the public
+  kernels R_near (eq. (76)), W (eq. (86)) and M_Robin (eq. (96)) at the Gauss-Laguerre points of eq. (97)
+  (numpy's laggauss), not the bake's table of Delta R (1025 log distances x 9 cosines, linear interpolation);
+  integrated over the lit surface of the exact sphere facing the receiver's way by Gauss-Legendre in log angle x
+  midpoint rule in azimuth, within the radius where the magnitude of Delta R beyond holds 1 % of R_near's total,
+  with that remainder's signed energy at the entry point (docs/physics.md §15.1: the model as documented). Both
+  computed here from the definition (trapezoid in ln r on 1201 nodes): the radius agrees with the bake's to 0.4 %,
+  the correction to 0.3 % of itself. Without the radius (eq. (98) summed everywhere) the reference would be 2-6 %
+  higher past the terminator: what the radius costs the model there, not what this test is about;
+* the texels' points from a rasteriser written here in numpy (texel centres ((c + 1/2)/N, 1 - (r + 1/2)/N) in
+  each UV triangle, the mesh's barycentric interpolation), not meshshade.geometry.uv.rasterise_uv.
+
+What is tested is the mesh, the refinement and the evaluation at texels; the model's own accuracy is tested in
+tests/volume and tests/kernels.
 """
 import importlib.util
 import math
@@ -15,18 +27,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import integrate
 
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere, spherical_uv
-from meshshade.geometry.uv import rasterise_uv
-from meshshade.kernels.fresnel import fresnel_transmittance_entry, refract_in
+from meshshade.kernels.near_field import incidence_gain, near_field_profile
+from meshshade.kernels.robin_halfspace import robin_point_source_exitance
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.output.render import PixelGather
 from meshshade.output.texture import bake_texture, texture_refinement
 from meshshade.transport.baking import bake
-from meshshade.volume.near_field import _LOG_R, NearFieldCorrection
-from meshshade.volume.transport import diffusion_constants
 
 _spec = importlib.util.spec_from_file_location(
     "sun_ball", Path(__file__).parents[1] / "volume" / "test_volume_sun_ball.py")
@@ -35,50 +46,94 @@ _spec.loader.exec_module(sun_ball)
 
 SKIN = Material.preset("skin1")
 SUN = [DirectionalLight((0.0, 0.0, -1.0), 1.0)]
+#: docs/physics.md §15.1: Delta R is summed within the radius where what lies beyond holds 1 % of R_near's total
+NEAR_TAIL = 1e-2
 
 
-def near_field_ball(theta_p, material, R, n_alpha=240, n_phi=160):
+def fresnel(cos_i, n1, n2):
+    """Unpolarised Fresnel reflectance from index n1 into n2 (Born & Wolf 1.5.2); 1 past the critical angle."""
+    cos_i = np.asarray(cos_i, dtype=np.float64)
+    sin2_t = (n1 / n2) ** 2 * (1.0 - cos_i * cos_i)
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, None))
+    rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t)
+    rp = (n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i)
+    return np.where(sin2_t >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
+
+
+def deon_constants(albedo, eta):
+    """(D, mu, A) in optical units, d'Eon's theory (docs/physics.md eq. (74)): D = (2 - alpha')/3, mu =
+    sqrt((1 - alpha')/D), A = (1 + 3 C2)/(1 - 2 C1), C_n = int_0^1 F(mu) mu^n dmu seen from inside."""
+    mu_c = math.sqrt(1.0 - 1.0 / eta ** 2)                       # F = 1 below the critical cosine
+    c1, c2 = (mu_c ** (n + 1) / (n + 1) + integrate.quad(lambda m: float(fresnel(m, eta, 1.0)) * m ** n, mu_c, 1.0,
+                                                          epsabs=1e-14, epsrel=1e-12)[0] for n in (1, 2))
+    D = (2.0 - albedo) / 3.0
+    return D, math.sqrt((1.0 - albedo) / D), (1.0 + 3.0 * c2) / (1.0 - 2.0 * c1)
+
+
+def delta_r(r_opt, cos_t, material):
+    """Eq. (98) of channel 0, optical units, on the grid r_opt (n,) x cos_t (m,): W(cos_t) R_near(r) - sum_j
+    alpha' w_j M_Robin(r; x_j cos_t), (x_j, w_j) the 4-point Gauss-Laguerre rule of eq. (97)."""
+    a, eta, g = float(material.albedo_prime[0]), float(material.eta), float(material.g)
+    D, mu, A = deon_constants(a, eta)
+    x, w = np.polynomial.laguerre.laggauss(4)
+    gain = np.array([incidence_gain(albedo_prime=a, eta=eta, g=g, cos_t=float(c)) for c in cos_t])
+    near = near_field_profile(r_opt, albedo_prime=a, eta=eta, g=g)
+    robin = sum(a * wj * robin_point_source_exitance(r_opt[:, None], xj * cos_t[None, :], D=D, mu=mu, A=A)
+                for xj, wj in zip(x, w))
+    return gain[None, :] * near[:, None] - robin
+
+
+def near_field_radius_and_rest(material, n_r=1201, n_c=17):
+    """(radius mm, cos_t grid, rest(cos_t)): the radius where the magnitude of Delta R beyond (its largest over
+    cos_t) holds NEAR_TAIL of R_near's total, and the signed energy of Delta R beyond it per cos_t (trapezoid in
+    ln r on [1e-6, 300] transport lengths, linear in ln r between the nodes; R_near's total by the same rule)."""
+    a, eta, g = float(material.albedo_prime[0]), float(material.eta), float(material.g)
+    lr = np.linspace(math.log(1e-6), math.log(300.0), n_r)
+    r = np.exp(lr)
+    cos_t = np.linspace(math.sqrt(1.0 - 1.0 / eta ** 2), 1.0, n_c)
+    f = 2.0 * math.pi * r[:, None] ** 2 * delta_r(r, cos_t, material)        # d/d(ln r) of the ring integral
+
+    def beyond(y):                                                  # int_{r_i}^inf y dln r at every node
+        seg = 0.5 * (y[1:] + y[:-1]) * np.diff(lr).reshape((-1,) + (1,) * (y.ndim - 1))
+        return np.concatenate([np.cumsum(seg[::-1], axis=0)[::-1], np.zeros((1,) + y.shape[1:])])
+
+    near = 2.0 * math.pi * r ** 2 * near_field_profile(r, albedo_prime=a, eta=eta, g=g)
+    tail = beyond(np.abs(f).max(axis=1))                            # non-increasing in r
+    log_radius = float(np.interp(NEAR_TAIL * beyond(near)[0], tail[::-1], lr[::-1]))
+    rest = np.array([np.interp(log_radius, lr, col) for col in beyond(f).T])
+    return math.exp(log_radius) / float(material.sigma_t_prime[0]), cos_t, rest
+
+
+def near_field_ball(theta_p, material, R, n_alpha=240, n_phi=80, n_c=64):
     """Continuum limit of the near-field correction (channel 0) on the exact ball of radius R under a unit sun
-    from +z, at polar angles ``theta_p`` (module docstring)."""
-    corr = NearFieldCorrection(material)
-    t, s = corr.tables[0], float(corr.sigma_t_prime[0])
-    Rc, eta = float(corr.radius_mm[0]), float(material.eta)
-    logr = _LOG_R[:t.n_r] - math.log(s)
-    f = t.f * s * s
-
-    def lookup(r, ct):
-        u = np.clip((np.log(r) - logr[0]) / (logr[1] - logr[0]), 0.0, t.n_r - 1 - 1e-9)
-        j = u.astype(int)
-        w = u - j
-        cc = np.clip(ct, t.cos_t[0], t.cos_t[-1])
-        k = np.minimum(((cc - t.cos_t[0]) / (t.cos_t[1] - t.cos_t[0])).astype(int), t.cos_t.size - 2)
-        fr = (cc - t.cos_t[k]) / (t.cos_t[1] - t.cos_t[0])
-        v = (1 - fr) * ((1 - w) * f[k, j] + w * f[k, j + 1]) + fr * ((1 - w) * f[k + 1, j] + w * f[k + 1, j + 1])
-        return np.where(r <= Rc, v, 0.0)
-
-    def entry(nq):
-        ci = nq[..., 2]
-        E = np.where(ci > 0, ci * fresnel_transmittance_entry(np.clip(ci, 1e-12, 1.0), eta), 0.0)
-        w = refract_in(np.broadcast_to([0.0, 0.0, -1.0], nq.shape).reshape(-1, 3), nq.reshape(-1, 3), eta)
-        return E, np.clip(-np.sum(w.reshape(nq.shape) * nq, axis=-1), 0.0, 1.0)
-
-    a_max = min(2.0 * math.asin(min(1.0, Rc / (2.0 * R))), math.pi / 2)
+    from +z, at polar angles ``theta_p`` (module docstring): per receiver p, the lit points q within the radius
+    (normals facing the same way there), each entering cos_i (1 - F) per unit area with its light at cos_t; plus
+    the receiver's own entry times the rest beyond the radius."""
+    s, eta = float(material.sigma_t_prime[0]), float(material.eta)
+    radius, rest_c, rest = near_field_radius_and_rest(material)
+    a_max = min(2.0 * math.asin(min(1.0, radius / (2.0 * R))), math.pi / 2)
     x, wx = np.polynomial.legendre.leggauss(n_alpha)
     la0, la1 = math.log(1e-9), math.log(a_max)
-    al = np.exp(0.5 * (la1 - la0) * (x + 1) + la0)
+    al = np.exp(0.5 * (la1 - la0) * (x + 1) + la0)                   # angle between p and q seen from the centre
     wa = 0.5 * (la1 - la0) * wx * al
-    ph = (np.arange(n_phi) + 0.5) * 2 * math.pi / n_phi
+    cos_t = np.linspace(math.sqrt(1.0 - 1.0 / eta ** 2), 1.0, n_c)
+    table = delta_r(2.0 * R * np.sin(al / 2) * s, cos_t, material) * s * s     # (n_alpha, n_c) per mm^2
+    ph = (np.arange(n_phi) + 0.5) * math.pi / n_phi                 # half the azimuths: symmetric about y = 0
+    rows = np.arange(n_alpha)[:, None]
     out = np.zeros(len(theta_p))
+
+    def entry(cos_i):
+        ci = np.clip(cos_i, 0.0, 1.0)
+        return np.where(cos_i > 0, ci * (1.0 - fresnel(ci, 1.0, eta)), 0.0), np.sqrt(1.0 - (1.0 - ci * ci) / eta ** 2)
+
     for k, th in enumerate(theta_p):
-        p = np.array([math.sin(th), 0.0, math.cos(th)])
-        e1 = np.array([math.cos(th), 0.0, -math.sin(th)])
-        dirs = np.cos(ph)[None, :, None] * e1 + np.sin(ph)[None, :, None] * np.array([0.0, 1.0, 0.0])
-        nq = np.cos(al)[:, None, None] * p + np.sin(al)[:, None, None] * dirs
-        E, ct = entry(nq)
-        r = np.broadcast_to((2 * R * np.sin(al / 2))[:, None], E.shape)
-        out[k] = np.sum(lookup(r, ct) * E * (R * R * np.sin(al) * wa)[:, None]) * 2 * math.pi / n_phi
-        Ep, ctp = entry(p[None, :])
-        out[k] += Ep[0] * np.interp(np.clip(ctp[0], t.cos_t[0], t.cos_t[-1]), t.cos_t, t.rest)
+        E, ct = entry(np.cos(al)[:, None] * math.cos(th) - np.sin(al)[:, None] * np.cos(ph)[None, :] * math.sin(th))
+        u = (ct - cos_t[0]) / (cos_t[1] - cos_t[0])
+        j = np.clip(u.astype(int), 0, n_c - 2)
+        v = (1.0 - (u - j)) * table[rows, j] + (u - j) * table[rows, j + 1]
+        out[k] = 2.0 * np.sum(v * E * (R * R * np.sin(al) * wa)[:, None]) * math.pi / n_phi
+        Ep, ctp = entry(np.array(math.cos(th)))
+        out[k] += float(Ep) * float(np.interp(ctp, rest_c, rest))
     return out
 
 
@@ -86,13 +141,42 @@ def near_field_ball(theta_p, material, R, n_alpha=240, n_phi=160):
 def ball_reference():
     """theta -> exact exitance of the sun-lit ball (volume series + near-field continuum), on a 1/2 degree grid."""
     theta = np.linspace(0.0, math.pi, 361)
-    D, sa, A = diffusion_constants(sun_ball.MATERIAL, 0)
-    ref = sun_ball.sun_ball_exitance(theta, D, sa, A) + near_field_ball(theta, sun_ball.MATERIAL, sun_ball.R)
+    m = sun_ball.MATERIAL
+    D, _, A = deon_constants(float(m.albedo_prime[0]), float(m.eta))
+    s = float(m.sigma_t_prime[0])
+    ref = (sun_ball.sun_ball_exitance(theta, D / s, float(m.sigma_a[0]), A)
+           + near_field_ball(theta, m, sun_ball.R))
 
     def at(points):
         th = np.arccos(np.clip(points[:, 2] / np.linalg.norm(points, axis=1), -1.0, 1.0))
         return np.interp(th, theta, ref)
     return at
+
+
+def texel_points(uv, size):
+    """(texel (k,) flat index row * size + col, face (k,), bary (k, 3)) of the texel centres ((col + 1/2)/size,
+    1 - (row + 1/2)/size) inside each UV triangle (edges included, the first face keeps a texel), in numpy."""
+    owner = -np.ones(size * size, dtype=np.int64)
+    bary = np.zeros((size * size, 3))
+    px, py = uv[:, :, 0] * size - 0.5, (1.0 - uv[:, :, 1]) * size - 0.5     # texel (row, col) centre at (col, row)
+    for f in range(uv.shape[0]):
+        x, y = px[f], py[f]
+        det = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0])
+        c0, c1 = max(math.ceil(x.min()), 0), min(math.floor(x.max()), size - 1)
+        r0, r1 = max(math.ceil(y.min()), 0), min(math.floor(y.max()), size - 1)
+        if det == 0 or c1 < c0 or r1 < r0:
+            continue
+        cc, rr = (a.ravel() for a in np.meshgrid(np.arange(c0, c1 + 1), np.arange(r0, r1 + 1)))
+        l1 = ((cc - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (rr - y[0])) / det
+        l2 = ((x[1] - x[0]) * (rr - y[0]) - (cc - x[0]) * (y[1] - y[0])) / det
+        lam = np.stack([1.0 - l1 - l2, l1, l2], axis=1)
+        inside = np.all(lam >= -1e-12, axis=1)
+        k = rr[inside] * size + cc[inside]
+        free = owner[k] < 0
+        owner[k[free]] = f
+        bary[k[free]] = np.clip(lam[inside][free], 0.0, 1.0)
+    texel = np.flatnonzero(owner >= 0)
+    return texel, owner[texel], bary[texel] / bary[texel].sum(axis=1, keepdims=True)
 
 
 def _error(M, ref):
@@ -103,8 +187,12 @@ def _error(M, ref):
 def test_near_field_continuum_is_converged():
     th = np.radians([0.0, 60.0, 90.0, 95.0])
     a = near_field_ball(th, sun_ball.MATERIAL, sun_ball.R)
-    b = near_field_ball(th, sun_ball.MATERIAL, sun_ball.R, n_alpha=480, n_phi=320)
+    b = near_field_ball(th, sun_ball.MATERIAL, sun_ball.R, n_alpha=480, n_phi=160, n_c=128)
     np.testing.assert_allclose(a, b, atol=1e-3 * np.abs(b).max())
+    radius, _, rest = near_field_radius_and_rest(sun_ball.MATERIAL)
+    radius2, _, rest2 = near_field_radius_and_rest(sun_ball.MATERIAL, n_r=2401)
+    assert radius2 == pytest.approx(radius, rel=1e-3)
+    np.testing.assert_allclose(rest2, rest, rtol=1e-3)
 
 
 def _ball_texture(ball_reference, refine):
@@ -112,7 +200,8 @@ def _ball_texture(ball_reference, refine):
     mesh = Mesh.from_arrays(V, F)
     uv = spherical_uv(V, F)
     tex = bake_texture(mesh, sun_ball.MATERIAL, SUN, uv=uv, size=1024, padding=2, refine=refine)
-    texel, face, bary, _ = rasterise_uv(uv, 1024, 1024)
+    texel, face, bary = texel_points(uv, 1024)
+    assert np.array_equal(np.flatnonzero(tex.covered), texel)       # the same texels on the surface
     points = np.einsum("ij,ijk->ik", bary, V[F[face]])
     return tex, _error(tex.image.reshape(-1, 3)[texel, 0], ball_reference(points))
 
@@ -142,7 +231,7 @@ def test_without_refinement_texels_are_the_vertex_bake_where_lights_enter_at_ver
     tex = bake_texture(mesh, SKIN, SUN, uv=uv, size=128, padding=0, refine=1)
     plain = bake(mesh, SKIN, SUN)
     np.testing.assert_allclose(tex.vertex_radiance, plain.radiance, rtol=1e-9, atol=1e-15)
-    texel, face, bary, _ = rasterise_uv(uv, 128, 128)
+    texel, face, bary = texel_points(uv, 128)
     interp = np.maximum(np.einsum("ij,ijk->ik", bary, plain.radiance[mesh.faces[face]]), 0.0)
     np.testing.assert_allclose(tex.image.reshape(-1, 3)[texel], interp, rtol=1e-9, atol=1e-15)
     assert np.all(tex.image.reshape(-1, 3)[~tex.covered.reshape(-1)] == 0.0)     # no padding asked for
