@@ -6,7 +6,8 @@ EXCLUDE_MM from every defect (whose clean exitance is above 1e-3 of the channel'
 
 Slow (a bake each, minutes where the bake leaves the volume model). Expected to fail on the code of 2ded9bb, whose
 volume transport needs a closed mesh: those cases are xfail (not strict) until the new transport lands; then
-remove the marks. Flipped faces are repaired by the mesh validation into the clean mesh, so that case holds today.
+remove the marks. Two cases hold today (the bakes are identical): flipped faces, which the mesh validation repairs
+into the clean mesh, and stray vertices, which no face uses.
 """
 from __future__ import annotations
 
@@ -63,8 +64,8 @@ def hand(shared_meshes):
     return V, F, sun, np.asarray(clean.radiance)
 
 
-@pytest.mark.parametrize("defect", [pytest.param(d, marks=REWRITE) for d in ("holes6", "dup5", "ball6", "fin",
-                                                                             "stray10")] + ["flip10"])
+@pytest.mark.parametrize("defect", [pytest.param(d, marks=REWRITE) for d in ("holes6", "dup5", "ball6", "fin")]
+                         + ["stray10", "flip10"])
 def test_default_bake_of_a_defective_scan_matches_the_clean_one_away_from_the_defects(hand, defect):
     V, F, sun, clean = hand
     d = bench.defective(defect, V, F, sun)
@@ -75,6 +76,6 @@ def test_default_bake_of_a_defective_scan_matches_the_clean_one_away_from_the_de
     referenced[d.faces.reshape(-1)] = True
     keep = md.far_from(V, d.points, EXCLUDE_MM) & referenced[:n]
     got = md.relative_change(np.asarray(res.radiance)[:n], clean, keep)
-    assert got["finite"] and min(got["count"]) > n // 3
+    assert got["finite"] and min(got["count"]) >= 1000            # not a vacuous comparison
     assert max(got["mean"]) <= TARGET_MEAN, got
     assert max(got["p99"]) <= TARGET_P99, got

@@ -11,8 +11,9 @@ Material.preset("skin1"), [DirectionalLight(SUN)])`` in a fresh subprocess per m
   and its surface fallback), outside the timing; the process's peak memory is then reset
   (``/proc/self/clear_refs``) so that ``peak_rss_mb`` (``resource.getrusage``, MB = 1e6 bytes) is the bake's,
   with the mesh already loaded (``warm_up_peak_rss_mb``: the peak before the reset);
-* ``seconds``, ``result.model``, ``stats["transport"]`` (which says why the volume model was not used), whether
-  the exitance is finite and >= 0, the exitant power per channel against the entering power, the load average;
+* ``seconds`` (wall) and ``cpu_seconds`` (user + system: less disturbed by a busy machine), ``result.model``,
+  ``stats["transport"]`` (which says why the volume model was not used), whether the exitance is finite and >= 0,
+  the exitant power per channel against the entering power, the load average;
 * ``targets``: the volume model, <= 30 s, <= 3 GB, finite and >= 0, exitant <= entering; ``meets_targets``.
 
 A bake that raises (meshshade refuses non-finite or negative exitance) is a row with its error; one that runs past
@@ -57,7 +58,7 @@ def one(name: str, light) -> dict:
     real_models.warm_up(material, [sun])   # numba's kernels compiled or loaded, outside the timing
     warm_peak = real_models.peak_rss_mb()
     reset = real_models.reset_peak_rss()
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), real_models.cpu_seconds()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -69,7 +70,8 @@ def one(name: str, light) -> dict:
     M = np.asarray(res.radiance)
     ex = [float(x) for x in res.stats["exitant_power"]]
     ent = float(res.stats["entering_power"])
-    return {"seconds": round(sec, 2), "peak_rss_mb": round(real_models.peak_rss_mb()), "peak_reset": reset,
+    return {"seconds": round(sec, 2), "cpu_seconds": round(real_models.cpu_seconds() - cpu, 2),
+            "peak_rss_mb": round(real_models.peak_rss_mb()), "peak_reset": reset,
             "warm_up_peak_rss_mb": round(warm_peak),
             "model": res.model, "transport": res.stats.get("transport"),
             "finite": bool(np.isfinite(M).all()), "nonnegative": bool((M >= 0).all()),

@@ -142,8 +142,8 @@ def punch_holes(vertices, faces, k: int, *, seed: int = 0, rings: int = 2, min_s
     Returns
     -------
     :class:`Defected`; ``points`` are the centres' positions; ``details``: ``centres`` (vertex ids),
-    ``removed_faces`` (face ids of the input, sorted), ``unreferenced`` (vertices left without a face: at least
-    the centres, kept in place since vertices are never removed).
+    ``removed_faces`` (face ids of the input, sorted), ``unreferenced`` (vertices left without a face, kept in
+    place since vertices are never removed: with ``rings=2`` each centre and its neighbours).
 
     Raises
     ------
