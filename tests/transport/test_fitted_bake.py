@@ -68,12 +68,19 @@ def test_beam_bake_follows_the_profile_on_a_sphere(sphere10):
     assert np.mean(res.radiance[far, 0]) > 1.3 * np.mean(curved.radiance[far, 0])   # beyond first order
 
 
-def test_direct_and_hierarchical_transports_agree(sphere10):
+@pytest.mark.parametrize("level", [4, pytest.param(5, marks=pytest.mark.slow)])
+def test_direct_and_hierarchical_transports_agree(level):
     """Directional light on the sphere: the hierarchical transport (near matrices with the pair curvatures, the far
-    field's clusters with the chord curvature of eq. (85)) against the direct sum, per vertex."""
+    field's clusters with the chord curvature of eq. (85)) against the direct sum, per vertex.
+
+    Level 4 (2562 vertices, 5 s) in the default suite: the far field carries 83 % of the pairs there (298k far,
+    59k near), and with the chord curvature zeroed in the far field the bakes differ by 43 % (median) and lose 21 %
+    of the energy (planted, measured). Level 5 (10k vertices) is slow: 40 s of CPU, nearly all the direct sum
+    (measured: median 1e-4, max 9e-4 at both levels)."""
+    mesh = Mesh(*icosphere(R, level))
     light = DirectionalLight((0.0, 0.0, -1.0))
-    direct = bake(sphere10, MAT, [light], model="fitted", geodesic="arc", transport="direct")
-    hier = bake(sphere10, MAT, [light], model="fitted", geodesic="arc", transport="hierarchical")
+    direct = bake(mesh, MAT, [light], model="fitted", geodesic="arc", transport="direct")
+    hier = bake(mesh, MAT, [light], model="fitted", geodesic="arc", transport="hierarchical")
     lit = direct.radiance[:, 0] > 1e-3 * direct.radiance[:, 0].max()
     rel = np.abs(hier.radiance[lit, 0] / direct.radiance[lit, 0] - 1)
     assert np.median(rel) < 0.01 and np.max(rel) < 0.05
