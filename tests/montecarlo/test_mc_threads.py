@@ -271,8 +271,10 @@ def _oversubscribed(seeds, threads, budget):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def test_many_threads_same_result_and_budget_runs_agree_face_by_face():
-    """16 numba threads on this 2-core machine (oversubscribed, as issue 30 says makes thread bugs show), 20 seeds:
+@pytest.mark.parametrize("n_seeds", [6, pytest.param(20, marks=pytest.mark.slow)])
+def test_many_threads_same_result_and_budget_runs_agree_face_by_face(n_seeds):
+    """16 numba threads on this 2-core machine (oversubscribed, as issue 30 says makes thread bugs show), 20 seeds
+    (slow) or 6 (the default suite: 3 s of budget runs instead of 10, about a third of the time):
 
     * a photon count gives bitwise the same faces, vertices and totals on 1, 2, 7 and 16 threads;
     * with a time budget, on 1 thread (even seeds) and 16 threads (odd seeds), every run agrees face by face with
@@ -280,16 +282,19 @@ def test_many_threads_same_result_and_budget_runs_agree_face_by_face():
       over every face with a relative error below 0.3. (Two thread counts on one seed share their first photons,
       so they are compared through the reference, not with each other.) With batch-means errors (16 batches, 15
       degrees of freedom) E[z^2] is about 1.1 (1 for known variances, 15/13 for one estimated variance); the
-      mean over ~10^4 faces must lie in [0.85, 1.35] and no seed's mean above 1.8 (a wrong tally such as issue
-      30's 0.42-correlated red channel gives z^2 >> 1 on its faces).
+      mean over the faces and channels (about 1800 a seed, measured: 11k for 6 seeds) must lie in [0.85, 1.35] and
+      no seed's mean above 1.8 (a wrong tally such as issue 30's 0.42-correlated red channel gives z^2 >> 1 on its
+      faces). The bands hold for 6 seeds: z^2 of one face is about F(1, 15) (variance 3.4), so the mean over 11k
+      has a standard error of 0.018 (0.85 and 1.35 are 17 and 11 of them from 1.15), one seed's 0.043 (1.8 is 15
+      away); measured with 6 seeds: 1.09, seeds 1.06-1.14.
     """
-    out = _oversubscribed(list(range(20)), [1, 2, 7, 16], 0.5)
+    out = _oversubscribed(list(range(n_seeds)), [1, 2, 7, 16], 0.5)
     assert out["max_threads"] == 16
     assert all(out["fixed"]), out["fixed"]
     z2 = sum(b["z2_sum"] for b in out["budget"])
     n = sum(b["n"] for b in out["budget"])
     per_seed = [b["z2_sum"] / max(b["n"], 1) for b in out["budget"]]
-    assert n > 5000, out["budget"]
+    assert n > 250 * n_seeds, out["budget"]
     assert 0.85 <= z2 / n <= 1.35, (z2 / n, per_seed)
     assert max(per_seed) < 1.8, per_seed
     assert all(min(b["photons"]) > 2000 for b in out["budget"]), [b["photons"] for b in out["budget"]]
