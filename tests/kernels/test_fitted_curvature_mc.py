@@ -7,7 +7,12 @@ order is out of range (nu > 0.25) the fitted model's mean error over these rings
 kernel's, was measured at 0.25 (held-out radius, alpha' = 0.9) and 0.30 (held-out medium alpha' = 0.95, eta = 1.4,
 radii 1 and 4 / sigma_tr; over the whole held-out set of tools/tables/fit_curvature_model.py: 0.32 and 0.26); the test
 asserts the issue's target, 0.5, and no worse than first order (+0.5 % for noise) within its range (measured 1.6 %
-against 2.5 %). With the fitted terms zeroed (the exponentiated first order) both fail."""
+against 2.5 %). With the fitted terms zeroed (the exponentiated first order) both fail.
+
+The held-out medium case (two radii, 13 runs of 1e6 photons: about 25 s of CPU) is slow; the default suite keeps
+the held-out radius case (5 runs, about 8 s). Fewer photons is no cheaper way: the rings kept (relative standard
+error below 2 %) thin out to the ones near the entry point (measured at 3e5: 22-29 out of range, fewer than the 30
+asked for), so the test would no longer see where first order fails most."""
 from __future__ import annotations
 
 import numpy as np
@@ -26,9 +31,9 @@ def _material(albedo, eta):
     return Material(np.full(3, 1.0), np.full(3, (1.0 - albedo) / albedo), eta, 0.0)
 
 
-@pytest.mark.parametrize("albedo,eta,radii,inside,ratio", [(0.9, 1.3, (1.0,), False, 0.5),
-                                                           (0.95, 1.4, (1.0, 4.0), True, 0.5)],
-                         ids=["held-out radius", "held-out medium"])
+@pytest.mark.parametrize("albedo,eta,radii,inside,ratio", [
+    (0.9, 1.3, (1.0,), False, 0.5),
+    pytest.param(0.95, 1.4, (1.0, 4.0), True, 0.5, marks=pytest.mark.slow)], ids=["held-out radius", "held-out medium"])
 def test_fitted_model_beats_first_order_on_held_out_shapes(albedo, eta, radii, inside, ratio):
     m = _material(albedo, eta)
     st, tr = float(m.sigma_t_prime[0]), float(m.sigma_tr[0])
