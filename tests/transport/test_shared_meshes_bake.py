@@ -44,8 +44,12 @@ def check_bake(mesh, material, geodesic="exact", *, min_ratio=2.0, min_sign=0.85
     return rel
 
 
-def test_bake_shared_mesh_bob_curved_vs_dipole(shared_meshes):
-    check_bake(scaled(shared_meshes, "bob.obj"), Material.preset("skin1"))
+@pytest.mark.parametrize("geodesic", ["arc", pytest.param("exact", marks=pytest.mark.slow)])
+def test_bake_shared_mesh_bob_curved_vs_dipole(shared_meshes, geodesic):
+    """bob (5.3k vertices): the default suite bakes with the arc geodesics (4.7 s of CPU against 21.5 s with the
+    exact ones, which stay in the slow set); measured ratio 4.58 and sign agreement 0.987 with arc, 4.70 and 0.988
+    with exact, against the thresholds 2 and 0.85 of both."""
+    check_bake(scaled(shared_meshes, "bob.obj"), Material.preset("skin1"), geodesic=geodesic)
 
 
 @pytest.mark.slow
