@@ -48,8 +48,8 @@ import numpy as np
 
 from meshshade.geometry.convexity import is_convex
 from meshshade.geometry.mesh import face_normals
-from meshshade.light.sky_loops import (AREA_ROWS, ENVIRONMENT_ROWS, MOMENTS, pack_sky, quadrature_rows, row_moments,
-                                       shadow_rows)
+from meshshade.light.sky_loops import (AREA_ROWS, ENVIRONMENT_ROWS, MOMENTS, SUPPORT_COS, pack_sky, quadrature_rows,
+                                       row_moments, shadow_rows)
 from meshshade.light.sources import AreaLight, EnvironmentLight
 from meshshade.pacing import run_in_blocks
 from meshshade.raycast.embree_direct import DirectEmbreeScene
@@ -112,15 +112,15 @@ class Incidence:
 class SupportingPlanes:
     """Shadow rays a convex mesh makes unnecessary: from vertex p along w nothing can be hit when one of p's faces
     has ``n_f . w > 1e-6`` (its plane supports the convex mesh; :class:`~meshshade.light.shadows.ShadowCuller`).
-    Built only for a mesh certified convex (:func:`~meshshade.geometry.convexity.is_convex`); otherwise
-    :meth:`certain` says no to every row."""
-
-    COS_TOL = 1e-6
+    Holds, for a mesh certified convex (:func:`~meshshade.geometry.convexity.is_convex`), each vertex's faces
+    (``adjacent`` (n, deg), padded with the row of zeros at the end of ``normals``); for any other mesh no column,
+    so no ray is skipped. The compiled rows apply the rule (:func:`~meshshade.light.sky_loops.quadrature_rows`)."""
 
     def __init__(self, vertices, faces):
         V, F = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
         self.convex = bool(is_convex(V, F))
         self.adjacent = np.zeros((V.shape[0], 0), dtype=np.int64)
+        self.normals = np.zeros((1, 3))
         if self.convex:
             fn = face_normals(V, F)
             self.normals = np.vstack([fn, np.zeros((1, 3))])      # row m: padding (never supports)
@@ -132,13 +132,6 @@ class SupportingPlanes:
             adj = np.full((V.shape[0], max(int(counts.max()), 1)), F.shape[0], dtype=np.int64)
             adj[corner[order], rank] = order // 3
             self.adjacent = adj
-
-    def certain(self, vertex, w) -> np.ndarray:
-        """(k,) bool: the ray from vertex ``vertex[j]`` along unit ``w[j]`` provably meets nothing."""
-        if not self.convex:
-            return np.zeros(len(vertex), dtype=bool)
-        dots = np.einsum("kdj,kj->kd", self.normals[self.adjacent[vertex]], w)
-        return dots.max(axis=1) > self.COS_TOL
 
 
 # ------------------------------------------------------------------------------------------------ the rule
@@ -208,12 +201,10 @@ class _Rays:
                 self.direct = None
         self.cast = self.skipped = 0
 
-    def occluded(self, vertex, origins, w, tmax) -> np.ndarray:
+    def occluded(self, sure, origins, w, tmax) -> np.ndarray:
         """(k,) bool: whether the rays from ``origins`` (k, 3) along unit ``w`` meet the mesh within ``tmax``;
-        ``vertex`` (k,) the mesh vertex each starts from (for the convex rule) or None."""
+        ``sure`` (k,) the rows known unshadowed (no ray cast)."""
         out = np.zeros(w.shape[0], dtype=bool)
-        sure = (self.planes.certain(vertex, w) if self.planes is not None and vertex is not None
-                else np.zeros(w.shape[0], dtype=bool))
         ray = np.flatnonzero(~sure)
         self.cast += int(ray.size)
         self.skipped += int(w.shape[0] - ray.size)
@@ -257,6 +248,11 @@ def _estimate(light, surface, vertex_ids, rays: _Rays, eta, directions, salt, ke
     prm, sky = _light_tables(light)
     kind = ENVIRONMENT_ROWS if isinstance(light, EnvironmentLight) else AREA_ROWS
     origin_pt = rays.scene.offset_origins(P, Nrm, +1.0) if n else np.zeros((0, 3))
+    planes = rays.planes
+    if planes is not None and planes.convex and vertex_ids is not None:
+        adjacent, fnormals = np.ascontiguousarray(planes.adjacent[vertex_ids]), planes.normals
+    else:
+        adjacent, fnormals = np.zeros((n, 0), dtype=np.int64), np.zeros((1, 3))
     T1, T2 = tangent_frames(Nrm) if n else (np.zeros((0, 3)), np.zeros((0, 3)))
     moments = np.zeros((n, MOMENTS))
     rep_sum = np.zeros((n, REPLICATES))
@@ -266,13 +262,14 @@ def _estimate(light, surface, vertex_ids, rays: _Rays, eta, directions, salt, ke
         c1 = min(n, c0 + step)
         n_rows = (c1 - c0) * K
         w, value, cos, tmax = np.empty((n_rows, 3)), np.empty(n_rows), np.empty(n_rows), np.empty(n_rows)
-        Pc, Nc, Sc = (np.ascontiguousarray(x[c0:c1]) for x in (P, Nrm, shifts))
+        sure = np.empty(n_rows, dtype=np.bool_)
+        Pc, Nc, Sc, Ac = (np.ascontiguousarray(x[c0:c1]) for x in (P, Nrm, shifts, adjacent))
         run_in_blocks(lambda a, b: quadrature_rows(a, b, kind, Pc, Nc, Sc, lx, ly, prm, sky.row_cdf, sky.flat_cdf,
-                                                   sky.lum, sky.cos_edges, w, value, cos, tmax),
+                                                   sky.lum, sky.cos_edges, Ac, fnormals, w, value, cos, tmax, sure),
                       c1 - c0, min_block=max(1, 16384 // K))
         live = np.flatnonzero(value > 0.0)
         pt = c0 + live // K
-        occ = rays.occluded(None if vertex_ids is None else vertex_ids[pt], origin_pt[pt], w[live], tmax[live])
+        occ = rays.occluded(sure[live], origin_pt[pt], w[live], tmax[live])
         live, pt = live[~occ], pt[~occ]
         rep = (live % K) // (S * m)
         wl, cl = np.ascontiguousarray(w[live]), cos[live]

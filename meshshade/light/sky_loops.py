@@ -25,11 +25,13 @@ from meshshade.light.sources import AreaLight, EnvironmentLight
 from meshshade.raycast.embree_direct import rayhit_buffer, trace
 
 __all__ = ["SkyTables", "pack_sky", "env_direction", "env_pixel", "cosine_direction", "area_point", "quadrature_rows",
-           "shadow_rows", "row_moments", "fresnel_in", "MOMENTS", "ENVIRONMENT_ROWS", "AREA_ROWS",
+           "shadow_rows", "row_moments", "fresnel_in", "MOMENTS", "ENVIRONMENT_ROWS", "AREA_ROWS", "SUPPORT_COS",
            "E_ROW", "E_PIX", "E_EDGE", "E_H", "E_W", "E_STRENGTH", "E_TOTAL", "E_FRAME",
            "A_C", "A_U", "A_V", "A_N", "A_SIZE", "A_DISC", "A_RADIANCE", "A_AREA"]
 
 _OPTS = dict(cache=True, error_model="numpy")
+#: a direction more than this cosine above one of a convex mesh's faces at the vertex cannot be shadowed
+SUPPORT_COS = 1e-6
 #: what quadrature_rows draws: an environment's two strategies (map, cosine) or an area light's emitter points
 ENVIRONMENT_ROWS, AREA_ROWS = 0, 1
 #: columns of a point's moments (row_moments): entering and incident power (W), then entering-power-weighted sums
@@ -108,12 +110,11 @@ def env_direction(p, row_cdf, flat_cdf, cos_edges, x, y):
     row = min(np.searchsorted(row_cdf[r0:r0 + H], x, side="right"), H - 1)
     lo = row_cdf[r0 + row - 1] if row > 0 else 0.0
     a = min(1.0, max(0.0, (x - lo) / (row_cdf[r0 + row] - lo)))
-    flat = flat_cdf[p0:p0 + H * W]
-    col = min(np.searchsorted(flat, y + 2.0 * row, side="right") - row * W, W - 1)
-    col = max(col, 0)
+    flat = flat_cdf[p0 + row * W:p0 + (row + 1) * W]      # the row's column CDF, offset by 2 row
     base = 2.0 * row
-    clo = flat[row * W + col - 1] - base if col > 0 else 0.0
-    b = min(1.0, max(0.0, (y - clo) / (flat[row * W + col] - base - clo)))
+    col = max(0, min(np.searchsorted(flat, y + base, side="right"), W - 1))
+    clo = flat[col - 1] - base if col > 0 else 0.0
+    b = min(1.0, max(0.0, (y - clo) / (flat[col] - base - clo)))
     c0, c1 = cos_edges[e0 + row], cos_edges[e0 + row + 1]
     cos_t = c0 + a * (c1 - c0)
     sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
@@ -154,13 +155,17 @@ def area_point(p, x, y):
 
 
 @njit(nogil=True, **_OPTS)
-def quadrature_rows(a, b, kind, P, Nrm, shifts, lx, ly, prm, sky_rows, sky_flat, sky_lum, sky_edges, w_out, value_out,
-                    cos_out, tmax_out):
+def quadrature_rows(a, b, kind, P, Nrm, shifts, lx, ly, prm, sky_rows, sky_flat, sky_lum, sky_edges, adjacent,
+                    face_normals, w_out, value_out, cos_out, tmax_out, sure_out):
     """Rows of points a .. b - 1 (module docstring): point j's K = R S m rows start at j K, ordered by replicate,
     strategy and lattice point; ``value_out`` 0 for a row that brings nothing (below the horizon, behind the
-    emitter). ``shifts`` (n, R, S, 2), ``lx``/``ly`` (m,) the lattice, ``prm`` the light's parameter row."""
+    emitter). ``shifts`` (n, R, S, 2), ``lx``/``ly`` (m,) the lattice, ``prm`` the light's parameter row.
+    ``adjacent`` (n, deg) the faces of each point's vertex on a mesh certified convex (padded with a face whose
+    ``face_normals`` row is 0; zero columns otherwise): ``sure_out`` marks the rows above one of them, which no
+    shadow ray needs (light.incidence.SupportingPlanes)."""
     R, S, m = shifts.shape[1], shifts.shape[2], lx.shape[0]
     K = R * S * m
+    deg = adjacent.shape[1]
     for j in range(a, b):
         nx, ny, nz = Nrm[j, 0], Nrm[j, 1], Nrm[j, 2]
         for r in range(R):
@@ -195,6 +200,15 @@ def quadrature_rows(a, b, kind, P, Nrm, shifts, lx, ly, prm, sky_rows, sky_flat,
                     w_out[row, 0], w_out[row, 1], w_out[row, 2] = wx, wy, wz
                     value_out[row] = value
                     cos_out[row] = cos
+                    sure = False
+                    if value > 0.0:
+                        for q in range(deg):
+                            f = adjacent[j, q]
+                            if (face_normals[f, 0] * wx + face_normals[f, 1] * wy
+                                    + face_normals[f, 2] * wz) > SUPPORT_COS:
+                                sure = True
+                                break
+                    sure_out[row] = sure
 
 
 @njit(nogil=True, **_OPTS)
