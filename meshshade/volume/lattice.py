@@ -1,0 +1,376 @@
+"""The volume's lattice: a graded octree of cubes anchored in world coordinates (docs/physics.md §15.2).
+
+The object's volume is discretised on cubes of side h_l = h0 2^l whose corners lie on the world lattice h_l Z^3
+(anchored at the origin, not at the mesh): where the mesh changes, only the cubes near the change move. Level 0
+(the finest) covers the surface and a band below it; deeper, each level may be used from the depth ``bands[l]``
+on, and nothing is kept deeper than ``depth_max`` (the light has died out there; the cut is a no-flux boundary).
+The inside is given by a depth function (positive inside, :mod:`meshshade.volume.inside`), so any surface whose
+winding number encloses a volume can be meshed, watertight or not.
+
+Every cube is split into Kuhn's six tetrahedra around its main diagonal, so the P1 functions on neighbouring
+cubes agree on shared faces; where a cube of level l meets cubes of level l - 1, the finer cubes' corners on the
+coarser cube's edges and faces ("hanging" nodes) are tied to the coarser cube's P1 trace: an edge midpoint to the
+mean of the edge's ends, a face centre to the mean of the face's lowest and highest corners (every Kuhn face
+diagonal runs between them), which keeps the space conforming. A 2:1 grading (no cube next to one two levels
+finer) is guaranteed by the bands (:func:`check_bands`).
+
+Pure array work (numpy, and compiled loops for point location); the depth function is the only call-out.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from meshshade.errors import MeshshadeError
+
+__all__ = ["Grading", "Lattice", "KUHN", "CORNERS", "build_lattice", "coarser_lattice", "check_bands", "locate_points",
+           "MAX_INDEX_CELLS"]
+
+#: Kuhn's six tetrahedra of the unit cube: corner (i, j, k) has index i + 2 j + 4 k; each path 0 -> 7 along the
+#: axes in one order is a tetrahedron
+KUHN = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]], dtype=np.int64)
+#: the cube's corners, index i + 2 j + 4 k
+CORNERS = np.array([[i, j, k] for k in (0, 1) for j in (0, 1) for i in (0, 1)], dtype=np.int64)
+#: the cube's 12 edges (corner pairs) and 6 faces (lowest and highest corner: Kuhn's diagonal of the face)
+EDGES = np.array([(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)])
+FACE_DIAGONALS = np.array([(0, 3), (4, 7), (0, 5), (2, 7), (0, 6), (1, 7)])
+#: the largest dense index (level-0 cells of the bounding box) the point location builds; above it, an error
+#: names the resolution (8 bytes per cell would be 2 GB)
+MAX_INDEX_CELLS = 2 ** 28
+_BITS = 20
+_OFF = 1 << (_BITS - 1)
+#: a point this close (in units of h0) to a lattice plane lies on it (rounding of k h0 / h0)
+_EPS = 1e-9
+
+
+class Grading(NamedTuple):
+    """The lattice's resolution: ``h0`` mm, level l >= 1 allowed from depth ``bands[l]`` mm (``bands[0] = 0``),
+    nothing deeper than ``depth_max`` mm."""
+
+    h0: float
+    bands: tuple
+    depth_max: float
+
+    @property
+    def levels(self) -> int:
+        return len(self.bands)
+
+
+def check_bands(grading: Grading) -> None:
+    """Raise unless the bands guarantee a 2:1 grading: bands[l + 1] - bands[l] >= sqrt(3) h_l for l >= 1 (a cube
+    of level l + 2 then lies more than its neighbours' reach below any cube of level l; the depth function is
+    1-Lipschitz)."""
+    b, h0 = grading.bands, grading.h0
+    if b[0] != 0.0 or any(b[k + 1] < b[k] for k in range(len(b) - 1)):
+        raise MeshshadeError(f"lattice bands must start at 0 and increase, got {b}")
+    for l in range(1, len(b) - 1):
+        if b[l + 1] - b[l] < math.sqrt(3.0) * h0 * 2 ** l * (1 - 1e-12):
+            raise MeshshadeError(f"lattice bands too close for a 2:1 grading at level {l}: {b}")
+
+
+def _pack(ijk):
+    """int64 key of integer coordinates (|coordinate| < 2^19)."""
+    ijk = np.asarray(ijk, dtype=np.int64) + _OFF
+    return (ijk[..., 0] << (2 * _BITS)) | (ijk[..., 1] << _BITS) | ijk[..., 2]
+
+
+def _unpack(key):
+    m = (1 << _BITS) - 1
+    return np.stack([(key >> (2 * _BITS)) & m, (key >> _BITS) & m, key & m], axis=-1) - _OFF
+
+
+class Lattice:
+    """The cubes and nodes of a graded lattice (module docstring). Build with :func:`build_lattice`.
+
+    Attributes: ``grading``; ``level`` (C,) and ``ijk`` (C, 3) of the cubes (coordinates in units of the cube's
+    own side); ``nodes`` (N, 3) mm and ``depth`` (N,) mm of their corners (positive inside; beyond a few cells from
+    the surface only its sign is meaningful); ``cell_nodes`` (C, 8) corner indices; ``hanging`` (H,) the hanging
+    nodes and ``parents`` (H, 2) the nodes whose mean each equals (possibly hanging themselves);
+    ``stats`` counts per level and seconds."""
+
+    def __init__(self, grading, level, ijk, nodes, depth, cell_nodes, hanging, parents, index, index_lo, stats,
+                 node_keys):
+        self.grading = grading
+        self.node_keys = node_keys
+        self.level, self.ijk = level, ijk
+        self.nodes, self.depth = nodes, depth
+        self.cell_nodes = cell_nodes
+        self.hanging, self.parents = hanging, parents
+        self._index, self._index_lo = index, index_lo
+        self.stats = stats
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.nodes.shape[0])
+
+    @property
+    def n_cells(self) -> int:
+        return int(self.level.shape[0])
+
+    @property
+    def cell_size(self) -> np.ndarray:
+        """(C,) side of each cube, mm."""
+        return self.grading.h0 * np.exp2(self.level.astype(np.float64))
+
+    def locate(self, points):
+        """(cell (p,) int64, -1 outside every cube; bary (p, 4) Kuhn barycentrics; nodes (p, 4)) of ``points``
+        (p, 3) mm: the tetrahedron of the lattice holding each point and its P1 weights."""
+        P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        cell = np.empty(P.shape[0], dtype=np.int64)
+        bary = np.empty((P.shape[0], 4))
+        nodes = np.empty((P.shape[0], 4), dtype=np.int64)
+        locate_points(P, self.grading.h0, self._index, self._index_lo, self.level, self.ijk, self.cell_nodes,
+                      cell, bary, nodes)
+        return cell, bary, nodes
+
+
+@numba.njit(cache=True, nogil=True)
+def locate_points(P, h0, index, lo, level, ijk, cell_nodes, cell, bary, nodes):
+    """For each point: the cube holding it (dense index of level-0 cells), the Kuhn tetrahedron by the order of
+    its coordinates in the cube, the barycentrics and the corner nodes; cell -1 (weights 0) outside the lattice."""
+    nx, ny, nz = index.shape
+    for p in range(P.shape[0]):
+        # lattice coordinates, nudged up by a rounding's worth: a node at k h0 computed as k - 1e-15 stays on k
+        fx, fy, fz = P[p, 0] / h0 + _EPS, P[p, 1] / h0 + _EPS, P[p, 2] / h0 + _EPS
+        i0 = int(math.floor(fx)) - lo[0]
+        j0 = int(math.floor(fy)) - lo[1]
+        k0 = int(math.floor(fz)) - lo[2]
+        c = -1
+        # a point on a lattice plane belongs to the cubes on both sides: try the lower ones if the upper is absent
+        for t in range(8):
+            di, dj, dk = t & 1, (t >> 1) & 1, (t >> 2) & 1
+            if (di and fx - math.floor(fx) > 2 * _EPS) or (dj and fy - math.floor(fy) > 2 * _EPS) or \
+                    (dk and fz - math.floor(fz) > 2 * _EPS):
+                continue
+            i, j, k = i0 - di, j0 - dj, k0 - dk
+            if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz and index[i, j, k] >= 0:
+                c = index[i, j, k]
+                break
+        cell[p] = c
+        if c < 0:
+            for q in range(4):
+                bary[p, q] = 0.0
+                nodes[p, q] = 0
+            continue
+        h = h0 * (2.0 ** level[c])
+        u = np.empty(3)
+        for d in range(3):
+            v = P[p, d] / h - ijk[c, d]
+            u[d] = min(1.0, max(0.0, v))
+        # order of the coordinates, largest first
+        a, b, e = 0, 1, 2
+        if u[a] < u[b]:
+            a, b = b, a
+        if u[b] < u[e]:
+            b, e = e, b
+        if u[a] < u[b]:
+            a, b = b, a
+        v1 = 1 << a
+        v2 = v1 | (1 << b)
+        bary[p, 0] = 1.0 - u[a]
+        bary[p, 1] = u[a] - u[b]
+        bary[p, 2] = u[b] - u[e]
+        bary[p, 3] = u[e]
+        nodes[p, 0] = cell_nodes[c, 0]
+        nodes[p, 1] = cell_nodes[c, v1]
+        nodes[p, 2] = cell_nodes[c, v2]
+        nodes[p, 3] = cell_nodes[c, 7]
+
+
+@numba.njit(cache=True)
+def _fill_index(index, lo, level, ijk):
+    """index[level-0 cell] = the cube covering it."""
+    for c in range(level.shape[0]):
+        s = 1 << level[c]
+        i0, j0, k0 = ijk[c, 0] * s - lo[0], ijk[c, 1] * s - lo[1], ijk[c, 2] * s - lo[2]
+        for i in range(i0, i0 + s):
+            for j in range(j0, j0 + s):
+                for k in range(k0, k0 + s):
+                    index[i, j, k] = c
+
+
+def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict | None = None) -> Lattice:
+    """The graded lattice of the volume ``depth(points, bound) > 0`` inside the box ``lo``..``hi`` (mm).
+
+    ``depth(points (p, 3), bound)`` returns the signed distance to the surface (positive inside), clipped to
+    +-``bound``. Top-down: a cube of level l is dropped when its centre lies more than its half-diagonal r_l
+    outside, or deeper than ``depth_max + r_l``; it is split when part of it may lie shallower than
+    ``bands[l]`` and its level is above the surface's level there; else kept. The surface's level is 0, or, with
+    ``refine`` (a callable: cube centres (p, 3) -> bool (p,)), 0 where ``refine`` says so and 1 elsewhere (the
+    lattice finer only where the light calls for it). The corners of every cube that may be cut are evaluated
+    once (clipped beyond two cells); a cube whose corners all lie outside is dropped (a sliver thinner than the
+    lattice between its corners is below its resolution)."""
+    import time
+
+    check_bands(grading)
+    t0 = time.perf_counter()
+    h0, bands, L = float(grading.h0), grading.bands, grading.levels - 1
+    hL = h0 * 2 ** L
+    a = np.floor(np.asarray(lo, dtype=np.float64) / hL).astype(np.int64) - 1
+    b = np.floor(np.asarray(hi, dtype=np.float64) / hL).astype(np.int64) + 2
+    if np.any(np.abs(a) * 2 ** L >= _OFF) or np.any(np.abs(b) * 2 ** L >= _OFF):
+        raise MeshshadeError("the mesh is too large for the volume's lattice at this resolution "
+                             f"({np.max(hi) - np.min(lo):.4g} mm at {h0:.4g} mm)")
+    g = np.meshgrid(*[np.arange(a[i], b[i]) for i in range(3)], indexing="ij")
+    cand = np.stack([x.ravel() for x in g], axis=1)
+    kept, counts, evaluated = [None] * (L + 1), [0] * (L + 1), 0
+    surface_cells = []          # (level, ijk) of kept cubes of level >= 1 that may be cut
+    for l in range(L, 0, -1):
+        h = h0 * 2 ** l
+        r = 0.5 * math.sqrt(3.0) * h
+        bound = max(bands[l] + 4 * r, grading.depth_max + 2 * r) if l == L else bands[l] + 4 * r
+        centres = (cand + 0.5) * h
+        d = depth(centres, bound)
+        evaluated += cand.shape[0]
+        out = d < -r
+        shallow = d - r < bands[l]
+        if l == 1 and refine is not None:
+            # the surface's level is 1 except where ``refine`` asks for 0
+            split = shallow & ~out
+            split[split] = refine(centres[split])
+            keep = ~(out | split) & (d - r <= grading.depth_max)
+            surface_cells.append(cand[keep & (d < r)])
+        else:
+            split = shallow
+            keep = ~(out | split) & (d - r <= grading.depth_max)
+        kept[l] = cand[keep]
+        counts[l] = int(keep.sum())
+        sub = cand[~out & split]
+        cand = (2 * sub[:, None, :] + CORNERS[None, :, :]).reshape(-1, 3)
+    # the corners of the finest candidates and of the coarser cubes that may be cut are evaluated once
+    t_mid = time.perf_counter()
+    corner_keys = _pack(cand[:, None, :] + CORNERS[None, :, :])
+    if surface_cells and surface_cells[0].size:
+        coarse_keys = _pack(surface_cells[0][:, None, :] * 2 + CORNERS[None, :, :] * 2)
+        all_keys = np.concatenate([corner_keys.ravel(), coarse_keys.ravel()])
+    else:
+        coarse_keys = None
+        all_keys = corner_keys.ravel()
+    ck, cinv = np.unique(all_keys, return_inverse=True)
+    cd = depth(_unpack(ck).astype(np.float64) * h0, 4.0 * math.sqrt(3.0) * h0 if refine is not None
+               else 2.0 * math.sqrt(3.0) * h0)
+    evaluated += ck.size
+    cdep = cd[cinv[:corner_keys.size]].reshape(-1, 8)
+    keep0 = cdep.max(axis=1) > 0.0
+    kept[0] = cand[keep0]
+    counts[0] = int(keep0.sum())
+    if coarse_keys is not None:
+        # a coarse surface cube whose corners are all outside holds no inside at the lattice's resolution
+        cdc = cd[cinv[corner_keys.size:]].reshape(-1, 8)
+        empty = cdc.max(axis=1) <= 0.0
+        if empty.any():
+            drop = _pack(surface_cells[0][empty])
+            k1 = _pack(kept[1])
+            kept[1] = kept[1][~np.isin(k1, drop)]
+            counts[1] = int(kept[1].shape[0])
+    level = np.concatenate([np.full(k.shape[0], l, dtype=np.int64) for l, k in enumerate(kept)])
+    ijk = np.concatenate(kept)
+    if level.size == 0:
+        raise MeshshadeError("the mesh encloses no volume the lattice can resolve (winding number below 1/2 "
+                             f"everywhere at {h0:.3g} mm)")
+    t1 = time.perf_counter()
+    out = _finish(grading, level, ijk, depth, ck, cd, h0)
+    out.stats["volume_cells_per_level"] = counts
+    out.stats["volume_depth_queries"] += int(evaluated)
+    out.stats["timings"] = {"lattice coarse cells": t_mid - t0, "lattice fine cells": t1 - t_mid,
+                            **out.stats["timings"]}
+    if stats is not None:
+        stats.update(out.stats)
+    return out
+
+
+def _finish(grading, level, ijk, depth, known_keys, known_depth, h_cut):
+    """The :class:`Lattice` of the cubes ``level``, ``ijk``: corners, their depths (``known_keys`` ->
+    ``known_depth`` reused; the corners of cubes of side ``h_cut`` or finer that may be cut evaluated, clipped
+    beyond two cells), hanging nodes and the point index."""
+    import time
+
+    t1 = time.perf_counter()
+    h0 = float(grading.h0)
+    scale = np.left_shift(1, level)[:, None, None]
+    keys = _pack(ijk[:, None, :] * scale + CORNERS[None, :, :] * scale)          # (C, 8) in h0 units
+    node_keys, inverse = np.unique(keys.ravel(), return_inverse=True)
+    cell_nodes = inverse.reshape(-1, 8).astype(np.int64)
+    nodes = _unpack(node_keys).astype(np.float64) * h0
+    n = node_keys.size
+    bound = 2.0 * math.sqrt(3.0) * h_cut
+    dep = np.full(n, np.nan)
+    if known_keys is not None and known_keys.size:
+        pos = np.searchsorted(known_keys, node_keys)
+        hit = (pos < known_keys.size) & (known_keys[np.minimum(pos, known_keys.size - 1)] == node_keys)
+        dep[hit] = np.clip(known_depth[pos[hit]], -bound, bound)
+    # corners still unknown: those of the finest cubes (the only ones the surface may cut) are evaluated; the
+    # rest lie deeper than band 1 and are inside
+    finest = level == level.min()
+    ask = np.zeros(n, dtype=bool)
+    ask[cell_nodes[finest].ravel()] = True
+    ask &= np.isnan(dep)
+    queries = int(ask.sum())
+    if queries and depth is not None:
+        dep[ask] = depth(nodes[ask], bound)
+    dep[np.isnan(dep)] = bound
+    t2 = time.perf_counter()
+    hanging, parents = _hanging_nodes(node_keys, level, ijk)
+    span_lo = np.min(ijk * np.left_shift(1, level)[:, None], axis=0)
+    span_hi = np.max((ijk + 1) * np.left_shift(1, level)[:, None], axis=0)
+    shape = tuple(int(x) for x in span_hi - span_lo)
+    if math.prod(shape) > MAX_INDEX_CELLS:
+        raise MeshshadeError(f"the volume's lattice would need {math.prod(shape):.3g} cells of {h0:.3g} mm to "
+                             "index; use a coarser volume resolution")
+    index = np.full(shape, -1, dtype=np.int32)
+    _fill_index(index, span_lo, level, ijk)
+    t3 = time.perf_counter()
+    counts = np.bincount(level, minlength=grading.levels).tolist()
+    info = {"volume_cells_per_level": counts, "volume_nodes": int(n), "volume_hanging_nodes": int(hanging.size),
+            "volume_depth_queries": queries, "timings": {"lattice corners": t2 - t1, "lattice index": t3 - t2}}
+    return Lattice(grading, level, ijk, nodes, dep, cell_nodes, hanging, parents, index, span_lo, info,
+                   node_keys)
+
+
+def coarser_lattice(lattice: Lattice, depth) -> Lattice:
+    """The lattice with its finest cubes merged into their parents (a multigrid level: the union of the same
+    cubes, one level coarser where it was finest; corners' depths reused where they were nodes, else evaluated
+    by ``depth``, or left at the cut-free value without it). Its grading gains a level if the finest cubes were
+    already of the coarsest level."""
+    lmin = int(lattice.level.min())
+    fine = lattice.level == lmin
+    parents = np.unique(_pack(np.floor_divide(lattice.ijk[fine], 2)))
+    level = np.concatenate([lattice.level[~fine], np.full(parents.size, lmin + 1, dtype=np.int64)])
+    ijk = np.concatenate([lattice.ijk[~fine], _unpack(parents)])
+    g = lattice.grading
+    grading = g if lmin + 1 < g.levels else Grading(g.h0, tuple(g.bands) + (g.bands[-1] + g.h0 * 2 ** (lmin + 1),),
+                                                    g.depth_max)
+    return _finish(grading, level, ijk, depth, lattice.node_keys, lattice.depth, g.h0 * 2 ** (lmin + 1))
+
+
+def _hanging_nodes(node_keys, level, ijk):
+    """(hanging (H,), parents (H, 2)) node indices: corners of finer cubes that lie on an edge midpoint or a face
+    centre of a coarser cube, and the two nodes whose mean each must equal."""
+    found_h, found_p = [], []
+    n = node_keys.size
+    for l in range(1, int(level.max(initial=0)) + 1):
+        sel = level == l
+        if not sel.any():
+            continue
+        base = ijk[sel] * (1 << l)
+        half = 1 << (l - 1)
+        for pairs in (EDGES, FACE_DIAGONALS):
+            for p, q in pairs:
+                mid = _pack(base + (CORNERS[p] + CORNERS[q]) * half)
+                pos = np.minimum(np.searchsorted(node_keys, mid), n - 1)
+                hit = node_keys[pos] == mid
+                if not hit.any():
+                    continue
+                pa = np.searchsorted(node_keys, _pack(base[hit] + CORNERS[p] * 2 * half))
+                pb = np.searchsorted(node_keys, _pack(base[hit] + CORNERS[q] * 2 * half))
+                found_h.append(pos[hit])
+                found_p.append(np.stack([pa, pb], axis=1))
+    if not found_h:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2), dtype=np.int64)
+    h = np.concatenate(found_h)
+    p = np.concatenate(found_p)
+    h, first = np.unique(h, return_index=True)
+    return h, p[first]

@@ -1,0 +1,202 @@
+"""The volume transport: diffusion inside the object's volume on a graded lattice, plus the near field (docs/physics.md
+§15): the bake's default model.
+
+:class:`VolumeTransport` is built once per mesh and material and reused for every light:
+
+1. the surface it samples (:mod:`meshshade.volume.surface`: the mesh, or the mesh refined on its facets where
+   it is coarser than the lattice);
+2. the inside (:mod:`meshshade.volume.inside`: the winding number, so open and overlapping meshes have one);
+3. the lattice (:mod:`meshshade.volume.lattice`) at the material's resolution (:mod:`meshshade.volume.resolution`);
+4. the cut-cell matrices (:mod:`meshshade.volume.cutfem`) and the channels' multigrid solver
+   (:mod:`meshshade.volume.multigrid`);
+5. the correction's tables (:mod:`meshshade.volume.remainder`).
+
+:meth:`VolumeTransport.exitance` takes the entry samples of the lights on the sampling surface and returns the
+exitance at the mesh's vertices:
+
+    M = phi / (2A)                       [the lattice's solution for the smoothed line sources, eqs. (99)-(100)]
+        + M_f                            [the near field less what the lattice carries, eqs. (102)-(103)]
+
+averaged over each vertex's patch (eq. (104)). Each stage is timed.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from meshshade.errors import MeshshadeError
+from meshshade.kernels.fresnel import refract_in
+from meshshade.progress import kernel_interrupts
+from meshshade.volume.cutfem import assemble
+from meshshade.volume.inside import SurfaceVolume
+from meshshade.volume.lattice import build_lattice
+from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
+from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
+from meshshade.volume.remainder import RemainderTables, remainder_exitance
+from meshshade.volume.resolution import DEFAULT_BUDGET, diffusion_constants, volume_resolution
+from meshshade.volume.surface import SamplingSurface
+
+__all__ = ["VolumeTransport"]
+
+
+class VolumeTransport:
+    """The volume transport of one mesh and material (module docstring). Build with :meth:`build`; the lattice
+    itself is made for the first light set it is given (finer at that light's edges) and remade only for a light
+    set with edges elsewhere."""
+
+    def __init__(self, mesh, material, resolution, surface, inside, tables, timings):
+        self.mesh, self.material, self.resolution = mesh, material, resolution
+        self.surface, self.inside, self.tables = surface, inside, tables
+        self.timings = timings
+        consts = [diffusion_constants(material, c) for c in range(3)]
+        self.A = np.array([c[2] for c in consts])
+        self.coef = np.array([(D, 1.0 / (2.0 * A), sa) for D, sa, A in consts])
+        self._lattice_key = None
+        self.lattice = self.assembly = self.operator = self.multigrid = None
+        self.stats = {
+            "volume_resolution_mm": round(resolution.h0, 5), "volume_resolution_limited_by": resolution.limited_by,
+            "volume_spread_mm": round(resolution.spread, 5),
+            "volume_samples": int(surface.samples.n_vertices), "volume_samples_split": bool(surface.split),
+            "volume_lattice_fraction": [round(float(x), 4) for x in tables.long_fraction],
+            "near_field_radius_mm": [round(float(r), 4) for r in tables.radius_mm],
+        }
+
+    @classmethod
+    def build(cls, mesh, material, *, h0: float | None = None, budget: int = DEFAULT_BUDGET,
+              sample_spacing: float | None = None):
+        """Sample ``mesh``, find its inside and tabulate the correction (module docstring); ``h0`` forces the
+        lattice's surface spacing (mm), ``budget`` caps its surface cubes (:mod:`meshshade.volume.resolution`)."""
+        timings = {}
+        t = time.perf_counter()
+        res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm, h0=h0, budget=budget)
+        surface = SamplingSurface(mesh, res.h0 if sample_spacing is None else sample_spacing)
+        inside = SurfaceVolume(mesh.vertices, mesh.nondegenerate_faces)
+        timings["volume sampling"] = time.perf_counter() - t
+        t = time.perf_counter()
+        tables = RemainderTables(material, res.spread)
+        timings["near-field tables"] = time.perf_counter() - t
+        return cls(mesh, material, res, surface, inside, tables, timings)
+
+    def edges_of_light(self, samples):
+        """(m, 3) points of the sampling surface where the light changes sharply (an edge of the sampling mesh
+        whose irradiance falls below a quarter from one end to the other) and the beams' entries."""
+        surf = self.surface.samples
+        at_v = samples.vertex >= 0
+        E = np.bincount(samples.vertex[at_v], weights=samples.power[at_v], minlength=surf.n_vertices)
+        E = np.where(surf.vertex_areas > 0, E / np.where(surf.vertex_areas > 0, surf.vertex_areas, 1.0), 0.0)
+        F = surf.faces
+        e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+        hi = np.maximum(E[e[:, 0]], E[e[:, 1]])
+        lo = np.minimum(E[e[:, 0]], E[e[:, 1]])
+        sharp = (hi > 0) & (lo < 0.25 * hi)
+        pts = np.unique(e[sharp].ravel())
+        return np.concatenate([surf.vertices[pts], samples.positions[~at_v]])
+
+    def prepare(self, samples):
+        """Build the lattice, its matrices and multigrid for ``samples``' light unless the current one fits."""
+        pts = self.edges_of_light(samples)
+        h1 = 2.0 * self.resolution.grading.h0
+        key = np.unique(np.floor(pts / h1).astype(np.int64), axis=0).tobytes() if len(pts) else b""
+        if key == self._lattice_key:
+            return {}
+        timings = {}
+        t = time.perf_counter()
+        reach = self.resolution.refine_radius
+        refine = None
+        if len(pts):
+            tree = cKDTree(pts)
+            r1 = 0.5 * math.sqrt(3.0) * h1
+
+            def refine(centres):
+                d, _ = tree.query(centres, distance_upper_bound=reach + r1)
+                return np.isfinite(d)
+        lo, hi = self.mesh.bbox
+        lattice = build_lattice(self.inside.depth, lo, hi, self.resolution.grading, refine=refine)
+        timings["volume lattice"] = time.perf_counter() - t
+        t = time.perf_counter()
+        asm = assemble(lattice)
+        op = ChannelOperator(asm, self.coef)
+        timings["volume operator"] = time.perf_counter() - t
+        t = time.perf_counter()
+        mg = Multigrid(lattice, op)
+        timings["volume multigrid"] = time.perf_counter() - t
+        self.lattice, self.assembly, self.operator, self.multigrid = lattice, asm, op, mg
+        self._lattice_key = key
+        self.stats.update({"volume_cells_per_level": lattice.stats["volume_cells_per_level"],
+                           "volume_unknowns": int(asm.n), "volume_multigrid_levels": mg.sizes,
+                           "volume_mm3": round(asm.volume, 3), "volume_surface_mm2": round(asm.area, 3),
+                           "volume_edge_points": int(len(pts))})
+        return timings
+
+    def exitance(self, samples):
+        """(M (n, 3) W/mm^2 at the mesh's vertices, stats with ``timings``) for ``samples``, the lights' entry
+        samples on ``self.surface.samples``."""
+        mat, surf = self.material, self.surface.samples
+        stats = {}
+        n = self.mesh.n_vertices
+        if len(samples) == 0:
+            return np.zeros((n, 3)), {"timings": {}}
+        timings = self.prepare(samples)
+        t = time.perf_counter()
+        w = refract_in(samples.directions, samples.normals, float(mat.eta))
+        cos_t = np.clip(-np.einsum("ij,ij->i", w, samples.normals), 0.0, 1.0)
+        depths, strengths = np.zeros((3, 6)), np.zeros((3, 6))
+        for c in range(3):
+            x, q = line_rule(float(mat.albedo_prime[c]))
+            depths[c] = x / float(mat.sigma_t_prime[c])
+            strengths[c] = q * ewald_weight(self.resolution.kappa[c], self.resolution.spread)
+        loads, dropped = lattice_loads(self.lattice, samples.positions, w, samples.normals, samples.power, depths,
+                                       strengths, self.resolution.spread)
+        b = self.assembly.to_unknowns(loads)
+        timings["volume sources"] = time.perf_counter() - t
+        t = time.perf_counter()
+        with kernel_interrupts():
+            x, its = solve_channels(self.operator, self.multigrid, b)
+        phi = self.assembly.to_nodes(x)
+        cells, bary, nodes = self.lattice.locate(surf.vertices)
+        M = np.einsum("pk,pkc->pc", bary, phi[nodes]) / (2.0 * self.A[None, :])
+        timings["volume solve"] = time.perf_counter() - t
+        t = time.perf_counter()
+        Mf, pairs = remainder_exitance(self.tables, *self._remainder_inputs(samples, cos_t))
+        M += Mf
+        timings["near field"] = time.perf_counter() - t
+        if not np.all(np.isfinite(M)):
+            raise MeshshadeError("the volume transport produced a non-finite exitance")
+        peak = np.maximum(M.max(axis=0), 1e-300)
+        neg = M < 0
+        stats["volume_negative_clamped"] = neg.sum(axis=0).tolist()
+        stats["volume_negative_worst"] = [float(max(0.0, -M[:, c].min()) / peak[c]) for c in range(3)]
+        M[neg] = 0.0
+        out = self.surface.to_vertices(M)
+        total = np.maximum(samples.power.sum(), 1e-300)
+        stats.update({"volume_dropped_source_power": [round(float(d / total), 6) for d in dropped],
+                      "near_field_pairs": int(pairs), "volume_solve_iterations": its.tolist(),
+                      "volume_outside_lattice": int(np.sum(cells < 0)), "timings": timings})
+        return out, stats
+
+    def _remainder_inputs(self, samples, cos_t):
+        """The entries and receivers of eq. (103) on the sampling surface: one entry per sampling vertex (every
+        one, lit or not: the subtraction needs the whole neighbourhood) with the power of all lights entering
+        there and their power-weighted cos theta_t, and the beams' point entries."""
+        surf = self.surface.samples
+        nv = surf.n_vertices
+        at_v = samples.vertex >= 0
+        v, p, c = samples.vertex[at_v], samples.power[at_v], cos_t[at_v]
+        P = np.bincount(v, weights=p, minlength=nv)
+        pc = np.bincount(v, weights=p * c, minlength=nv)
+        cos_v = np.where(P > 0, pc / np.where(P > 0, P, 1.0), 1.0)
+        area = surf.vertex_areas
+        E = np.where(area > 0, P / np.where(area > 0, area, 1.0), 0.0)
+        pt = ~at_v
+        src = {"pos": np.concatenate([surf.vertices, samples.positions[pt]]),
+               "normal": np.concatenate([surf.vertex_normals, samples.normals[pt]]),
+               "power": np.concatenate([P, samples.power[pt]]),
+               "area": np.concatenate([area, np.zeros(int(pt.sum()))]),
+               "cos_t": np.concatenate([cos_v, cos_t[pt]]),
+               "light": np.zeros(nv + int(pt.sum()), dtype=np.int64)}
+        rec = {"pos": surf.vertices, "normal": surf.vertex_normals, "radius": np.sqrt(area / math.pi),
+               "E": E[:, None], "cos_t": cos_v[:, None]}
+        return src, rec

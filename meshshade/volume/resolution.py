@@ -1,0 +1,115 @@
+"""How finely the volume transport resolves a material on a mesh (docs/physics.md §15.2): the lattice's spacing,
+its grading with depth and the sources' sideways spread.
+
+The finest spacing h0 is set by the material: the channel that decays fastest (kappa = sqrt(sigma_a / D),
+d'Eon's D) is resolved at kappa h0 = RESOLVED_KAPPA_H (skin1's blue: h0 = 0.79 mm; marble's: 4 mm). On
+curved or small objects that is capped by the object (no coarser than its smallest extent over MIN_CELLS_ACROSS),
+and on large ones raised so that the finest level holds at most ``budget`` cubes (the bake stays affordable; the
+cost it saves and the accuracy it costs are in docs/benchmarks.md). h0 is rounded to the world lattice of
+spacings 2^(k/4) mm, so a small change of the mesh (a defect) does not move the whole lattice.
+
+Deeper, level l (spacing 2^l h0) is used from the depth where every channel it does not resolve (kappa 2^l h0 >
+GRADE_KAPPA_H) has fallen by exp(-DECAY_EFOLDS), and where the 2:1 grading allows; nothing is kept below
+TRUNCATION_EFOLDS decay lengths of the channel that reaches farthest (a no-flux cut there changes the surface by
+exp(-2 TRUNCATION_EFOLDS)). The sources' sideways spread is SPREAD_OVER_H0 h0.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from meshshade.errors import ParameterError
+from meshshade.kernels.beam_diffusion import dipole_variant
+from meshshade.volume.lattice import Grading
+
+__all__ = ["VolumeResolution", "volume_resolution", "diffusion_constants", "DEFAULT_BUDGET", "RESOLVED_KAPPA_H"]
+
+#: kappa h0 of the fastest-decaying channel (1-D cut-cell study: 1-2 % at 1, 5 % at 1.6)
+RESOLVED_KAPPA_H = 1.0
+#: a coarser level is used where the channels it does not resolve (kappa h > GRADE_KAPPA_H) have decayed by
+#: exp(-DECAY_EFOLDS)
+GRADE_KAPPA_H, DECAY_EFOLDS = 1.5, 2.0
+#: nothing is kept deeper than this many decay lengths of the longest-reaching channel
+TRUNCATION_EFOLDS = 6.0
+#: the finest spacing is at most the object's smallest extent over this
+MIN_CELLS_ACROSS = 12.0
+#: level-0 cubes the default resolution allows (about 1 GB and a few seconds on 2 cores)
+DEFAULT_BUDGET = 400_000
+#: the sources' sideways spread, in units of h0
+SPREAD_OVER_H0 = 1.0
+#: levels of the lattice (2^LEVELS - 1 h0 at the coarsest)
+LEVELS = 7
+#: around an edge of light (and a beam's entry) the lattice is twice as fine, over this many decay lengths of the
+#: fastest-decaying channel
+REFINE_EFOLDS = 3.0
+
+
+def diffusion_constants(material, c: int) -> tuple[float, float, float]:
+    """(D mm, sigma_a 1/mm, A) of channel ``c`` in d'Eon's diffusion theory (eq. (74)), the volume's."""
+    s = float(material.sigma_t_prime[c])
+    v = dipole_variant(float(material.albedo_prime[c]), float(material.eta), "better")
+    return v.D / s, float(material.sigma_a[c]), v.z_b / (2.0 * v.D)
+
+
+class VolumeResolution:
+    """The lattice's surface spacing ``h0`` mm and why it is what it is (``limited_by``: "material", "object",
+    "budget" or "given"); ``grading``: the lattice's levels with level 0 at h0 / 2, used only where the light
+    calls for it (edges of light and shadow, beams: REFINE_EFOLDS decay lengths of the fastest channel around
+    them), level 1 (h0) at the surface elsewhere; ``spread`` mm the sources' sideways spread, ``kappa`` (3,)
+    1/mm, ``refine_radius`` mm."""
+
+    def __init__(self, h0, grading, spread, kappa, limited_by, requested):
+        self.h0, self.grading, self.spread, self.kappa = h0, grading, spread, kappa
+        self.limited_by, self.requested = limited_by, requested
+        self.refine_radius = REFINE_EFOLDS / float(np.max(kappa))
+
+    def describe(self) -> str:
+        return (f"lattice {self.h0:.3g} mm ({self.limited_by}; {0.5 * self.h0:.3g} mm at edges of light), "
+                f"sideways spread {self.spread:.3g} mm, {len(self.grading.bands)} levels to "
+                f"{self.grading.depth_max:.3g} mm")
+
+
+def _round_h(h: float) -> float:
+    """h rounded up to 2^(k/4) mm."""
+    return float(2.0 ** (math.ceil(4.0 * math.log2(h) - 1e-9) / 4.0))
+
+
+def _bands(h0, kappa):
+    bands = [0.0]
+    for l in range(1, LEVELS):
+        h = h0 * 2 ** l
+        need = [DECAY_EFOLDS / k for k in kappa if k * h > GRADE_KAPPA_H]
+        grade = bands[-1] + (math.sqrt(3.0) * h0 * 2 ** (l - 1) if l >= 2 else h)
+        bands.append(max([grade] + need))
+    return tuple(bands)
+
+
+def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None = None,
+                      budget: int = DEFAULT_BUDGET) -> VolumeResolution:
+    """The resolution for ``material`` on a surface of ``area_mm2`` whose bounding box is ``extent_mm`` (3,);
+    ``h0`` forces the finest spacing (mm), ``budget`` caps the level-0 cubes (module docstring)."""
+    kappa = np.array([math.sqrt(sa / D) for D, sa, _ in (diffusion_constants(material, c) for c in range(3))])
+    if h0 is not None:
+        if not (isinstance(h0, (int, float)) and math.isfinite(h0) and h0 > 0):
+            raise ParameterError(f"the volume's lattice spacing must be a positive number of mm, got {h0!r}")
+        h, why = float(h0), "given"
+    else:
+        if not (isinstance(budget, int) and budget >= 1000):
+            raise ParameterError(f"the volume's cell budget must be an integer >= 1000, got {budget!r}")
+        h_mat = RESOLVED_KAPPA_H / float(kappa.max())
+        h_obj = float(np.min(extent_mm)) / MIN_CELLS_ACROSS
+        h, why = (h_mat, "material") if h_mat <= h_obj else (h_obj, "object")
+        h = _round_h(h) if why == "material" else float(2.0 ** (math.floor(4.0 * math.log2(h)) / 4.0))
+        # surface cubes (h0): the surface's area times their band (to where level 2 starts) and a cut layer, over
+        # h0^3 (the finer cubes at edges of light come on top, in proportion to the edges' length)
+        for _ in range(40):
+            cells = area_mm2 * (_bands(0.5 * h, kappa)[2] + h) / h ** 3
+            if cells <= budget:
+                break
+            h *= 2.0 ** 0.25
+            why = "budget"
+    depth_max = TRUNCATION_EFOLDS / float(kappa.min())
+    fine = 0.5 * h
+    grading = Grading(fine, _bands(fine, kappa), depth_max)
+    return VolumeResolution(h, grading, SPREAD_OVER_H0 * fine, kappa, why, h0)

@@ -1,0 +1,145 @@
+"""The surface the volume transport samples (docs/physics.md §15.5): the mesh, with its long edges split until
+none is longer than the lattice resolves.
+
+Where light enters and where exitance is read are points of the surface, not only vertices of the input: a coarse
+asset (edges of several millimetres on skin) is sampled on its facets, split where they are long (edges halved in
+rounds until every edge is within ``spacing``; a triangle with one, two or three halved edges becomes two, three
+or four; the split is conforming and nothing is moved: the same polyhedron). New vertices take the facets' own
+normals (so light enters each flat facet at the facet's angle, as it does in the Monte Carlo), and the exitance at
+an input vertex is the average over its patch weighted by its hat function (the barycentric weight the Monte
+Carlo tallies with):
+
+    M_v = int w_v M dA / int w_v dA,   w_v = the P1 basis function of v on the input mesh,                (104)
+
+integrated exactly over the split triangles with M linear on each. Where no edge is split the samples are the
+vertices and (104) is the identity.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from meshshade.geometry.mesh import Mesh, MeshReport
+
+__all__ = ["SamplingSurface", "split_long_edges", "MAX_SAMPLES"]
+
+#: the split surface holds at most this many vertices (the splitting stops there, with a note in the stats)
+MAX_SAMPLES = 3_000_000
+#: rounds of halving (a 26 mm edge at 0.4 mm needs 7)
+MAX_ROUNDS = 12
+
+
+def split_long_edges(vertices, faces, spacing: float, *, max_vertices: int = MAX_SAMPLES):
+    """(V (n', 3), F (m', 3), origin (m',), bary (m', 3, 3), complete): the mesh with every edge longer than
+    ``spacing`` halved, round after round; the first vertices are the input's, in order. ``origin`` is each new
+    face's face of the input and ``bary`` its corners' barycentric coordinates there (corner, input corner).
+    ``complete`` is False if ``max_vertices`` stopped the splitting."""
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64)
+    origin = np.arange(F.shape[0])
+    bary = np.broadcast_to(np.eye(3), (F.shape[0], 3, 3)).copy()
+    complete = True
+    for _ in range(MAX_ROUNDS):
+        e = np.concatenate([F[:, [1, 2]], F[:, [2, 0]], F[:, [0, 1]]])        # edge k of a face: opposite corner k
+        lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+        key = lo * np.int64(V.shape[0]) + hi
+        length = np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1)
+        long_ = length > spacing
+        if not long_.any():
+            break
+        ukeys, inv = np.unique(key[long_], return_inverse=True)
+        if V.shape[0] + ukeys.size > max_vertices:
+            complete = False
+            break
+        ul, uh = ukeys // V.shape[0], ukeys % V.shape[0]
+        mid_id = V.shape[0] + np.arange(ukeys.size)
+        V = np.concatenate([V, 0.5 * (V[ul] + V[uh])])
+        nf = F.shape[0]
+        split = np.full(3 * nf, -1, dtype=np.int64)
+        split[long_] = mid_id[inv]
+        split = split.reshape(3, nf).T                                           # (f, k): midpoint opposite k
+        F, origin, bary = _subdivide(F, origin, bary, split)
+    return V, F, origin, bary, complete
+
+
+def _subdivide(F, origin, bary, split):
+    """Each face split by its halved edges (``split`` (f, 3): the midpoint of the edge opposite corner k, or -1)."""
+    nsplit = (split >= 0).sum(axis=1)
+    out_f, out_o, out_b = [F[nsplit == 0]], [origin[nsplit == 0]], [bary[nsplit == 0]]
+    for count in (1, 2, 3):
+        sel = np.flatnonzero(nsplit == count)
+        if sel.size == 0:
+            continue
+        f, s, o, b = F[sel], split[sel], origin[sel], bary[sel]
+        # rotate so that the halved edges come first in a fixed order: corner 0 opposite the first halved edge
+        if count == 1:
+            k = np.argmax(s >= 0, axis=1)
+        elif count == 2:
+            k = np.argmax(s < 0, axis=1)                  # corner 0 opposite the edge that is not halved
+        else:
+            k = np.zeros(sel.size, dtype=np.int64)
+        idx = (k[:, None] + np.arange(3)[None, :]) % 3
+        f = np.take_along_axis(f, idx, axis=1)
+        s = np.take_along_axis(s, idx, axis=1)
+        b = np.take_along_axis(b, idx[:, :, None], axis=1)
+        mb = 0.5 * (b[:, [1, 2, 0]] + b[:, [2, 0, 1]])    # barycentrics of the midpoint opposite each corner
+        a0, a1, a2 = f[:, 0], f[:, 1], f[:, 2]
+        m0, m1, m2 = s[:, 0], s[:, 1], s[:, 2]
+        B0, B1, B2 = b[:, 0], b[:, 1], b[:, 2]
+        M0, M1, M2 = mb[:, 0], mb[:, 1], mb[:, 2]
+        if count == 1:                                     # m0 on edge a1-a2
+            tris = [((a0, a1, m0), (B0, B1, M0)), ((a0, m0, a2), (B0, M0, B2))]
+        elif count == 2:                                   # m1 on a2-a0, m2 on a0-a1; edge a1-a2 whole
+            tris = [((a0, m2, m1), (B0, M2, M1)), ((m2, a1, a2), (M2, B1, B2)), ((m2, a2, m1), (M2, B2, M1))]
+        else:
+            tris = [((a0, m2, m1), (B0, M2, M1)), ((m2, a1, m0), (M2, B1, M0)), ((m1, m0, a2), (M1, M0, B2)),
+                    ((m0, m1, m2), (M0, M1, M2))]
+        for corners, bs in tris:
+            out_f.append(np.stack(corners, axis=1))
+            out_o.append(o)
+            out_b.append(np.stack(bs, axis=1))
+    return np.concatenate(out_f), np.concatenate(out_o), np.concatenate(out_b)
+
+
+class SamplingSurface:
+    """``mesh`` sampled at ``spacing`` mm (module docstring): ``samples`` (a :class:`Mesh`: the input itself when
+    no edge is longer than ``spacing``), :meth:`to_vertices` eq. (104); ``complete``: False if
+    :data:`MAX_SAMPLES` stopped the splitting."""
+
+    def __init__(self, mesh, spacing: float):
+        self.source = mesh
+        self.spacing = float(spacing)
+        V, F, origin, bary, self.complete = split_long_edges(mesh.vertices, mesh.faces, self.spacing)
+        if F.shape[0] == mesh.n_faces:
+            self.samples = mesh
+            self._W = None
+            return
+        report = MeshReport(n_vertices=int(V.shape[0]), n_faces=int(F.shape[0]), faces=F)
+        self.samples = Mesh(V, F, mm_per_unit=mesh.mm_per_unit, source=mesh.source, defects=report)
+        self._W = _hat_weights(mesh, self.samples, origin, bary)
+
+    @property
+    def split(self) -> bool:
+        return self._W is not None
+
+    def to_vertices(self, values):
+        """(n_vertices, k) eq. (104) of ``values`` (n_samples, k) at the samples."""
+        if self._W is None:
+            return np.asarray(values)
+        return self._W @ np.asarray(values)
+
+
+def _hat_weights(mesh, split, origin, bary):
+    """CSR (n_v, n_s): eq. (104)'s weights, each row normalised. The integral of w_v times the split surface's P1
+    function over a split face of area a is a/12 (sum_k w_v(k) M_k + sum_k w_v(k) sum_k M_k), w_v(k) the corner
+    k's barycentric of v in the input face."""
+    area = split.face_areas
+    s = bary.sum(axis=1)                                                   # (Q, m): sum over corners
+    w = area[:, None, None] / 12.0 * (bary + s[:, None, :])                # (Q, corner k, input corner m)
+    rows = np.broadcast_to(mesh.faces[origin][:, None, :], w.shape).ravel()
+    cols = np.broadcast_to(split.faces[:, :, None], w.shape).ravel()
+    W = sp.csr_matrix((w.ravel(), (rows, cols)), shape=(mesh.n_vertices, split.n_vertices))
+    W.sum_duplicates()
+    tot = np.asarray(W.sum(axis=1)).ravel()
+    inv = np.divide(1.0, tot, out=np.zeros_like(tot), where=tot > 0)
+    return sp.diags(inv) @ W
