@@ -25,7 +25,7 @@ import numpy as np
 from meshshade.errors import MaterialError
 
 __all__ = ["robin_point_source_exitance", "robin_point_source_disc", "robin_point_source_total",
-           "robin_smoothed_exitance"]
+           "robin_smoothed_exitance", "robin_smoothed_exitances"]
 
 # the smooth integral over the image line: Gauss-Legendre in v = ln(1 + s / d_0) up to s = LINE_REACH l (the
 # exp(-s / l) weight is below 1e-19 there)
@@ -104,9 +104,17 @@ _K_NODES, _K_WEIGHTS = np.polynomial.legendre.leggauss(16)
 
 
 def robin_smoothed_exitance(rho, depths, strengths, *, D, mu, A, spread, scaled=True):
-    """The exitance of point sources at ``depths`` (n,) with ``strengths`` (n,), each spread sideways by a Gaussian
-    of standard deviation ``spread`` in the plane of the surface (docs/physics.md eq. (101)): (M (len rho,)
-    per unit area, its disc integral int_0^rho M 2 pi r dr (len rho,), its total). ``scaled``: times
+    """Eq. (101) for one set of sources: see :func:`robin_smoothed_exitances` (which takes several sets at once)."""
+    M, disc, total = robin_smoothed_exitances(rho, [depths], [strengths], D=D, mu=mu, A=A, spread=spread,
+                                              scaled=scaled)
+    return M[0], disc[0], float(total[0])
+
+
+def robin_smoothed_exitances(rho, depths, strengths, *, D, mu, A, spread, scaled=True):
+    """The exitance of point sources at ``depths`` (s, n) with ``strengths`` (s, n) (s sets of n sources), each
+    spread sideways by a Gaussian of standard deviation ``spread`` in the plane of the surface (docs/physics.md
+    eq. (101)): (M (s, len rho) per unit area, its disc integral int_0^rho M 2 pi r dr (s, len rho), its total
+    (s,)); the Bessel functions are evaluated once for all sets. ``scaled``: times
     exp(-mu^2 spread^2 / 2), the Ewald weight of eq. (100) that keeps the point's far field.
 
     From eq. (93)'s Hankel transform, the Gaussian multiplies it by exp(-k^2 s^2 / 2):
@@ -124,8 +132,8 @@ def robin_smoothed_exitance(rho, depths, strengths, *, D, mu, A, spread, scaled=
     if not s > 0:
         raise MaterialError(f"the sideways spread must be positive, got {spread!r}")
     rho = np.asarray(rho, dtype=np.float64).ravel()
-    t = np.asarray(depths, dtype=np.float64).ravel()
-    q = np.asarray(strengths, dtype=np.float64).ravel()
+    t = np.atleast_2d(np.asarray(depths, dtype=np.float64))
+    q = np.atleast_2d(np.asarray(strengths, dtype=np.float64))
     K = HANKEL_REACH / s
     # composite Gauss-Legendre (16 nodes a panel) with about 4 nodes per half period of J0 at the largest rho
     panels = int(min(2000, max(16, math.ceil(4.0 * K * float(rho.max(initial=0.0)) / math.pi / 16.0))))
@@ -135,13 +143,13 @@ def robin_smoothed_exitance(rho, depths, strengths, *, D, mu, A, spread, scaled=
     kw = (half[:, None] * _K_WEIGHTS[None, :]).ravel()
     m = np.sqrt(k * k + mu * mu)
     e = np.exp(-0.5 * (m * s) ** 2) if scaled else np.exp(-0.5 * (k * s) ** 2)
-    H = (np.exp(-np.outer(m, t)) @ q) * e / (1.0 + 2.0 * A * D * m)
-    M = np.empty(rho.size)
-    disc = np.empty(rho.size)
+    H = np.einsum("sn,ksn->sk", q, np.exp(-m[:, None, None] * t[None, :, :])) * (e / (1.0 + 2.0 * A * D * m))
+    M = np.empty((t.shape[0], rho.size))
+    disc = np.empty((t.shape[0], rho.size))
     for i in range(0, rho.size, 128):
         kr = np.outer(rho[i:i + 128], k)
-        M[i:i + 128] = (j0(kr) * (kw * k * H)).sum(axis=1) / (2.0 * math.pi)
-        disc[i:i + 128] = rho[i:i + 128] * (j1(kr) * (kw * H)).sum(axis=1)
-    total = float(np.sum(q * np.exp(-mu * t)) * (math.exp(-0.5 * (mu * s) ** 2) if scaled else 1.0)
-                  / (1.0 + 2.0 * A * D * mu))
+        M[:, i:i + 128] = (H * (kw * k)) @ j0(kr).T / (2.0 * math.pi)
+        disc[:, i:i + 128] = rho[i:i + 128] * ((H * kw) @ j1(kr).T)
+    total = (np.sum(q * np.exp(-mu * t), axis=1) * (math.exp(-0.5 * (mu * s) ** 2) if scaled else 1.0)
+             / (1.0 + 2.0 * A * D * mu))
     return M, disc, total

@@ -42,7 +42,7 @@ from meshshade.geometry.uv import automatic_atlas, check_uv, dilate, rasterise_u
 from meshshade.output.render import PixelGather
 from meshshade.output.tonemap import to_uint8, tonemap_linear
 from meshshade.transport.baking import BakeResult, bake
-from meshshade.volume.transport import grading
+from meshshade.volume.resolution import volume_resolution
 
 __all__ = ["TextureBake", "bake_texture", "texture_refinement", "refinement_budget", "REFINE_SPACING", "MAX_REFINE",
            "MAX_REFINED_VERTICES", "check_texture_options"]
@@ -126,7 +126,7 @@ def check_texture_options(size=2048, padding=16, refine=None) -> tuple[int, int,
 def texture_refinement(mesh, material) -> int:
     """Segments per edge so that the mean edge is within :data:`REFINE_SPACING` column spacings (module
     docstring), at most :data:`MAX_REFINE` (see :func:`refinement_budget` for the vertex budget)."""
-    target = REFINE_SPACING * grading(material)[4]
+    target = REFINE_SPACING * 0.5 * volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm).h0
     return int(min(MAX_REFINE, max(1, math.ceil(float(mesh.mean_edge_length) / target - 1e-9))))
 
 

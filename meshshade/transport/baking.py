@@ -43,7 +43,7 @@ from meshshade.transport.gather import Stopwatch, cutoff_radii
 from meshshade.transport.direct_sum import SumOptions, direct_sum, merge_plans, subset_samples
 from meshshade.transport.models import DEFAULT_MODEL, MODELS
 from meshshade.transport.near_field import (check_source_model, near_field_factors, source_model_keyword)
-from meshshade.volume.transport import NORMAL_SPACING, VolumeTransport, grading
+from meshshade.volume.transport import VolumeTransport
 
 log = logging.getLogger("meshshade")
 
@@ -71,7 +71,8 @@ class BakeResult:
     """Per-vertex result of :func:`bake`.
 
     radiance : (n, 3) float64 W/mm^2 — linear radiant exitance per channel (r, g, b)
-    k1, k2 : (n,) 1/mm; d1, d2 : (n, 3) — principal curvatures and directions of the mesh
+    k1, k2 : (n,) 1/mm; d1, d2 : (n, 3) — principal curvatures and directions of the mesh (None for the volume
+                model, which needs none)
     samples : EntrySamples — where light entered and how much
     beam_distance : (n,) mm or None — geodesic distance of each vertex from the first beam's entry point
                     (inf beyond the neighbourhood)
@@ -133,16 +134,16 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     Returns a :class:`BakeResult`; ``radiance`` is W/mm^2 per unit light power (beam, W), irradiance
     (directional, W/mm^2) or intensity (point, W/sr). Stages are timed in ``result.timings``.
 
-    ``model="volume"`` (the default): diffusion inside the object's own volume, solved on a tetrahedral mesh
-    that keeps the surface's vertices, from sources along the refracted light, with the analytic near field
-    (the beam's near-field model less the Robin half-space's response to the same sources) on top
+    ``model="volume"`` (the default): diffusion inside the object's own volume, solved on a graded lattice
+    anchored in world coordinates (cut by the surface; the inside by the generalised winding number, so open,
+    overlapping and defective meshes have one), from sources along the refracted light, with the analytic near
+    field (the beam's near-field model less what the lattice carries) on top
     (:class:`meshshade.volume.transport.VolumeTransport`, docs/physics.md §15). It always takes the beam
     source model. ``volume``: a VolumeTransport built for this mesh and material (reused across lights);
-    ``volume_cache``: where the tetrahedral mesh is looked up and kept between runs
-    (:class:`meshshade.asset_cache.AssetCache`; the CLI, batches and the add-on pass one). On a mesh that is not closed,
-    or that cannot be tetrahedralised, the bake uses ``model="auto"`` with the beam source model and says why in
-    ``stats["transport"]``. The options below (geodesics, far field, transport, cutoff) are the surface
-    models'.
+    ``volume_cache``: accepted for compatibility and unused (the lattice is built in seconds and depends on the
+    light's edges). A mesh that encloses nothing the lattice resolves (a lone sheet) takes ``model="auto"`` with
+    the beam source model, saying why in ``stats["transport"]``. The options below (geodesics, far field,
+    transport, cutoff) are the surface models'.
 
     ``geodesic``: "exact" (polyhedral window propagation, the reference; default) or "arc" (curvature-corrected
     chords over an edge-path search: 1e-4 on smooth meshes such as spheres and tori and about 5x faster, but
@@ -205,10 +206,11 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     clock = Stopwatch()
     volume_why = None
     if model == "volume":
-        vt, volume_why = _volume_transport(mesh, material, volume, volume_cache, clock)
-        if vt is None:
-            log.warning("%s; using the surface transport (model auto, beam source model)", volume_why)
-            model = "auto"
+        vt, volume_why = _volume_transport(mesh, material, volume, clock)
+        if vt is not None:
+            return _volume_bake(vt, mesh, material, lights, backend, clock)
+        log.warning("%s; using the surface transport (model auto, beam source model)", volume_why)
+        model = "auto"
     far_field = check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol,
                                    far_tol=far_tol, far_rel_tol=far_rel_tol, far_geodesic=far_geodesic,
                                    backend=backend, auto_options=auto_options, transport=transport)
@@ -222,8 +224,6 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     samples = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, lights, scene=scene,
                             eta=material.eta)
     clock.lap("rays")
-    if model == "volume":
-        return _volume_bake(vt, mesh, material, lights, samples, curv, clock)
     cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
     direct_options = far_field_given or far_geodesic != "shared"
     core, why, built = _surface_transport(transport, mesh, material, model, samples, curv, geodesic=geodesic,
@@ -281,34 +281,20 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
                       clock.timings, stats, plan)
 
 
-#: the volume transport's layers below the surface are at most this many times thinner than the surface's edges
-#: (thinner ones form slivers, and the light of such a material stays within a vertex's patch anyway)
-MAX_LAYER_ASPECT = 25.0
-
-
-def _volume_transport(mesh, material, volume, cache, clock):
+def _volume_transport(mesh, material, volume, clock):
     """``(VolumeTransport or None, why not)``: the one passed in, the one kept for this mesh and material inside
     :func:`meshshade.memo.reuse`, or a new one (its stages charged to ``clock``); None where the mesh encloses no
-    volume (not closed) or cannot be tetrahedralised."""
+    volume the lattice can resolve (a lone sheet, a winding number below 1/2 everywhere)."""
     if volume is not None:
         return volume, None
-    d = mesh.defects
-    if not d.is_closed:
-        return None, (f"the mesh is not closed ({d.n_boundary_edges} boundary and {d.n_nonmanifold_edges} "
-                      "non-manifold edges): it encloses no volume")
-    step, edge = grading(material)[0], float(mesh.mean_edge_length)
-    if step * MAX_LAYER_ASPECT < edge:
-        return None, (f"the material's shortest length ({step / NORMAL_SPACING:.3g} mm) is far below the mesh's edge "
-                      f"length ({edge:.3g} mm): its light stays within a vertex's patch, where the surface kernels "
-                      "are as exact")
     built = []
 
     def build():
         built.append(True)
         try:
-            return VolumeTransport.build(mesh, material, cache=cache), None
-        except (MeshshadeError, QhullError) as e:
-            return None, f"the volume could not be tetrahedralised ({str(e).splitlines()[0] if str(e) else e!r})"
+            return VolumeTransport.build(mesh, material), None
+        except MeshshadeError as e:
+            return None, f"the volume transport cannot be built ({str(e).splitlines()[0]})"
 
     vt, why = memo.cached("volume", (id(mesh), material.describe()), build, pins=(mesh,))
     if vt is not None and built:
@@ -316,17 +302,27 @@ def _volume_transport(mesh, material, volume, cache, clock):
     return vt, why
 
 
-def _volume_bake(vt, mesh, material, lights, samples, curv, clock) -> BakeResult:
-    """The bake's result by the volume transport (``model="volume"``)."""
-    M, vstats = vt.exitance(samples)
+def _volume_bake(vt, mesh, material, lights, backend, clock) -> BakeResult:
+    """The bake's result by the volume transport (``model="volume"``): the lights' entry samples on the surface
+    the transport samples, then its exitance; no curvature (the volume needs none)."""
+    S = vt.surface.samples
+    scene = memo.cached("scene", (id(S), backend), lambda: make_scene(S.vertices, S.faces, backend=backend),
+                        pins=(S,))
+    samples = entry_samples(S.vertices, S.faces, S.vertex_normals, S.vertex_areas, lights, scene=scene,
+                            eta=material.eta)
+    clock.lap("rays")
+    try:
+        M, vstats = vt.exitance(samples)
+    except MeshshadeError:
+        raise
     clock.charge(vstats.pop("timings"))
-    stats = {"entry_samples": len(samples), "cutoff_mm": vt.correction.radius_mm.tolist(), **samples.stats,
+    stats = {"entry_samples": len(samples), "cutoff_mm": vt.tables.radius_mm.tolist(), **samples.stats,
              **vt.stats, **vstats, "transport": "volume", "near_field": "beam"}
     stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
     stats["entering_power"] = float(samples.power.sum())
     check_exitance(M, lights)
-    return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, samples, None, vt.correction.radius_mm.copy(),
-                      "volume", material, clock.timings, stats, None, vt)
+    return BakeResult(M, None, None, None, None, samples, None, vt.tables.radius_mm.copy(), "volume", material,
+                      clock.timings, stats, None, vt)
 
 
 def _surface_transport(transport, mesh, material, model, samples, curv, *, direct_options=False, **kw):
@@ -446,9 +442,11 @@ def describe_result(result: BakeResult) -> str:
     t = ", ".join(f"{k} {v:.3g} s" for k, v in result.timings.items())
     ex = s["exitant_power"]
     if s.get("transport") == "volume":
-        return (f"volume: {s['entry_samples']} entry samples; diffusion in {s['volume_tetrahedra']} tetrahedra "
-                f"({s['volume_nodes']} nodes{', cached' if s.get('volume_tetrahedra_cached') else ''}), "
-                f"near field within {max(s['cutoff_mm']):.3g} mm ({s['near_field_pairs']} pairs); entering "
+        cells = s.get("volume_cells_per_level", [])
+        return (f"volume: {s['entry_samples']} entry samples; diffusion on {sum(cells)} cubes of "
+                f"{s['volume_resolution_mm']:.3g} mm ({s['volume_resolution_limited_by']}; "
+                f"{cells[0] if cells else 0} of half that at edges of light), {s['volume_unknowns']} unknowns; "
+                f"near field within {max(s['cutoff_mm']):.3g} mm ({s['near_field_pairs']} evaluations); entering "
                 f"{s['entering_power']:.4g} W, exitant {ex[0]:.4g}/{ex[1]:.4g}/{ex[2]:.4g} W (r/g/b); {t}")
     far = (f" (area lights: geodesic near zone within {max(s['near_mm']):.3g} mm, {s['far_field']} far field "
            f"beyond)" if "near_mm" in s else "")

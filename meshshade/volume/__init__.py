@@ -1,27 +1,27 @@
-"""The far field as diffusion inside the object's own volume, with the analytic near field on top (docs/physics.md
-§15, §15.1): the bake's default model.
+"""Diffusion inside the object's own volume, with the analytic near field on top (docs/physics.md §15): the bake's
+default model.
 
-The diffusion equation -div(D grad phi) + sigma_a phi = Q with the extrapolated (Robin) boundary, solved with P1
-finite elements on a tetrahedral mesh of the object: :mod:`meshshade.volume.fem` (assembly, point loads, exitance,
-pure array functions), :mod:`meshshade.volume.tetmesh` (the tetrahedral mesh of a closed surface, keeping its
-vertices; graded boxes and balls by construction), :mod:`meshshade.volume.sources` (the entering light's sources
-along the refracted rays), :mod:`meshshade.volume.locate` (point location, a compiled neighbour walk),
-:mod:`meshshade.volume.operator` (the channels' assembled operators on one sparsity pattern),
-:mod:`meshshade.volume.solve` (conjugate gradients over all channels at once), :mod:`meshshade.volume.near_field`
-(the near-field model less the Robin half-space's response to the same sources, eq. (98)) and
-:mod:`meshshade.volume.transport` (:class:`VolumeTransport`: the stage the bake calls, built once per mesh and
-material and reused for every light).
+The pipeline, one module per stage: :mod:`meshshade.volume.surface` (the surface it samples: the mesh, its long
+edges split), :mod:`meshshade.volume.inside` (what is inside: the generalised winding number, so open, overlapping
+and defective meshes have an inside), :mod:`meshshade.volume.resolution` (how fine, from the material and a cell
+budget), :mod:`meshshade.volume.lattice` (a graded octree of cubes anchored in world coordinates, finer at edges
+of light), :mod:`meshshade.volume.cutfem` (P1 finite elements on the cubes cut by the surface),
+:mod:`meshshade.volume.multigrid` (the channels' operators and their multigrid conjugate gradients),
+:mod:`meshshade.volume.long_range` (the light's sources along the refracted rays, the share the lattice carries),
+:mod:`meshshade.volume.remainder` (the near field less that share, summed in the local half-space) and
+:mod:`meshshade.volume.transport` (:class:`VolumeTransport`: the stage the bake calls).
 """
-from meshshade.volume.fem import (assemble_channels, assemble_diffusion, boundary_faces, exitance_from_fluence,
-                                  locate_points, point_source_vector, tet_geometry)
-from meshshade.volume.near_field import NearFieldCorrection
-from meshshade.volume.operator import DiffusionOperator
-from meshshade.volume.solve import pcg_jacobi
-from meshshade.volume.sources import line_source_rule, line_sources
-from meshshade.volume.tetmesh import SurfaceTetrahedra, graded_box, surface_tetrahedra
+from meshshade.volume.cutfem import Assembly, assemble, cut_tetrahedron
+from meshshade.volume.inside import SurfaceVolume
+from meshshade.volume.lattice import Grading, Lattice, build_lattice, coarser_lattice
+from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
+from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
+from meshshade.volume.remainder import RemainderTables, remainder_exitance
+from meshshade.volume.resolution import VolumeResolution, diffusion_constants, volume_resolution
+from meshshade.volume.surface import SamplingSurface, split_long_edges
 from meshshade.volume.transport import VolumeTransport
 
-__all__ = ["assemble_channels", "assemble_diffusion", "boundary_faces", "exitance_from_fluence", "locate_points",
-           "point_source_vector", "tet_geometry", "NearFieldCorrection", "DiffusionOperator", "pcg_jacobi",
-           "line_source_rule", "line_sources", "SurfaceTetrahedra", "graded_box", "surface_tetrahedra",
-           "VolumeTransport"]
+__all__ = ["Assembly", "assemble", "cut_tetrahedron", "SurfaceVolume", "Grading", "Lattice", "build_lattice",
+           "coarser_lattice", "ewald_weight", "lattice_loads", "line_rule", "ChannelOperator", "Multigrid",
+           "solve_channels", "RemainderTables", "remainder_exitance", "VolumeResolution", "diffusion_constants",
+           "volume_resolution", "SamplingSurface", "split_long_edges", "VolumeTransport"]

@@ -40,17 +40,30 @@ CHEB_DEGREE, CHEB_RANGE = 2, 1.0 / 25.0
 
 @numba.njit(cache=True, parallel=True)
 def _matvec(indptr, indices, s_data, b_data, m, coef, x, out):
-    """out[:, c] = D_c (S x_c) + (B x_c) / (2 A_c) + sigma_a,c m x_c for the k channels (coef (k, 3))."""
-    n, k = x.shape
+    """out[:, c] = D_c (S x_c) + (B x_c) / (2 A_c) + sigma_a,c m x_c for the 3 channels (coef (3, 3)), one pass
+    over the pattern."""
+    n = x.shape[0]
+    d0, d1, d2 = coef[0, 0], coef[1, 0], coef[2, 0]
+    e0, e1, e2 = coef[0, 1], coef[1, 1], coef[2, 1]
+    f0, f1, f2 = coef[0, 2], coef[1, 2], coef[2, 2]
     for i in numba.prange(n):
-        for c in range(k):
-            a_s = 0.0
-            a_b = 0.0
-            for j in range(indptr[i], indptr[i + 1]):
-                col = indices[j]
-                a_s += s_data[j] * x[col, c]
-                a_b += b_data[j] * x[col, c]
-            out[i, c] = coef[c, 0] * a_s + coef[c, 1] * a_b + coef[c, 2] * m[i] * x[i, c]
+        s0 = s1 = s2 = 0.0
+        b0 = b1 = b2 = 0.0
+        for j in range(indptr[i], indptr[i + 1]):
+            col = indices[j]
+            sv = s_data[j]
+            bv = b_data[j]
+            x0, x1, x2 = x[col, 0], x[col, 1], x[col, 2]
+            s0 += sv * x0
+            s1 += sv * x1
+            s2 += sv * x2
+            b0 += bv * x0
+            b1 += bv * x1
+            b2 += bv * x2
+        mi = m[i]
+        out[i, 0] = d0 * s0 + e0 * b0 + f0 * mi * x[i, 0]
+        out[i, 1] = d1 * s1 + e1 * b1 + f1 * mi * x[i, 1]
+        out[i, 2] = d2 * s2 + e2 * b2 + f2 * mi * x[i, 2]
 
 
 @numba.njit(cache=True)
@@ -89,6 +102,7 @@ class ChannelOperator:
                         self.coef, self.diag, self.bound)
         if np.any(self.diag <= 0.0):
             raise MeshshadeError("the volume's matrix has a non-positive diagonal (an unknown with no inside)")
+        self.inv_diag = 1.0 / self.diag
 
     def __call__(self, x):
         out = np.empty_like(x)
@@ -209,23 +223,25 @@ class Multigrid:
         self.chol = [sla.cho_factor(last.dense(c), lower=True, check_finite=False) for c in range(op.coef.shape[0])]
         self.sizes = [o.n for o in self.ops]
 
-    def _smooth(self, level, x, r):
-        """Chebyshev-Jacobi (degree CHEB_DEGREE) on K x = r from x (in place); the same polynomial every call."""
+    def _smooth(self, level, x, r, zero=False):
+        """Chebyshev-Jacobi (degree CHEB_DEGREE) on K x = r from x (in place; ``zero``: x is 0); the same
+        polynomial every call."""
         op = self.ops[level]
         hi = op.bound * 1.05
         lo = hi * CHEB_RANGE
         theta, delta = 0.5 * (hi + lo), 0.5 * (hi - lo)
         sigma = theta / delta
         rho = 1.0 / sigma
-        res = r - op(x)
-        d = res / op.diag / theta
+        res = r.copy() if zero else r - op(x)
+        d = res * op.inv_diag / theta
         for k in range(CHEB_DEGREE):
             x += d
             if k == CHEB_DEGREE - 1:
                 break
             res -= op(d)
             rho_new = 1.0 / (2.0 * sigma - rho)
-            d = rho_new * rho * d + 2.0 * rho_new / delta * (res / op.diag)
+            d *= rho_new * rho
+            d += (2.0 * rho_new / delta) * (res * op.inv_diag)
             rho = rho_new
         return x
 
@@ -233,7 +249,7 @@ class Multigrid:
         if level == len(self.ops) - 1:
             return np.stack([sla.cho_solve(self.chol[c], r[:, c], check_finite=False)
                              for c in range(r.shape[1])], axis=1)
-        x = self._smooth(level, np.zeros_like(r), r)
+        x = self._smooth(level, np.zeros_like(r), r, zero=True)
         res = r - self.ops[level](x)
         x += self.P[level] @ self(self.P[level].T @ res, level + 1)
         return self._smooth(level, x, r)

@@ -37,7 +37,7 @@ from scipy.spatial import cKDTree
 
 from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.kernels.near_field import incidence_gain, near_field_profile, near_field_ring, near_field_total
-from meshshade.kernels.robin_halfspace import robin_smoothed_exitance
+from meshshade.kernels.robin_halfspace import robin_smoothed_exitances
 from meshshade.pacing import run_in_blocks
 from meshshade.volume.long_range import line_rule
 
@@ -45,6 +45,8 @@ __all__ = ["RemainderTables", "TAIL_TOL", "PATCH_RADII", "remainder_exitance"]
 
 #: the correction's radius: where the magnitude of f beyond it holds this fraction of R_near's total
 TAIL_TOL = 1e-3
+#: the tables' reach in optical units
+TABLE_REACH = 30.0
 #: pairs closer than this many disc radii take f averaged over the entry's disc
 PATCH_RADII = 4.0
 #: pairs per block of entries (bounded memory on dense meshes; about 60 bytes each)
@@ -92,6 +94,11 @@ class RemainderTables:
             self.radius_mm[c] = r_all[nr - 1] / s
             self.long_fraction[c] = long_total / near_total
         self.dlog = float(_LOG_R[1] - _LOG_R[0])
+        # f averaged over an entry's disc, for every disc radius of the grid and distance up to PATCH_RADII radii
+        self.disc = np.zeros((3, _N_COS, DISC_A[2], DISC_STEPS + 1))
+        _disc_table(self.f, self.cum, self.rest, self.n_r, self.log_r0, self.dlog, _TH_NODES, _TH_WEIGHTS,
+                    PATCH_RADII, DISC_STEPS, math.log(DISC_A[0]), math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1),
+                    self.disc)
 
     def near_and_beyond(self, cos_t, near_mm: float):
         """(p, 3): int_0^near f plus the energy beyond the radius, per channel, at ``cos_t`` (p,): what a receiver
@@ -120,8 +127,9 @@ def _channel(albedo_prime, eta, g, spread_opt, r_all):
     A = v.z_b / (2.0 * v.D)
     c_min = math.sqrt(max(0.0, 1.0 - 1.0 / (eta * eta))) if eta > 1.0 else 0.05
     cos_t = np.linspace(max(c_min, 0.05), 1.0, _N_COS)
-    # the tables reach 60 optical units (beyond, f is below 1e-20 of its peak for every medium in the presets)
-    n_use = int(np.searchsorted(r_all, 60.0))
+    # the tables reach TABLE_REACH optical units (the radius where the tail holds TAIL_TOL lies within 14 for every
+    # preset; a medium whose tail reaches further gets the whole table, and the rest beyond it at the entry)
+    n_use = int(np.searchsorted(r_all, TABLE_REACH))
     r = r_all[:n_use]
     kw = {"albedo_prime": albedo_prime, "eta": eta}
     near = near_field_profile(r, g=g, **kw)
@@ -131,14 +139,14 @@ def _channel(albedo_prime, eta, g, spread_opt, r_all):
     f = np.empty((_N_COS, r.size))
     cum = np.empty((_N_COS, r.size))
     total = np.empty(_N_COS)
-    long_total = 0.0
+    Ms, Cs, Ts = robin_smoothed_exitances(r, np.outer(cos_t, x), np.broadcast_to(wq, (cos_t.size, wq.size)),
+                                          D=v.D, mu=v.mu, A=A, spread=spread_opt)
     for i, ct in enumerate(cos_t):
         gain = incidence_gain(g=g, cos_t=float(ct), **kw)
-        M, C, T = robin_smoothed_exitance(r, x * ct, wq, D=v.D, mu=v.mu, A=A, spread=spread_opt)
-        f[i] = gain * near - M
-        cum[i] = gain * near_cum - C
-        total[i] = gain * near_total - T
-        long_total = T
+        f[i] = gain * near - Ms[i]
+        cum[i] = gain * near_cum - Cs[i]
+        total[i] = gain * near_total - Ts[i]
+    long_total = float(Ts[-1])
     ring = 2.0 * np.pi * r * np.abs(f).max(axis=0)
     tail = np.concatenate([np.cumsum((0.5 * (ring[1:] + ring[:-1]) * np.diff(r))[::-1])[::-1], [0.0]])
     below = tail < TAIL_TOL * near_total
@@ -163,53 +171,6 @@ def _lookup(tab, c, k, frac, x, log_r0, dlog, n_r, beyond_zero):
     lo = (1.0 - w) * tab[c, k, j] + w * tab[c, k, j + 1]
     hi = (1.0 - w) * tab[c, k + 1, j] + w * tab[c, k + 1, j + 1]
     return (1.0 - frac) * lo + frac * hi
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _pair_values(i, o, s, src_n, rec_n, weight, cos_t, src_a, rec_a, f, cum, rest, cosg, n_r, log_r0, dlog,
-                 radius, th_x, th_w, patch_radii, out, p_lo, p_hi):
-    """Pairs p_lo:p_hi of (i, o, s): weight[p] (the entry's power less the receiver's irradiance times its area)
-    times f of the pair (disc-averaged near the entry), into out[p]; 0 for pairs facing away or beyond the
-    radius."""
-    for p in range(p_lo, p_hi):
-        a_src, b = i[p], o[p]
-        out[p, 0] = 0.0
-        out[p, 1] = 0.0
-        out[p, 2] = 0.0
-        if (src_n[a_src, 0] * rec_n[b, 0] + src_n[a_src, 1] * rec_n[b, 1] + src_n[a_src, 2] * rec_n[b, 2]) <= 0.0:
-            continue
-        a = src_a[a_src] if src_a[a_src] > 0.0 else rec_a[b]
-        d = s[p]
-        for c in range(3):
-            if d > radius[c]:
-                continue
-            g = cosg[c]
-            ct = min(max(cos_t[a_src], g[0]), g[g.size - 1])
-            k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
-            frac = (ct - g[k]) / (g[k + 1] - g[k])
-            nr = n_r[c]
-            if d >= patch_radii * a or a <= 0.0:
-                v = _lookup(f, c, k, frac, max(d, 1e-300), log_r0[c], dlog, nr, True)
-            else:
-                # average over the disc of radius a centred at distance d: full circles up to a - d (the disc
-                # integral), then arcs from |d - a| to d + a (Gauss-Legendre in theta)
-                acc = 0.0
-                if d < a:
-                    acc = _lookup(cum, c, k, frac, a - d, log_r0[c], dlog, nr, False)
-                    acc += (1.0 - frac) * rest[c, k] + frac * rest[c, k + 1]   # the energy beyond the radius
-                lo, hi = abs(d - a), d + a
-                if d > 0.0:
-                    for q in range(th_x.size):
-                        th = 0.5 * math.pi * (th_x[q] + 1.0)
-                        rho = lo + 0.5 * (hi - lo) * (1.0 - math.cos(th))
-                        if rho <= 0.0:
-                            continue
-                        cang = (rho * rho + d * d - a * a) / (2.0 * rho * d)
-                        cang = min(1.0, max(-1.0, cang))
-                        wgt = 2.0 * rho * math.acos(cang) * 0.5 * (hi - lo) * math.sin(th) * 0.5 * math.pi * th_w[q]
-                        acc += wgt * _lookup(f, c, k, frac, rho, log_r0[c], dlog, nr, True)
-                v = acc / (math.pi * a * a)
-            out[p, c] = weight[p] * v
 
 
 @numba.njit(cache=True)
@@ -288,21 +249,20 @@ def _build_tree(pos, power, normal, cos_t, leaf):
     return perm, lo[:n_nodes], hi[:n_nodes], child[:n_nodes], box[:n_nodes], agg[:n_nodes]
 
 
-@numba.njit(cache=True, inline="always")
-def _kernel(f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w, patch_radii, c, cos_t, d, a):
-    """f of channel c at distance d for an entry of cos theta_t, averaged over a disc of radius a when d < 4a."""
-    if d > radius[c] or d <= 0.0 and a <= 0.0:
-        return 0.0
-    g = cosg[c]
-    ct = min(max(cos_t, g[0]), g[g.size - 1])
-    k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
-    frac = (ct - g[k]) / (g[k + 1] - g[k])
-    nr = n_r[c]
-    if d >= patch_radii * a or a <= 0.0:
-        return _lookup(f, c, k, frac, max(d, 1e-300), log_r0[c], dlog, nr, True)
+#: the disc averages are tabulated for d / a from 0 to PATCH_RADII in DISC_STEPS steps, and for disc radii from
+#: DISC_A[0] to DISC_A[1] mm at DISC_A[2] log-spaced values (a disc outside the range takes its end's value)
+DISC_STEPS = 40
+DISC_A = (1e-3, 30.0, 96)
+
+
+@numba.njit(cache=True)
+def _disc_average(f, cum, rest, c, k, frac, d, a, log_r0, dlog, nr, th_x, th_w):
+    """f of channel c (cos bin k, weight frac) averaged over the disc of radius a centred at distance d: full
+    circles up to a - d from the disc integral (with the energy beyond the radius when d < a), arcs from |d - a| to
+    d + a by Gauss-Legendre in theta."""
     acc = 0.0
     if d < a:
-        acc = _lookup(cum, c, k, frac, a - d, log_r0[c], dlog, nr, False)
+        acc = _lookup(cum, c, k, frac, a - d, log_r0, dlog, nr, False)
         acc += (1.0 - frac) * rest[c, k] + frac * rest[c, k + 1]
     lo, hi = abs(d - a), d + a
     if d > 0.0:
@@ -314,13 +274,63 @@ def _kernel(f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w, patch_rad
             cang = (rho * rho + d * d - a * a) / (2.0 * rho * d)
             cang = min(1.0, max(-1.0, cang))
             wgt = 2.0 * rho * math.acos(cang) * 0.5 * (hi - lo) * math.sin(th) * 0.5 * math.pi * th_w[q]
-            acc += wgt * _lookup(f, c, k, frac, rho, log_r0[c], dlog, nr, True)
+            acc += wgt * _lookup(f, c, k, 0.0 if frac == 0.0 else frac, rho, log_r0, dlog, nr, True)
     return acc / (math.pi * a * a)
+
+
+@numba.njit(cache=True)
+def _disc_table(f, cum, rest, n_r, log_r0, dlog, th_x, th_w, patch_radii, steps, log_a0, dlog_a, out):
+    """out[c, k, i, j]: f (channel c, cos node k) averaged over a disc of radius a_i = exp(log_a0 + i dlog_a) mm
+    at distance j / steps * patch_radii * a_i."""
+    for c in range(out.shape[0]):
+        for k in range(out.shape[1]):
+            kk = min(k, out.shape[1] - 2)
+            fr = 0.0 if k < out.shape[1] - 1 else 1.0
+            for i in range(out.shape[2]):
+                a = math.exp(log_a0 + i * dlog_a)
+                for j in range(steps + 1):
+                    d = j * patch_radii * a / steps
+                    out[c, k, i, j] = _disc_average(f, cum, rest, c, kk, fr, d, a, log_r0[c], dlog, n_r[c],
+                                                    th_x, th_w)
+
+
+@numba.njit(cache=True, inline="always")
+def _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, c, cos_t, d, a):
+    """f of channel c at distance d for an entry of cos theta_t, averaged over a disc of radius a when d < 4a
+    (interpolated in the disc table: ln a, d / a and cos theta_t)."""
+    if d > radius[c] or d <= 0.0 and a <= 0.0:
+        return 0.0
+    g = cosg[c]
+    ct = min(max(cos_t, g[0]), g[g.size - 1])
+    k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
+    frac = (ct - g[k]) / (g[k + 1] - g[k])
+    nr = n_r[c]
+    if d >= patch_radii * a or a <= 0.0:
+        return _lookup(f, c, k, frac, max(d, 1e-300), log_r0[c], dlog, nr, True)
+    u = (math.log(a) - log_a0) / dlog_a
+    na = dtab.shape[2]
+    if u <= 0.0:
+        i, wi = 0, 0.0
+    elif u >= na - 1:
+        i, wi = na - 2, 1.0
+    else:
+        i = int(u)
+        wi = u - i
+    steps = dtab.shape[3] - 1
+    v = d / (patch_radii * a) * steps
+    j = min(int(v), steps - 1)
+    wj = v - j
+    out = 0.0
+    for kk, wk in ((k, 1.0 - frac), (k + 1, frac)):
+        lo = (1.0 - wj) * dtab[c, kk, i, j] + wj * dtab[c, kk, i, j + 1]
+        hi = (1.0 - wj) * dtab[c, kk, i + 1, j] + wj * dtab[c, kk, i + 1, j + 1]
+        out += wk * ((1.0 - wi) * lo + wi * hi)
+    return out
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_pos, src_n, src_p, src_area, src_a,
-              src_cos, src_light, f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w, patch_radii,
+              src_cos, src_light, f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
               near, theta, mode, out, counts, r_lo, r_hi):
     """Receivers r_lo:r_hi: eq. (103)'s pair sum (``mode`` 0: the entries within ``near`` only, 1: those beyond
     only, 2: all). Entries within ``near`` of the receiver one by one, their weight
@@ -362,12 +372,9 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                 dc = math.sqrt(cx * cx + cy * cy + cz * cz)
                 if ex < theta * dc:
                     if agg[nd, 5] * rec_n[r, 0] + agg[nd, 6] * rec_n[r, 1] + agg[nd, 7] * rec_n[r, 2] > 0.0:
-                        a0 += agg[nd, 0] * _kernel(f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w,
-                                                   patch_radii, 0, agg[nd, 4], dc, 0.0)
-                        a1 += agg[nd, 0] * _kernel(f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w,
-                                                   patch_radii, 1, agg[nd, 4], dc, 0.0)
-                        a2 += agg[nd, 0] * _kernel(f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w,
-                                                   patch_radii, 2, agg[nd, 4], dc, 0.0)
+                        a0 += agg[nd, 0] * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 0, agg[nd, 4], dc, 0.0)
+                        a1 += agg[nd, 0] * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 1, agg[nd, 4], dc, 0.0)
+                        a2 += agg[nd, 0] * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 2, agg[nd, 4], dc, 0.0)
                         n_pairs += 1
                     continue
             if child[nd] >= 0:
@@ -389,11 +396,11 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                 if w == 0.0:
                     continue
                 a = src_a[j] if src_a[j] > 0.0 else rec_a[r]
-                a0 += w * _kernel(f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w, patch_radii, 0,
+                a0 += w * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 0,
                                   src_cos[j], d, a)
-                a1 += w * _kernel(f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w, patch_radii, 1,
+                a1 += w * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 1,
                                   src_cos[j], d, a)
-                a2 += w * _kernel(f, cum, rest, cosg, n_r, log_r0, dlog, radius, th_x, th_w, patch_radii, 2,
+                a2 += w * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 2,
                                   src_cos[j], d, a)
                 n_pairs += 1
         out[r, 0] += a0
@@ -442,8 +449,8 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     area = np.ascontiguousarray(src["area"], dtype=np.float64)
     disc = np.sqrt(np.maximum(area, 0.0) / math.pi)
     light = np.ascontiguousarray(src["light"], dtype=np.int64)
-    tabs = (tables.f, tables.cum, tables.rest, tables.cos_t, tables.n_r, tables.log_r0, tables.dlog,
-            tables.radius_mm, _TH_NODES, _TH_WEIGHTS, PATCH_RADII)
+    tabs = (tables.f, tables.disc, tables.cos_t, tables.n_r, tables.log_r0, tables.dlog, tables.radius_mm,
+            PATCH_RADII, math.log(DISC_A[0]), math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1))
     rp = np.ascontiguousarray(rec["pos"], dtype=np.float64)
     rn = np.ascontiguousarray(rec["normal"], dtype=np.float64)
     ra = np.ascontiguousarray(rec["radius"], dtype=np.float64)
