@@ -247,8 +247,8 @@ class PixelGather:
     distances (no leaks through thin parts beyond ``near_mm``). At a vertex it equals the bake exactly.
     ``near_mm`` defaults to 16 mean edge lengths for up to 4096 entry samples (beams), else 8.
 
-    With the volume model (``result.volume``) ``M_near`` is its near field (docs/physics.md eq. (98)) of the point
-    entries, with the mean patch radius as the receiver's, and the volume solution is interpolated.
+    With the volume model (``result.volume``) ``M_near`` is its correction (docs/physics.md eq. (103)) of the point
+    entries, with the mean patch radius as the receiver's, and the rest of the solution is interpolated.
 
     Only *point* entry samples (beams, inside triangles) are gathered per pixel: vertex samples (directional and
     point lights) stand for their vertex's patch, their exitance is smooth on the scale of an edge, and the
@@ -258,14 +258,12 @@ class PixelGather:
 
     def __init__(self, mesh, result, *, near_mm=None, max_pairs=3_000_000):
         self.volume = getattr(result, "volume", None)
-        if self.volume is not None:   # the volume model: its near field (eq. (98)) of the point entries, per pixel
+        if self.volume is not None:   # the volume model: its correction (eq. (103)) of the point entries, per pixel
             s = self.samples = result.samples
             self.faces = mesh.faces
             self.src_index = np.flatnonzero(s.vertex < 0)
             self._normals, self._vtree = mesh.vertex_normals, cKDTree(mesh.vertices)
             self._radius = float(np.sqrt(np.mean(mesh.vertex_areas) / np.pi))
-            w = refract_in(s.directions[self.src_index], s.normals[self.src_index], float(result.material.eta))
-            self._cos_t = np.clip(-np.einsum("ij,ij->i", w, s.normals[self.src_index]), 0.0, 1.0)
             self.far = np.asarray(result.radiance, float) - self.near_field(mesh.vertices)
             return
         curv = SimpleNamespace(k1=result.k1, k2=result.k2, d1=result.d1)
@@ -299,12 +297,9 @@ class PixelGather:
         if self.volume is not None:
             if self.src_index.size == 0 or len(points) == 0:
                 return np.zeros((len(points), 3))
-            s, i = self.samples, self.src_index
             normals = self._normals[self._vtree.query(points)[1]]
-            M, _ = self.volume.correction.exitance(s.positions[i], s.normals[i], s.power[i], self._cos_t,
-                                                   np.zeros(i.size), points, normals,
-                                                   np.full(len(points), self._radius))
-            return M
+            return self.volume.point_entries_correction(self.samples, self.src_index, points, normals,
+                                                        np.full(len(points), self._radius))
         if self.tree is None or len(points) == 0:
             return np.zeros((len(points), 3))
         pos = self.samples.positions[self.src_index]

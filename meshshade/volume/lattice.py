@@ -195,8 +195,9 @@ def _fill_index(index, lo, level, ijk):
 def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict | None = None) -> Lattice:
     """The graded lattice of the volume ``depth(points, bound) > 0`` inside the box ``lo``..``hi`` (mm).
 
-    ``depth(points (p, 3), bound)`` returns the signed distance to the surface (positive inside), clipped to
-    +-``bound``. Top-down: a cube of level l is dropped when its centre lies more than its half-diagonal r_l
+    ``depth(points (p, 3), bound, sign=, exact=)`` returns the signed distance to the surface (positive inside),
+    clipped to +-``bound``; ``sign`` (p,) int8 gives the side where known (0: unknown), ``exact=False`` may
+    return a lower bound of the magnitude and ``exact=None`` only the side (any magnitude). Top-down: a cube of level l is dropped when its centre lies more than its half-diagonal r_l
     outside, or deeper than ``depth_max + r_l``; it is split when part of it may lie shallower than
     ``bands[l]`` and its level is above the surface's level there; else kept. The surface's level is 0, or, with
     ``refine`` (a callable: cube centres (p, 3) -> bool (p,)), 0 where ``refine`` says so and 1 elsewhere (the
@@ -216,6 +217,7 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
                              f"({np.max(hi) - np.min(lo):.4g} mm at {h0:.4g} mm)")
     g = np.meshgrid(*[np.arange(a[i], b[i]) for i in range(3)], indexing="ij")
     cand = np.stack([x.ravel() for x in g], axis=1)
+    cand_sign = np.zeros(cand.shape[0], dtype=np.int8)     # known side of each candidate (0: unknown)
     kept, counts, evaluated = [None] * (L + 1), [0] * (L + 1), 0
     surface_cells = []          # (level, ijk) of kept cubes of level >= 1 that may be cut
     for l in range(L, 0, -1):
@@ -223,7 +225,7 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
         r = 0.5 * math.sqrt(3.0) * h
         bound = max(bands[l] + 4 * r, grading.depth_max + 2 * r) if l == L else bands[l] + 4 * r
         centres = (cand + 0.5) * h
-        d = depth(centres, bound)
+        d = depth(centres, bound, sign=cand_sign, exact=False)
         evaluated += cand.shape[0]
         out = d < -r
         shallow = d - r < bands[l]
@@ -238,8 +240,12 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
             keep = ~(out | split) & (d - r <= grading.depth_max)
         kept[l] = cand[keep]
         counts[l] = int(keep.sum())
-        sub = cand[~out & split]
-        cand = (2 * sub[:, None, :] + CORNERS[None, :, :]).reshape(-1, 3)
+        sub = ~out & split
+        # a parent wholly on one side (|d| > r) gives its children its side: only children of parents the
+        # surface may cross need the winding number
+        side = np.where(np.abs(d[sub]) > r, np.sign(d[sub]), 0).astype(np.int8)
+        cand = (2 * cand[sub][:, None, :] + CORNERS[None, :, :]).reshape(-1, 3)
+        cand_sign = np.repeat(side, 8)
     # the corners of the finest candidates and of the coarser cubes that may be cut are evaluated once
     t_mid = time.perf_counter()
     corner_keys = _pack(cand[:, None, :] + CORNERS[None, :, :])
@@ -250,8 +256,23 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
         coarse_keys = None
         all_keys = corner_keys.ravel()
     ck, cinv = np.unique(all_keys, return_inverse=True)
-    cd = depth(_unpack(ck).astype(np.float64) * h0, 4.0 * math.sqrt(3.0) * h0 if refine is not None
-               else 2.0 * math.sqrt(3.0) * h0)
+    # a corner of a level-0 candidate whose parent lies wholly inside is inside
+    known = np.zeros(ck.size, dtype=np.int8)
+    cs = np.repeat(cand_sign, 8)                                   # the candidates' corners, candidate by candidate
+    np.maximum.at(known, cinv[:corner_keys.size], cs)
+    # first each corner's side; the distance only at the corners of cubes the surface cuts (mixed sides): the
+    # others' magnitude is never read (a cube with its corners on one side is whole or dropped)
+    pts = _unpack(ck).astype(np.float64) * h0
+    bnd = 4.0 * math.sqrt(3.0) * h0 if refine is not None else 2.0 * math.sqrt(3.0) * h0
+    cd = np.asarray(depth(pts, bnd, sign=known, exact=None), dtype=np.float64)
+    inside = cd > 0.0
+    need = np.zeros(ck.size, dtype=bool)
+    for sel in (cinv[:corner_keys.size], cinv[corner_keys.size:]):
+        if sel.size:
+            s8 = inside[sel].reshape(-1, 8)
+            need[sel.reshape(-1, 8)[s8.any(axis=1) & ~s8.all(axis=1)].ravel()] = True
+    if need.any():
+        cd[need] = depth(pts[need], bnd, sign=np.where(inside[need], 1, -1).astype(np.int8))
     evaluated += ck.size
     cdep = cd[cinv[:corner_keys.size]].reshape(-1, 8)
     keep0 = cdep.max(axis=1) > 0.0
@@ -272,7 +293,8 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
         raise MeshshadeError("the mesh encloses no volume the lattice can resolve (winding number below 1/2 "
                              f"everywhere at {h0:.3g} mm)")
     t1 = time.perf_counter()
-    out = _finish(grading, level, ijk, depth, ck, cd, h0)
+    # every corner of a cube that may be cut was evaluated above; the others are inside
+    out = _finish(grading, level, ijk, None, ck, cd, h0)
     out.stats["volume_cells_per_level"] = counts
     out.stats["volume_depth_queries"] += int(evaluated)
     out.stats["timings"] = {"lattice coarse cells": t_mid - t0, "lattice fine cells": t1 - t_mid,

@@ -295,37 +295,60 @@ def _disc_table(f, cum, rest, n_r, log_r0, dlog, th_x, th_w, patch_radii, steps,
 
 
 @numba.njit(cache=True, inline="always")
-def _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, c, cos_t, d, a):
-    """f of channel c at distance d for an entry of cos theta_t, averaged over a disc of radius a when d < 4a
-    (interpolated in the disc table: ln a, d / a and cos theta_t)."""
-    if d > radius[c] or d <= 0.0 and a <= 0.0:
-        return 0.0
-    g = cosg[c]
-    ct = min(max(cos_t, g[0]), g[g.size - 1])
-    k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
-    frac = (ct - g[k]) / (g[k + 1] - g[k])
-    nr = n_r[c]
-    if d >= patch_radii * a or a <= 0.0:
-        return _lookup(f, c, k, frac, max(d, 1e-300), log_r0[c], dlog, nr, True)
-    u = (math.log(a) - log_a0) / dlog_a
-    na = dtab.shape[2]
-    if u <= 0.0:
-        i, wi = 0, 0.0
-    elif u >= na - 1:
-        i, wi = na - 2, 1.0
+def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a):
+    """f of the three channels at distance d for an entry of cos theta_t, averaged over a disc of radius a when
+    d < PATCH_RADII a (interpolated in the disc table: ln a, d / a and cos theta_t); the logarithms and the disc
+    table's cell are shared by the channels."""
+    k0 = k1 = k2 = 0.0
+    if d <= 0.0 and a <= 0.0:
+        return k0, k1, k2
+    disc = a > 0.0 and d < patch_radii * a
+    i, wi, j, wj, ld = 0, 0.0, 0, 0.0, 0.0
+    if disc:
+        u = (math.log(a) - log_a0) / dlog_a
+        na = dtab.shape[2]
+        if u >= na - 1:
+            i, wi = na - 2, 1.0
+        elif u > 0.0:
+            i = int(u)
+            wi = u - i
+        steps = dtab.shape[3] - 1
+        v = d / (patch_radii * a) * steps
+        j = min(int(v), steps - 1)
+        wj = v - j
     else:
-        i = int(u)
-        wi = u - i
-    steps = dtab.shape[3] - 1
-    v = d / (patch_radii * a) * steps
-    j = min(int(v), steps - 1)
-    wj = v - j
-    out = 0.0
-    for kk, wk in ((k, 1.0 - frac), (k + 1, frac)):
-        lo = (1.0 - wj) * dtab[c, kk, i, j] + wj * dtab[c, kk, i, j + 1]
-        hi = (1.0 - wj) * dtab[c, kk, i + 1, j] + wj * dtab[c, kk, i + 1, j + 1]
-        out += wk * ((1.0 - wi) * lo + wi * hi)
-    return out
+        ld = math.log(max(d, 1e-300))
+    for c in range(3):
+        if d > radius[c]:
+            continue
+        g = cosg[c]
+        ct = min(max(cos_t, g[0]), g[g.size - 1])
+        k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
+        frac = (ct - g[k]) / (g[k + 1] - g[k])
+        val = 0.0
+        if disc:
+            for kk, wk in ((k, 1.0 - frac), (k + 1, frac)):
+                lo = (1.0 - wj) * dtab[c, kk, i, j] + wj * dtab[c, kk, i, j + 1]
+                hi = (1.0 - wj) * dtab[c, kk, i + 1, j] + wj * dtab[c, kk, i + 1, j + 1]
+                val += wk * ((1.0 - wi) * lo + wi * hi)
+        else:
+            u = (ld - log_r0[c]) / dlog
+            if u >= n_r[c] - 1:
+                continue
+            jj, w = 0, 0.0
+            if u > 0.0:
+                jj = int(u)
+                w = u - jj
+            lo = (1.0 - w) * f[c, k, jj] + w * f[c, k, jj + 1]
+            hi = (1.0 - w) * f[c, k + 1, jj] + w * f[c, k + 1, jj + 1]
+            val = (1.0 - frac) * lo + frac * hi
+        if c == 0:
+            k0 = val
+        elif c == 1:
+            k1 = val
+        else:
+            k2 = val
+    return k0, k1, k2
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -372,9 +395,11 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                 dc = math.sqrt(cx * cx + cy * cy + cz * cz)
                 if ex < theta * dc:
                     if agg[nd, 5] * rec_n[r, 0] + agg[nd, 6] * rec_n[r, 1] + agg[nd, 7] * rec_n[r, 2] > 0.0:
-                        a0 += agg[nd, 0] * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 0, agg[nd, 4], dc, 0.0)
-                        a1 += agg[nd, 0] * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 1, agg[nd, 4], dc, 0.0)
-                        a2 += agg[nd, 0] * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 2, agg[nd, 4], dc, 0.0)
+                        v0, v1, v2 = _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
+                                              dlog_a, agg[nd, 4], dc, 0.0)
+                        a0 += agg[nd, 0] * v0
+                        a1 += agg[nd, 0] * v1
+                        a2 += agg[nd, 0] * v2
                         n_pairs += 1
                     continue
             if child[nd] >= 0:
@@ -396,12 +421,11 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                 if w == 0.0:
                     continue
                 a = src_a[j] if src_a[j] > 0.0 else rec_a[r]
-                a0 += w * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 0,
-                                  src_cos[j], d, a)
-                a1 += w * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 1,
-                                  src_cos[j], d, a)
-                a2 += w * _kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, 2,
-                                  src_cos[j], d, a)
+                v0, v1, v2 = _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
+                                      src_cos[j], d, a)
+                a0 += w * v0
+                a1 += w * v1
+                a2 += w * v2
                 n_pairs += 1
         out[r, 0] += a0
         out[r, 1] += a1
