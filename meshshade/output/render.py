@@ -248,7 +248,9 @@ class PixelGather:
     ``near_mm`` defaults to 16 mean edge lengths for up to 4096 entry samples (beams), else 8.
 
     With the volume model (``result.volume``) ``M_near`` is its correction (docs/physics.md eq. (103)) of the point
-    entries, with the mean patch radius as the receiver's, and the rest of the solution is interpolated.
+    entries, with the mean patch radius of its sampling surface as the receiver's, and the rest of the solution is
+    interpolated P1 on the sampling surface (``result.sample_exitance``: the mesh split where it is coarser than
+    the volume resolves, :class:`meshshade.volume.surface.SamplingSurface`), not on the input's triangles.
 
     Only *point* entry samples (beams, inside triangles) are gathered per pixel: vertex samples (directional and
     point lights) stand for their vertex's patch, their exitance is smooth on the scale of an edge, and the
@@ -258,13 +260,17 @@ class PixelGather:
 
     def __init__(self, mesh, result, *, near_mm=None, max_pairs=3_000_000):
         self.volume = getattr(result, "volume", None)
-        if self.volume is not None:   # the volume model: its correction (eq. (103)) of the point entries, per pixel
-            s = self.samples = result.samples
-            self.faces = mesh.faces
+        if self.volume is not None:   # the volume model: its solution on its sampling surface, P1 between the
+            s = self.samples = result.samples            # samples, plus its correction (eq. (103)) of point entries
+            self.surface = self.volume.surface
+            S = self.surface.samples
             self.src_index = np.flatnonzero(s.vertex < 0)
-            self._normals, self._vtree = mesh.vertex_normals, cKDTree(mesh.vertices)
-            self._radius = float(np.sqrt(np.mean(mesh.vertex_areas) / np.pi))
-            self.far = np.asarray(result.radiance, float) - self.near_field(mesh.vertices)
+            self._normals, self._vtree = S.vertex_normals, cKDTree(S.vertices)
+            self._radius = float(np.sqrt(np.mean(S.vertex_areas) / np.pi))
+            Ms = getattr(result, "sample_exitance", None)
+            Ms = np.asarray(result.radiance, float) if Ms is None else np.asarray(Ms, float)
+            self.far = Ms - self.near_field(S.vertices)
+            self.faces = S.faces
             return
         curv = SimpleNamespace(k1=result.k1, k2=result.k2, d1=result.d1)
         self.samples = result.samples
@@ -326,6 +332,8 @@ class PixelGather:
 
     def __call__(self, points, face, bary) -> np.ndarray:
         """Surface points (k, 3) mm on faces (k,) with barycentrics (k, 3) -> (k, 3) W/mm^2 exitance."""
+        if self.volume is not None:
+            face, bary = self.surface.locate(face, bary)
         far = np.einsum("ij,ijk->ik", np.asarray(bary, float), self.far[self.faces[face]])
         return far + self.near_field(points)
 

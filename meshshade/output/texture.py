@@ -4,16 +4,16 @@ A texel is a point on the surface: the texel's centre in UV space, mapped by its
 on that face with the interpolated shading normal (:func:`meshshade.geometry.uv.rasterise_uv`). Its exitance is
 evaluated there, not interpolated from the mesh's vertex values:
 
-1. **The surface is refined to what the material resolves.** Where the mesh's mean edge is longer than
-   REFINE_SPACING x the volume transport's column spacing (:func:`meshshade.volume.transport.grading`: the lateral
-   resolution of its layers), each triangle is split into n^2 on its own facet (same polyhedron, normals of the
-   original interpolated; :mod:`meshshade.geometry.refine`; within MAX_REFINED_VERTICES, with a warning where
-   that stops it short) and the bake runs on that surface: the light enters at
-   its vertices and the volume is meshed under them. Without this a 642-vertex ball's volume solution is 5 % off
-   on average (+8 % past the terminator; measured against the exact Robin ball series), whatever is done at the
-   texels afterwards.
-2. **At each texel**: the bake's solution where it is smooth, P1 within the refined triangle (the volume solution
-   is P1 on its elements), plus the near field of point entries (beams) gathered at the texel's own point
+1. **The volume model (the default)** samples the surface on its own where the mesh is coarser than the material
+   resolves (:class:`meshshade.volume.surface.SamplingSurface`: long edges split on the facets) and solves there;
+   a texel takes that solution P1 within the split triangle holding it (``BakeResult.sample_exitance``), not the
+   input's vertex averages (eq. (104)). The mesh itself is not refined, so a texture costs the vertex bake plus
+   the texels' lookups.
+   **The surface models** are refined instead to what the material resolves: where the mesh's mean edge is longer
+   than REFINE_SPACING x half the volume's surface spacing, each triangle is split into n^2 on its own facet
+   (same polyhedron, normals of the original interpolated; :mod:`meshshade.geometry.refine`; within
+   MAX_REFINED_VERTICES, with a warning where that stops it short) and the bake runs on that surface.
+2. **Beams** (point entries) add their near field gathered at the texel's own point
    (:class:`meshshade.output.render.PixelGather`, the same evaluation as ``render --per-pixel``), so a pencil
    beam's peak is as sharp as the texels, not the triangles. The near field of vertex entries (directional and
    point lights: each stands for its vertex's patch) is part of the smooth solution: summed per texel it has a
@@ -22,7 +22,7 @@ evaluated there, not interpolated from the mesh's vertex values:
 3. **Padding**: texels outside every UV triangle, up to ``padding`` texels away, take the nearest covered texel's
    value (:func:`meshshade.geometry.uv.dilate`), so filtering and mipmaps do not bleed the background in.
 
-Where the mesh needs no refinement (n = 1), a texel at a vertex equals the vertex bake exactly.
+Where neither the mesh nor the sampling surface is split, a texel at a vertex equals the vertex bake exactly.
 """
 from __future__ import annotations
 
@@ -39,6 +39,7 @@ import numpy as np
 from meshshade.errors import ParameterError
 from meshshade.geometry.refine import refined_location, refined_mesh
 from meshshade.geometry.uv import automatic_atlas, check_uv, dilate, rasterise_uv
+from meshshade.names import DEFAULT_MODEL
 from meshshade.output.render import PixelGather
 from meshshade.output.tonemap import to_uint8, tonemap_linear
 from meshshade.transport.baking import BakeResult, bake
@@ -87,7 +88,8 @@ class TextureBake:
         PLY, glTF or USD."""
         n = self.vertex_radiance.shape[0]
         r = self.result
-        return replace(r, radiance=self.vertex_radiance, k1=r.k1[:n], k2=r.k2[:n], d1=r.d1[:n], d2=r.d2[:n],
+        cut = (lambda a: None if a is None else a[:n])
+        return replace(r, radiance=self.vertex_radiance, k1=cut(r.k1), k2=cut(r.k2), d1=cut(r.d1), d2=cut(r.d2),
                        beam_distance=None if r.beam_distance is None else r.beam_distance[:n], timings=self.timings,
                        stats=self.stats)
 
@@ -123,9 +125,12 @@ def check_texture_options(size=2048, padding=16, refine=None) -> tuple[int, int,
     return size, padding, refine
 
 
-def texture_refinement(mesh, material) -> int:
-    """Segments per edge so that the mean edge is within :data:`REFINE_SPACING` column spacings (module
-    docstring), at most :data:`MAX_REFINE` (see :func:`refinement_budget` for the vertex budget)."""
+def texture_refinement(mesh, material, model: str = DEFAULT_MODEL) -> int:
+    """Segments per edge of the surface the bake runs on: 1 for the volume model (it samples the surface itself:
+    module docstring), else so that the mean edge is within :data:`REFINE_SPACING` half surface spacings, at most
+    :data:`MAX_REFINE` (see :func:`refinement_budget` for the vertex budget)."""
+    if model == "volume":
+        return 1
     target = REFINE_SPACING * 0.5 * volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm).h0
     return int(min(MAX_REFINE, max(1, math.ceil(float(mesh.mean_edge_length) / target - 1e-9))))
 
@@ -166,7 +171,7 @@ def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: 
     for an automatic atlas by xatlas, kept in ``atlas_cache`` when given: :func:`texture_atlas`); module docstring
     for what each texel holds. ``refine``: segments per edge of the surface the transport runs on (None:
     :func:`texture_refinement`); ``bake_options`` go to :func:`meshshade.transport.baking.bake` (model,
-    progress, volume_cache, ...)."""
+    progress, ...)."""
     size, padding, refine = check_texture_options(size, padding, refine)
     timings, stats = {}, {}
     t0 = time.perf_counter()
@@ -183,7 +188,7 @@ def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: 
     texel, face, bary, rstats = rasterise_uv(uv, size, size)
     stats.update(rstats)
     timings["texture rasterise"] = time.perf_counter() - t0
-    n = texture_refinement(mesh, material) if refine is None else refine
+    n = texture_refinement(mesh, material, bake_options.get("model", DEFAULT_MODEL)) if refine is None else refine
     if refine is None and n > refinement_budget(mesh):
         wanted, n = n, refinement_budget(mesh)
         stats["texture_refine_wanted"] = wanted

@@ -81,6 +81,8 @@ class BakeResult:
     plan : meshshade.transport.auto.AutoPlan or None — the per-sample decisions of ``model="auto"``
     volume : meshshade.volume.transport.VolumeTransport or None — the volume transport of ``model="volume"``
              (reuse it for further lights: ``bake(..., volume=result.volume)``; per-pixel renders use its near field)
+    sample_exitance : (n_s, 3) W/mm^2 or None — the volume model's solution at the vertices of the surface it
+             samples (``volume.surface``; P1 between them), which textures and per-pixel renders interpolate
     """
 
     radiance: np.ndarray
@@ -97,6 +99,7 @@ class BakeResult:
     stats: dict = field(default_factory=dict)
     plan: object = None
     volume: object = None
+    sample_exitance: np.ndarray | None = None
 
     def __repr__(self) -> str:
         n = self.radiance.shape[0]
@@ -312,9 +315,10 @@ def _volume_bake(vt, mesh, material, lights, backend, clock) -> BakeResult:
                             eta=material.eta)
     clock.lap("rays")
     try:
-        M, vstats = vt.exitance(samples)
+        Ms, vstats = vt.sample_exitance(samples)
     except MeshshadeError:
         raise
+    M = vt.surface.to_vertices(Ms)
     clock.charge(vstats.pop("timings"))
     stats = {"entry_samples": len(samples), "cutoff_mm": vt.tables.radius_mm.tolist(), **samples.stats,
              **vt.stats, **vstats, "transport": "volume", "near_field": "beam"}
@@ -322,7 +326,7 @@ def _volume_bake(vt, mesh, material, lights, backend, clock) -> BakeResult:
     stats["entering_power"] = float(samples.power.sum())
     check_exitance(M, lights)
     return BakeResult(M, None, None, None, None, samples, None, vt.tables.radius_mm.copy(), "volume", material,
-                      clock.timings, stats, None, vt)
+                      clock.timings, stats, None, vt, Ms)
 
 
 def _surface_transport(transport, mesh, material, model, samples, curv, *, direct_options=False, **kw):

@@ -10,7 +10,7 @@ the cut surface (1 or 2 triangles per tetrahedron) carries the boundary term phi
 
     S_ij = int_in grad l_i . grad l_j,   m_i = int_in l_i   (lumped mass),   B_ij = int_cut l_i l_j   (consistent),
 
-so each channel's matrix is K_c = D_c S + sigma_a,c diag(m) + B / (2 A_c) (:mod:`meshshade.volume.operator`).
+so each channel's matrix is K_c = D_c S + sigma_a,c diag(m) + B / (2 A_c) (:class:`meshshade.volume.multigrid.ChannelOperator`).
 Hanging nodes are eliminated as they are assembled (each is the mean of two others), so the matrices act on the
 lattice's free nodes; nodes with no inside in their support are dropped.
 

@@ -192,6 +192,10 @@ def _fill_index(index, lo, level, ijk):
                     index[i, j, k] = c
 
 
+#: corners closer to the surface than this fraction of the finest spacing are taken as just inside it
+CORNER_SNAP = 1e-4
+
+
 def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict | None = None) -> Lattice:
     """The graded lattice of the volume ``depth(points, bound) > 0`` inside the box ``lo``..``hi`` (mm).
 
@@ -334,6 +338,10 @@ def _finish(grading, level, ijk, depth, known_keys, known_depth, h_cut):
     if queries and depth is not None:
         dep[ask] = depth(nodes[ask], bound)
     dep[np.isnan(dep)] = bound
+    # a corner on the surface (faces on the lattice's planes: boxes at round coordinates) is put a hair inside,
+    # so that rounding of the input's coordinates (a float32 file, other units) does not flip it from side to side
+    tiny = CORNER_SNAP * h0
+    dep = np.where(np.abs(dep) < tiny, tiny, dep)
     t2 = time.perf_counter()
     hanging, parents = _hanging_nodes(node_keys, level, ijk)
     span_lo = np.min(ijk * np.left_shift(1, level)[:, None], axis=0)

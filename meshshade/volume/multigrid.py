@@ -25,7 +25,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from meshshade.errors import MeshshadeError
-from meshshade.volume.cutfem import assemble
+from meshshade.volume.cutfem import assemble, constraint_map
 from meshshade.volume.lattice import coarser_lattice
 
 __all__ = ["ChannelOperator", "Multigrid", "solve_channels", "SOLVE_RTOL", "COARSEST"]
@@ -143,7 +143,6 @@ def prolongation(points, coarse):
     cells, bary, nodes = coarse.locate(points)
     if np.any(cells < 0):
         raise MeshshadeError("a node of the volume's lattice lies outside its coarser level")
-    from meshshade.volume.cutfem import constraint_map
     cptr, cidx, cw, n_free = constraint_map(coarse.n_nodes, coarse.hanging, coarse.parents)
     size = int(np.sum(np.diff(cptr)[nodes]))
     rows = np.empty(size, np.int64)

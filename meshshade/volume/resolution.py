@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from meshshade.errors import ParameterError
+from meshshade.errors import MeshshadeError, ParameterError
 from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.volume.lattice import Grading
 
@@ -98,7 +98,10 @@ def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None 
         if not (isinstance(budget, int) and budget >= 1000):
             raise ParameterError(f"the volume's cell budget must be an integer >= 1000, got {budget!r}")
         h_mat = RESOLVED_KAPPA_H / float(kappa.max())
-        h_obj = float(np.min(extent_mm)) / MIN_CELLS_ACROSS
+        thinnest = float(np.min(extent_mm))
+        if not (thinnest > 0.0 and area_mm2 > 0.0):
+            raise MeshshadeError("the mesh is flat (a sheet of zero thickness): it encloses no volume")
+        h_obj = thinnest / MIN_CELLS_ACROSS
         h, why = (h_mat, "material") if h_mat <= h_obj else (h_obj, "object")
         h = _round_h(h) if why == "material" else float(2.0 ** (math.floor(4.0 * math.log2(h)) / 4.0))
         # surface cubes (h0): the surface's area times their band (to where level 2 starts) and a cut layer, over

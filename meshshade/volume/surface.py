@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 from meshshade.geometry.mesh import Mesh, MeshReport
 
@@ -110,6 +111,7 @@ class SamplingSurface:
         self.source = mesh
         self.spacing = float(spacing)
         V, F, origin, bary, self.complete = split_long_edges(mesh.vertices, mesh.faces, self.spacing)
+        self._origin, self._bary = origin, bary
         if F.shape[0] == mesh.n_faces:
             self.samples = mesh
             self._W = None
@@ -127,6 +129,50 @@ class SamplingSurface:
         if self._W is None:
             return np.asarray(values)
         return self._W @ np.asarray(values)
+
+
+    def locate(self, face, bary):
+        """(sub_face (k,), lam (k, 3)): the face of the sampling surface holding each point given by its input
+        ``face`` (k,) and barycentrics ``bary`` (k, 3) there, and the point's barycentrics in it (the split is on
+        the input's facets: every point of an input face lies in one of its split faces)."""
+        face = np.asarray(face, dtype=np.int64)
+        bary = np.asarray(bary, dtype=np.float64)
+        if self._W is None or face.size == 0:
+            return face, bary
+        inv = getattr(self, "_inv", None)
+        if inv is None:
+            inv = self._inv = np.linalg.inv(self._bary)                 # lam = bary @ inv(B_q)
+            src = self.source
+            cent = np.einsum("qkm,qmd->qd", self._bary / 3.0, src.vertices[src.faces[self._origin]])
+            self._tree = cKDTree(cent)
+            self._by_origin = np.argsort(self._origin, kind="stable")
+            self._first = np.searchsorted(self._origin[self._by_origin], np.arange(src.n_faces + 1))
+        src = self.source
+        pts = np.einsum("km,kmd->kd", bary, src.vertices[src.faces[face]])
+        sub = np.full(face.size, -1, dtype=np.int64)
+        best = np.full(face.size, -np.inf)
+        k = int(min(8, self._tree.n))
+        _, cand = self._tree.query(pts, k=k)
+        cand = cand.reshape(face.size, k)
+        for j in range(k):                                                # nearest split faces of the same face
+            q = cand[:, j]
+            lam_min = np.einsum("km,kmc->kc", bary, inv[q]).min(axis=1)
+            ok = (self._origin[q] == face) & (lam_min > best)
+            sub[ok], best[ok] = q[ok], lam_min[ok]
+        rest = np.flatnonzero(best < -1e-9)                               # not found among them: all of its face
+        if rest.size:
+            f = face[rest]
+            cnt = self._first[f + 1] - self._first[f]
+            owner = np.repeat(np.arange(rest.size), cnt)
+            offs = np.arange(owner.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            q = self._by_origin[np.repeat(self._first[f], cnt) + offs]
+            lam_min = np.einsum("km,kmc->kc", bary[rest][owner], inv[q]).min(axis=1)
+            order = np.lexsort((-lam_min, owner))
+            firsts = order[np.searchsorted(owner[order], np.arange(rest.size))]
+            sub[rest] = q[firsts]
+        lam = np.einsum("km,kmc->kc", bary, inv[sub])
+        lam = np.clip(lam, 0.0, None)
+        return sub, lam / lam.sum(axis=1, keepdims=True)
 
 
 def _hat_weights(mesh, split, origin, bary):

@@ -139,12 +139,18 @@ class VolumeTransport:
 
     def exitance(self, samples):
         """(M (n, 3) W/mm^2 at the mesh's vertices, stats with ``timings``) for ``samples``, the lights' entry
-        samples on ``self.surface.samples``."""
+        samples on ``self.surface.samples``: eq. (104) of :meth:`sample_exitance`."""
+        Ms, stats = self.sample_exitance(samples)
+        return self.surface.to_vertices(Ms), stats
+
+    def sample_exitance(self, samples):
+        """(M (n_s, 3) W/mm^2 at the sampling surface's vertices, stats with ``timings``): the solution itself,
+        P1 on the sampling surface, which textures and per-pixel renders interpolate
+        (:meth:`meshshade.volume.surface.SamplingSurface.locate`)."""
         mat, surf = self.material, self.surface.samples
         stats = {}
-        n = self.mesh.n_vertices
         if len(samples) == 0:
-            return np.zeros((n, 3)), {"timings": {}}
+            return np.zeros((surf.n_vertices, 3)), {"timings": {}}
         timings = self.prepare(samples)
         t = time.perf_counter()
         w = refract_in(samples.directions, samples.normals, float(mat.eta))
@@ -175,12 +181,11 @@ class VolumeTransport:
         stats["volume_negative_clamped"] = neg.sum(axis=0).tolist()
         stats["volume_negative_worst"] = [float(max(0.0, -M[:, c].min()) / peak[c]) for c in range(3)]
         M[neg] = 0.0
-        out = self.surface.to_vertices(M)
         total = np.maximum(samples.power.sum(), 1e-300)
         stats.update({"volume_dropped_source_power": [round(float(d / total), 6) for d in dropped],
                       "near_field_pairs": int(pairs), "volume_solve_iterations": its.tolist(),
                       "volume_outside_lattice": int(outside), "timings": timings})
-        return out, stats
+        return M, stats
 
     def point_entries_correction(self, samples, index, points, normals, radius):
         """(p, 3) W/mm^2: eq. (103) of the point entries ``index`` of ``samples`` (beams) at ``points`` (p, 3) with
