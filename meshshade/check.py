@@ -47,8 +47,12 @@ from meshshade.geometry.curvature import principal_curvatures
 from meshshade.kernels.curvature import VALIDITY_TOL, curvature_ratios, curvature_validity
 from meshshade.materials import CHANNELS, Material
 from meshshade.transport import cutoff_radii
+from meshshade.volume.inside import SurfaceVolume
+from meshshade.volume.resolution import volume_resolution
+from meshshade.volume.surface import split_long_edges
+from meshshade.volume.transport import BURIED_OFFSET_MM, SAMPLE_SPACING_OVER_H0
 
-__all__ = ["check_mesh", "format_check", "report_to_json", "VALIDITY_RHO_TOL", "PERCENTILES"]
+__all__ = ["check_mesh", "volume_report", "format_check", "report_to_json", "VALIDITY_RHO_TOL", "PERCENTILES"]
 
 #: validity is judged at the radius holding all but this fraction of the diffuse reflectance (see module doc)
 VALIDITY_RHO_TOL = 1e-2
@@ -116,6 +120,7 @@ def check_mesh(mesh, material: Material | None = None, *, curvature_radius_mm: f
         "fraction_concave": float(np.mean((k1 < -scale_k))),
         "fraction_saddle": float(np.mean((k1 > scale_k) & (k2 < -scale_k))),
     }
+    report["volume"] = volume_report(mesh, material)
     if material is None:
         return report
     report["material"] = material.to_dict()
@@ -158,6 +163,28 @@ def check_mesh(mesh, material: Material | None = None, *, curvature_radius_mm: f
     return report
 
 
+def volume_report(mesh, material: Material | None = None) -> dict:
+    """What the default bake (the volume transport, docs/physics.md §15) will do with ``mesh``: whether it can
+    (a flat sheet encloses nothing: the surface transport instead), its inside (closed, or holes closed by the
+    winding number), parts (baked as their union), vertices buried in other parts (reported as 0) and, with a
+    material, the lattice's spacing and the surface it samples."""
+    d = mesh.defects
+    out = {"closed": bool(d.is_closed), "parts": int(d.n_components), "buried_vertices": 0}
+    flat = not (float(np.min(mesh.bbox_size_mm)) > 0.0)
+    out["transport"] = "surface (the mesh is flat: a sheet encloses no volume)" if flat else "volume"
+    if not flat and d.n_components > 1:
+        inside = SurfaceVolume(mesh.vertices, mesh.nondegenerate_faces)
+        offset = min(BURIED_OFFSET_MM, 0.1 * float(mesh.mean_edge_length))
+        out["buried_vertices"] = int(inside.buried(mesh.vertices, mesh.vertex_normals, offset).sum())
+    if material is not None and not flat:
+        res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm)
+        spacing = SAMPLE_SPACING_OVER_H0 * res.h0
+        V, F, *_ = split_long_edges(mesh.vertices, mesh.faces, spacing)
+        out.update({"lattice_mm": float(res.h0), "lattice_limited_by": res.limited_by,
+                    "sample_spacing_mm": float(spacing), "sampling_vertices": int(V.shape[0])})
+    return out
+
+
 def _g(x) -> str:
     return f"{x:.4g}" if isinstance(x, (int, float)) else str(x)
 
@@ -182,6 +209,17 @@ def format_check(report: dict) -> str:
                  + (f"; {c['n_fallback']} vertices filled from neighbours" if c["n_fallback"] else "")
                  + (f" ({c['n_no_plane']} without a tangent plane: the normals cancel there, e.g. a bow-tie vertex; "
                     "libigl's fit was not run on them)" if c.get("n_no_plane") else ""))
+    v = report["volume"]
+    line = f"default bake: {v['transport']} transport"
+    if v["transport"] == "volume":
+        line += (", closed" if v["closed"] else ", holes closed by the winding number") + (
+            f", {v['parts']} parts baked as their union" if v["parts"] > 1 else "")
+        if v["buried_vertices"]:
+            line += f", {v['buried_vertices']} vertices buried inside other parts (reported as 0)"
+        if "lattice_mm" in v:
+            line += (f"; lattice {v['lattice_mm']:.3g} mm ({v['lattice_limited_by']}), light sampled every "
+                     f"{v['sample_spacing_mm']:.3g} mm on {v['sampling_vertices']} points")
+    lines.append(line)
     if "channels" not in report:
         lines.append("material: none given (add --material NAME or --sigma-s-prime/--sigma-a for sizes in "
                      "transport lengths, resolution and first-order validity)")

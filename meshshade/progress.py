@@ -110,6 +110,7 @@ class Progress:
         self.clock = clock
         self.n = 0.0
         self.lines: list[str] = []  # every line printed (for tests and logs)
+        self.stage: str | None = None  # the stage now running, for a job made of stages (set_stage)
         self._bar = None
         self._tty = False
         if not self.enabled:
@@ -156,6 +157,12 @@ class Progress:
         if line:
             self._emit(self.status(now), now)
 
+    def set_stage(self, name: str) -> None:
+        """Name the stage now running: the bar's label on a terminal, ``[name]`` after the status in lines."""
+        self.stage = name
+        if self._bar is not None:
+            self._bar.set_description(f"{self.task}: {name}", refresh=True)
+
     def seconds_left(self, now: float | None = None) -> float:
         """Projected seconds to the end (inf while unknown): the work left at the speed since the first update
         (or since the start when that is all there is)."""
@@ -183,12 +190,13 @@ class Progress:
         elapsed = now - self._t0
         frac = self.fraction
         unit = f" {self.unit}" if self.unit else ""
+        stage = f" [{self.stage}]" if self.stage else ""
         if frac is None:
-            return f"{int(self.n)}{unit}, {format_duration(elapsed)} elapsed"
+            return f"{int(self.n)}{unit}, {format_duration(elapsed)} elapsed{stage}"
         remaining = self.seconds_left(now)
         left = f", ~{format_duration(remaining)} left" if remaining < float("inf") else ""
         return (f"{int(100 * frac)} % ({int(self.n)}/{int(self.total)}{unit}), {format_duration(elapsed)} elapsed"
-                f"{left}")
+                f"{left}{stage}")
 
     def _emit(self, text: str, now: float) -> None:
         line = f"meshshade: {self.task}: {text}"

@@ -6,6 +6,8 @@ Its help and arguments are in :mod:`meshshade.cli.arguments.bake`; :mod:`meshsha
 only once they are parsed."""
 from __future__ import annotations
 
+import sys
+
 from meshshade.cli.options import lights_from_args, mesh_and_material
 from meshshade.asset_cache import AssetCache
 from meshshade.errors import ParameterError
@@ -13,7 +15,7 @@ from meshshade.io import check_output_path, read_uv_map
 from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, texture_outputs, write_bake, write_texture
 from meshshade.output.texture import bake_texture, check_texture_options
 from meshshade.transport import bake, describe_result
-from meshshade.transport.baking import check_bake_options
+from meshshade.transport.baking import check_bake_options, mesh_note
 
 
 def _refine(text):
@@ -67,6 +69,9 @@ def run_bake(args) -> int:
                    texture_path=args.texture)
         written += [args.out] + ([args.npz] if args.npz else [])
     if not args.quiet:
+        note = mesh_note(result)
+        if note:
+            print(f"meshshade: note: {note}", file=sys.stderr)
         print(describe_result(result))
         if result.plan is not None:
             print(result.plan.describe())

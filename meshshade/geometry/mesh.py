@@ -258,7 +258,8 @@ def validate_mesh(vertices, faces, *, emit_warnings: bool = True) -> MeshReport:
                     "areas, normals, curvature and ray casting")
     n_comp, _ = topology.vertex_components(n, F)
     if n_comp > 1:
-        warn.append(f"{n_comp} connected components (light does not diffuse between them)")
+        warn.append(f"{n_comp} connected components (the volume transport bakes their union: overlapping parts "
+                    "share light, separate ones do not)")
     referenced = np.zeros(n, bool)
     referenced[F.reshape(-1)] = True
     n_unref = int(n - referenced.sum())

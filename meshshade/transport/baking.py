@@ -35,6 +35,7 @@ from meshshade.light.samples import check_exitance
 from meshshade.light.sources import light_list
 from meshshade.materials import Material
 from meshshade.preview import mesh_preview
+from meshshade.progress import Progress
 from meshshade.raycast import make_scene
 from meshshade.transport.farfield import (DEFAULT_FAR_TOL)
 from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
@@ -42,7 +43,7 @@ from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, S
 from meshshade.transport.gather import Stopwatch, cutoff_radii
 from meshshade.transport.direct_sum import SumOptions, direct_sum, merge_plans, subset_samples
 from meshshade.transport.models import DEFAULT_MODEL, MODELS
-from meshshade.transport.near_field import (check_source_model, near_field_factors, source_model_keyword)
+from meshshade.transport.source_factors import (check_source_model, near_field_factors, source_model_keyword)
 from meshshade.volume.transport import VolumeTransport
 
 log = logging.getLogger("meshshade")
@@ -179,7 +180,7 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     sources along the beam fitted to exact transport (docs/physics.md §13), carried by every model as the factor
     of eq. (79): pairs are multiplied by the ratio of the near-field model to the planar dipole (patch-averaged
     near the source; for beams over the receiver's patch), and the far field by the ratio of their tails
-    (transport/near_field.py, eq. (80)). ``near_field``: the former name of ``source_model`` (deprecated: a
+    (transport/source_factors.py, eq. (80)). ``near_field``: the former name of ``source_model`` (deprecated: a
     DeprecationWarning).
 
     ``progress``: False (default), True or the task named in the progress lines ("bake"; ``render`` and
@@ -209,9 +210,18 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     clock = Stopwatch()
     volume_why = None
     if model == "volume":
-        vt, volume_why = _volume_transport(mesh, material, volume, clock)
-        if vt is not None:
-            return _volume_bake(vt, mesh, material, lights, backend, clock)
+        bar, on_stage = _volume_progress(progress)
+        try:
+            vt, volume_why = _volume_transport(mesh, material, volume, clock, on_stage)
+            if vt is not None:
+                vt.on_stage = on_stage
+                try:
+                    return _volume_bake(vt, mesh, material, lights, backend, clock, on_stage)
+                finally:
+                    vt.on_stage = None
+        finally:
+            if bar is not None:
+                bar.close()
         log.warning("%s; using the surface transport (model auto, beam source model)", volume_why)
         model = "auto"
     far_field = check_bake_options(model, cutoff_tol, curvature_radius_mm, geodesic, far_field, rtol=rtol,
@@ -284,7 +294,27 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
                       clock.timings, stats, plan)
 
 
-def _volume_transport(mesh, material, volume, clock):
+#: the volume bake's stages in order, with their rough shares of its time (the progress bar's units)
+VOLUME_STAGES = {"volume sampling": 1, "near-field tables": 1, "rays": 1, "volume lattice": 3, "volume operator": 2,
+                 "volume multigrid": 2, "volume sources": 1, "volume solve": 3, "near field": 3}
+
+
+def _volume_progress(progress):
+    """(Progress or None, on_stage callback or None) of a volume bake: a bar over its stages, named as they run."""
+    if not progress:
+        return None, None
+    bar = Progress(progress if isinstance(progress, str) else "bake", sum(VOLUME_STAGES.values()), "")
+    order = list(VOLUME_STAGES)
+    bar.set_stage(order[0])
+
+    def on_stage(name):                                   # ``name`` has ended: the next one runs now
+        if name in order and order.index(name) + 1 < len(order):
+            bar.set_stage(order[order.index(name) + 1])
+        bar.update(VOLUME_STAGES.get(name, 0))
+    return bar, on_stage
+
+
+def _volume_transport(mesh, material, volume, clock, on_stage=None):
     """``(VolumeTransport or None, why not)``: the one passed in, the one kept for this mesh and material inside
     :func:`meshshade.memo.reuse`, or a new one (its stages charged to ``clock``); None where the mesh encloses no
     volume the lattice can resolve (a lone sheet, a winding number below 1/2 everywhere)."""
@@ -295,7 +325,7 @@ def _volume_transport(mesh, material, volume, clock):
     def build():
         built.append(True)
         try:
-            return VolumeTransport.build(mesh, material), None
+            return VolumeTransport.build(mesh, material, on_stage=on_stage), None
         except MeshshadeError as e:
             return None, f"the volume transport cannot be built ({str(e).splitlines()[0]})"
 
@@ -305,7 +335,7 @@ def _volume_transport(mesh, material, volume, clock):
     return vt, why
 
 
-def _volume_bake(vt, mesh, material, lights, backend, clock) -> BakeResult:
+def _volume_bake(vt, mesh, material, lights, backend, clock, on_stage=None) -> BakeResult:
     """The bake's result by the volume transport (``model="volume"``): the lights' entry samples on the surface
     the transport samples, then its exitance; no curvature (the volume needs none)."""
     S = vt.surface.samples
@@ -314,11 +344,13 @@ def _volume_bake(vt, mesh, material, lights, backend, clock) -> BakeResult:
     samples = entry_samples(S.vertices, S.faces, S.vertex_normals, S.vertex_areas, lights, scene=scene,
                             eta=material.eta)
     clock.lap("rays")
+    if on_stage is not None:
+        on_stage("rays")
     try:
         Ms, vstats = vt.sample_exitance(samples)
     except MeshshadeError:
         raise
-    M = vt.surface.to_vertices(Ms)
+    M = vt.to_vertices(Ms)
     clock.charge(vstats.pop("timings"))
     stats = {"entry_samples": len(samples), "cutoff_mm": vt.tables.radius_mm.tolist(), **samples.stats,
              **vt.stats, **vstats, "transport": "volume", "near_field": "beam"}
@@ -438,6 +470,27 @@ def check_bake_options(model=DEFAULT_MODEL, cutoff_tol=1e-4, curvature_radius_mm
     if auto_options is not None and not isinstance(auto_options, dict):
         raise MeshshadeError(f"auto_options must be a dict or None, got {type(auto_options).__name__}")
     return far_field
+
+
+def mesh_note(result: BakeResult) -> str | None:
+    """One line on what the bake made of a mesh that is not one closed part (None for one closed part): the
+    volume over an open or many-part mesh, buried vertices, or why the surface transport was used instead."""
+    s = result.stats
+    if s.get("transport") == "volume":
+        closed, parts = s.get("volume_closed", True), s.get("volume_parts", 1)
+        buried = s.get("volume_buried_vertices", 0)
+        if closed and parts <= 1 and not buried:
+            return None
+        what = [] if closed else ["holes closed by the winding number"]
+        if parts > 1:
+            what.append(f"{parts} parts baked as their union (overlapping parts share light)")
+        if buried:
+            what.append(f"{buried} vertices buried inside other parts report 0")
+        return "volume transport on " + ("a closed" if closed else "an open") + " mesh: " + "; ".join(what)
+    why = str(s.get("transport", ""))
+    if "[volume transport not used:" in why:
+        return "surface transport: " + why.split("[volume transport not used:", 1)[1].rstrip("]").strip()
+    return None
 
 
 def describe_result(result: BakeResult) -> str:

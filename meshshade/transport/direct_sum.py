@@ -18,7 +18,7 @@ from meshshade.progress import Progress, kernel_interrupts
 from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
 from meshshade.transport.farfield import far_field_exitance, far_field_exitance_pairwise, far_field_radius
 from meshshade.transport.gather import PairStream, chunk_size, gather
-from meshshade.transport.near_field import drift_angles, near_field_factors, refracted_drift
+from meshshade.transport.source_factors import drift_angles, near_field_factors, refracted_drift
 from meshshade.transport.pair_kernel import PairKernel, source_frames
 from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
 from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay, neighbourhood_solver

@@ -44,7 +44,7 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
     (k, 3) or None: pairs must also have chord <= it (the near zone of sources whose far field is summed by
     clusters). ``source_radius`` (k,) mm: patch radius of each source (0 for a pencil beam), see
     :func:`~meshshade.transport.patch_average.patch_average_factor`. With the near field of ``kernel.near_factors``
-    (transport/near_field.py) every pair is also multiplied by its near-field factor (and, with
+    (transport/source_factors.py) every pair is also multiplied by its near-field factor (and, with
     ``kernel.source_drift``, by the drift factor of eq. (88)), and a point source (a beam)
     is averaged over the receiver's patch, of radius ``receiver_radius`` (n_vertices,) mm: a vertex's exitance
     stands for its patch, and the near field peaks within it. Returns M (n_vertices, 3) W/mm^2 and counts.

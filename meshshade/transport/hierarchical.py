@@ -45,7 +45,7 @@ from meshshade.transport.hierarchy_loops import (FAR_TRAVERSE, Clusters, FarFact
                                                    cluster_geometry)
 from meshshade.transport.kernel_evaluation import SphereTables, kernel_params
 from meshshade.transport.models import MODEL_KERNEL, MODELS, Kernel
-from meshshade.transport.near_field import (check_source_model, drift_angles, near_field_factors,
+from meshshade.transport.source_factors import (check_source_model, drift_angles, near_field_factors,
                                             refracted_drift, source_model_keyword)
 from meshshade.transport.pair_kernel import PairKernel, source_frames
 from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
@@ -234,7 +234,7 @@ class SurfaceTransport:
     params: object
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
-    #: the source model, "point" or "beam" (transport/near_field.py: with "beam" the near matrices and every far
+    #: the source model, "point" or "beam" (transport/source_factors.py: with "beam" the near matrices and every far
     #: pair carry the near-field factor N(s) of eq. (80))
     source_model: str = "point"
     #: with the source model "beam": the near pairs' sources, distances and azimuths (:class:`NearPairs`) for the
@@ -256,7 +256,7 @@ class SurfaceTransport:
         radius in patch radii; None lets :func:`far_distance_check` choose it from NEAR_PATCH_RADII on this mesh,
         and raises :class:`FarFieldUnsupported` when none of them makes the far field's distances accurate
         enough (bake's ``transport="auto"`` then uses the direct sum). ``source_model``: "point" (default) or
-        "beam" (transport/near_field.py: the near matrices and the far field's pairs carry the near-field factor
+        "beam" (transport/source_factors.py: the near matrices and the far field's pairs carry the near-field factor
         N(s)); ``near_field``: its former name (deprecated).
         """
         source_model = check_source_model(source_model_keyword(source_model, near_field) or "point")

@@ -89,13 +89,13 @@ class PairKernel:
         if model not in MODELS or model == "volume":
             raise ParameterError(f"unknown surface model {model!r}; choose one of "
                                  f"{', '.join(m for m in MODELS if m != 'volume')}")
-        #: the near-field factors (transport.near_field.NearFieldFactors) the gather multiplies pairs by, or None
+        #: the near-field factors (transport.source_factors.NearFieldFactors) the gather multiplies pairs by, or None
         #: for the kernels' own point source at z_r; with them, ``source_scale`` (k, 3): each source's incidence
         #: scale per channel (NearFieldFactors.incidence_scale), or None
         self.near_factors = near
         self.source_scale = None
         #: with the near-field factors, each source's sideways drift (sin theta_t (k,), its azimuth psi (k,) in the
-        #: source frame; transport.near_field.drift_angles), or None: the gather multiplies pairs by
+        #: source frame; transport.source_factors.drift_angles), or None: the gather multiplies pairs by
         #: NearFieldFactors.drift_factor (docs/physics.md eq. (88))
         self.source_drift = None
         if model == "auto" and plan is None:

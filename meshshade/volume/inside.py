@@ -63,6 +63,15 @@ class SurfaceVolume:
             w[unsure] = self._bvh.winding_number(np.ascontiguousarray(P[unsure]), WINDING_EXACT)
         return w
 
+    def buried(self, vertices, normals, offset: float) -> np.ndarray:
+        """(n,) bool: vertices whose outside is inside the volume (w > 1/2 at ``offset`` mm along the outward
+        normal): a part's vertices inside another part (eyes in a head, overlapping armour) are not on the exposed
+        surface."""
+        V = np.asarray(vertices, dtype=np.float64)
+        if V.shape[0] == 0:
+            return np.zeros(0, dtype=bool)
+        return self.winding(V + float(offset) * np.asarray(normals, dtype=np.float64)) > 0.5
+
     def depth(self, points, bound: float, sign=None, exact: bool | None = True) -> np.ndarray:
         """(p,) signed distance (mm) from ``points`` (p, 3) to the surface, positive where w > 1/2, its magnitude
         clipped to ``bound`` (beyond it only the sign is meaningful). ``sign`` (p,) int: the side where already

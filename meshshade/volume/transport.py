@@ -45,6 +45,14 @@ __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0"]
 #: needs the light sampled, not the kernel resolved: 2 h0 is as accurate as h0 on the Monte Carlo scenes, with a
 #: quarter of the samples; docs/benchmarks.md)
 SAMPLE_SPACING_OVER_H0 = 2.0
+#: a vertex is buried when the winding number this far outside it (mm; at most a tenth of the mean edge) is > 1/2
+BURIED_OFFSET_MM = 0.05
+
+
+def _lap(timings, name, t, on_stage):
+    timings[name] = time.perf_counter() - t
+    if on_stage is not None:
+        on_stage(name)
 
 
 class VolumeTransport:
@@ -60,31 +68,53 @@ class VolumeTransport:
         self.A = np.array([c[2] for c in consts])
         self.coef = np.array([(D, 1.0 / (2.0 * A), sa) for D, sa, A in consts])
         self._lattice_key = None
+        self.on_stage = None          # called with each stage's name as it ends (progress), or None
         self.lattice = self.assembly = self.operator = self.multigrid = None
+        self.buried = self._buried_vertices()
         self.stats = {
             "volume_resolution_mm": round(resolution.h0, 5), "volume_resolution_limited_by": resolution.limited_by,
             "volume_spread_mm": round(resolution.spread, 5),
             "volume_samples": int(surface.samples.n_vertices), "volume_samples_split": bool(surface.split),
             "volume_lattice_fraction": [round(float(x), 4) for x in tables.long_fraction],
             "near_field_radius_mm": [round(float(r), 4) for r in tables.radius_mm],
+            "volume_parts": int(mesh.defects.n_components), "volume_closed": bool(mesh.defects.is_closed),
+            "volume_buried_vertices": int(self.buried.sum()),
         }
 
     @classmethod
     def build(cls, mesh, material, *, h0: float | None = None, budget: int = DEFAULT_BUDGET,
-              sample_spacing: float | None = None):
+              sample_spacing: float | None = None, on_stage=None):
         """Sample ``mesh``, find its inside and tabulate the correction (module docstring); ``h0`` forces the
-        lattice's surface spacing (mm), ``budget`` caps its surface cubes (:mod:`meshshade.volume.resolution`)."""
+        lattice's surface spacing (mm), ``budget`` caps its surface cubes (:mod:`meshshade.volume.resolution`);
+        ``on_stage(name)`` is called as each stage ends (progress)."""
         timings = {}
         t = time.perf_counter()
         res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm, h0=h0, budget=budget)
         surface = SamplingSurface(mesh, SAMPLE_SPACING_OVER_H0 * res.h0 if sample_spacing is None else sample_spacing)
         inside = SurfaceVolume(mesh.vertices, mesh.nondegenerate_faces, surface.samples.vertices,
                                surface.spacing)
-        timings["volume sampling"] = time.perf_counter() - t
+        _lap(timings, "volume sampling", t, on_stage)
         t = time.perf_counter()
         tables = RemainderTables(material, res.spread)
-        timings["near-field tables"] = time.perf_counter() - t
-        return cls(mesh, material, res, surface, inside, tables, timings)
+        _lap(timings, "near-field tables", t, on_stage)
+        vt = cls(mesh, material, res, surface, inside, tables, timings)
+        vt.on_stage = on_stage
+        return vt
+
+    def _buried_vertices(self):
+        """(n,) bool: the mesh's vertices buried in another of its parts (only a mesh of several parts has them),
+        whose exitance is reported as 0 (docs/limitations.md)."""
+        mesh = self.mesh
+        if mesh.defects.n_components < 2:
+            return np.zeros(mesh.n_vertices, dtype=bool)
+        offset = min(BURIED_OFFSET_MM, 0.1 * float(mesh.mean_edge_length))
+        return self.inside.buried(mesh.vertices, mesh.vertex_normals, offset)
+
+    def to_vertices(self, sample_values):
+        """(n, 3) eq. (104) of values at the sampling surface's vertices, 0 at buried vertices."""
+        out = np.array(self.surface.to_vertices(sample_values), dtype=np.float64)
+        out[self.buried] = 0.0
+        return out
 
     def edges_of_light(self, samples):
         """(m, 3) points of the sampling surface where the light changes sharply (an edge of the sampling mesh
@@ -109,6 +139,7 @@ class VolumeTransport:
         if key == self._lattice_key:
             return {}
         timings = {}
+        on_stage = self.on_stage
         t = time.perf_counter()
         reach = self.resolution.refine_radius
         refine = None
@@ -121,14 +152,14 @@ class VolumeTransport:
                 return np.isfinite(d)
         lo, hi = self.mesh.bbox
         lattice = build_lattice(self.inside.depth, lo, hi, self.resolution.grading, refine=refine)
-        timings["volume lattice"] = time.perf_counter() - t
+        _lap(timings, "volume lattice", t, on_stage)
         t = time.perf_counter()
         asm = assemble(lattice)
         op = ChannelOperator(asm, self.coef)
-        timings["volume operator"] = time.perf_counter() - t
+        _lap(timings, "volume operator", t, on_stage)
         t = time.perf_counter()
         mg = Multigrid(lattice, op)
-        timings["volume multigrid"] = time.perf_counter() - t
+        _lap(timings, "volume multigrid", t, on_stage)
         self.lattice, self.assembly, self.operator, self.multigrid = lattice, asm, op, mg
         self._lattice_key = key
         self.stats.update({"volume_cells_per_level": lattice.stats["volume_cells_per_level"],
@@ -141,7 +172,7 @@ class VolumeTransport:
         """(M (n, 3) W/mm^2 at the mesh's vertices, stats with ``timings``) for ``samples``, the lights' entry
         samples on ``self.surface.samples``: eq. (104) of :meth:`sample_exitance`."""
         Ms, stats = self.sample_exitance(samples)
-        return self.surface.to_vertices(Ms), stats
+        return self.to_vertices(Ms), stats
 
     def sample_exitance(self, samples):
         """(M (n_s, 3) W/mm^2 at the sampling surface's vertices, stats with ``timings``): the solution itself,
@@ -152,6 +183,7 @@ class VolumeTransport:
         if len(samples) == 0:
             return np.zeros((surf.n_vertices, 3)), {"timings": {}}
         timings = self.prepare(samples)
+        on_stage = self.on_stage
         t = time.perf_counter()
         w = refract_in(samples.directions, samples.normals, float(mat.eta))
         cos_t = np.clip(-np.einsum("ij,ij->i", w, samples.normals), 0.0, 1.0)
@@ -163,17 +195,17 @@ class VolumeTransport:
         loads, dropped = lattice_loads(self.lattice, samples.positions, w, samples.normals, samples.power, depths,
                                        strengths, self.resolution.spread)
         b = self.assembly.to_unknowns(loads)
-        timings["volume sources"] = time.perf_counter() - t
+        _lap(timings, "volume sources", t, on_stage)
         t = time.perf_counter()
         with kernel_interrupts():
             x, its = solve_channels(self.operator, self.multigrid, b)
         phi = self.assembly.to_nodes(x)
         M, outside = self._read(phi, surf.vertices, surf.vertex_normals)
-        timings["volume solve"] = time.perf_counter() - t
+        _lap(timings, "volume solve", t, on_stage)
         t = time.perf_counter()
         Mf, pairs = remainder_exitance(self.tables, *self._remainder_inputs(samples, cos_t))
         M += Mf
-        timings["near field"] = time.perf_counter() - t
+        _lap(timings, "near field", t, on_stage)
         if not np.all(np.isfinite(M)):
             raise MeshshadeError("the volume transport produced a non-finite exitance")
         peak = np.maximum(M.max(axis=0), 1e-300)
@@ -204,12 +236,24 @@ class VolumeTransport:
         return M
 
     def _read(self, phi, points, normals):
-        """(M (p, 3) = phi / (2A) at ``points``, how many lay outside the lattice). A point of a part thinner than
-        the lattice resolves (no cube of it kept) is read a little inside along its normal, else at the nearest
-        node that holds an unknown."""
-        cells, bary, nodes = self.lattice.locate(points)
-        miss = np.flatnonzero(cells < 0)
+        """(M (p, 3) = phi / (2A) at ``points``, how many lay outside the lattice). The solution is read on its own
+        domain: a point outside it (a sharp corner or edge finer than the lattice, where the cut surface passes
+        inside the mesh's) is moved in along its normal to the lattice's surface (the zero of its interpolated
+        depth), not read from the P1 functions' extension outside, which a sliver's corner can make large. A
+        point of a part thinner than the lattice resolves (no cube of it kept) is read a little inside along its
+        normal, else at the nearest node that holds an unknown."""
+        points = np.array(points, dtype=np.float64)
         h = self.resolution.grading.h0
+        cells, bary, nodes = self.lattice.locate(points)
+        for _ in range(4):
+            ok = np.flatnonzero(cells >= 0)
+            d = np.einsum("pk,pk->p", bary[ok], self.lattice.depth[nodes[ok]])
+            out = ok[d < 0.0]
+            if out.size == 0:
+                break
+            points[out] += (d[d < 0.0] - 0.05 * h)[:, None] * normals[out]
+            cells[out], bary[out], nodes[out] = self.lattice.locate(points[out])
+        miss = np.flatnonzero(cells < 0)
         for step in (0.5, 1.0, 2.0, 3.0, 4.0):
             if miss.size == 0:
                 break

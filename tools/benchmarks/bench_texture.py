@@ -6,8 +6,9 @@ nothing compiled or cached is shared beyond numba's on-disk cache, warmed first)
 light, with their wall times, the ratio (same run, same machine state), the texture's stage times and peak
 resident memory (``ru_maxrss``). Scenes: sphere20 (icosphere of radius 20 mm, level 5, 10k vertices, the
 procedural longitude-latitude map), spot50 (spot.obj at 50 mm from ../shared/meshes, an automatic atlas; skipped
-with a note without it), ball642 (the 642-vertex ball of radius 20 mm, refined for the texture). skin1, the sun
-along (0.3, -0.4, -0.866).
+with a note without it), ball642 (the 642-vertex ball of radius 20 mm), boot300 (boot.obj at 300 mm, 20k vertices,
+an automatic atlas: issue 40's texture target). skin1, the sun along (0.3, -0.4, -0.866). The volume model (the
+default) bakes the mesh as it is and reads the texels on its own sampling surface; the surface models refine it.
 
     python tools/benchmarks/bench_texture.py [--scenes sphere20,spot50,ball642] [--sizes 512,1024,2048]
 """
@@ -40,19 +41,21 @@ def scene(name):
     if name in ("sphere20", "ball642"):
         V, F = icosphere(20.0, 5 if name == "sphere20" else 3)
         return Mesh.from_arrays(V, F, source=name), spherical_uv(V, F)
-    if name == "spot50":
-        if not (SHARED / "spot.obj").exists():
+    files = {"spot50": ("spot.obj", 50.0), "boot300": ("boot.obj", 300.0)}
+    if name in files:
+        f, size = files[name]
+        if not (SHARED / f).exists():
             return None
-        V, F = read_mesh_arrays(SHARED / "spot.obj")
+        V, F = read_mesh_arrays(SHARED / f)
         V = V - 0.5 * (V.min(axis=0) + V.max(axis=0))
-        return Mesh.from_arrays(V * (50.0 / float(np.ptp(V, axis=0).max())), F, source="spot.obj"), None
+        return Mesh.from_arrays(V * (size / float(np.ptp(V, axis=0).max())), F, source=f), None
     raise SystemExit(f"unknown scene {name!r}")
 
 
 def one(name: str, size: int) -> dict:
     got = scene(name)
     if got is None:
-        return {"scene": name, "skipped": f"{SHARED / 'spot.obj'} not found"}
+        return {"scene": name, "skipped": f"{SHARED} not found"}
     mesh, uv = got
     material, light = Material.preset("skin1"), [DirectionalLight(SUN, 1.0)]
     t0 = time.perf_counter()

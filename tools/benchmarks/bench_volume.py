@@ -1,22 +1,28 @@
-"""The default bake (the volume transport) against Monte Carlo: accuracy, wall time, and how its cost grows (issue 29).
+"""The default bake (the volume transport) against Monte Carlo: accuracy, wall time, and how its cost grows (issues
+29, 40).
 
 Rows (JSON, one object per line on stdout):
 
-* ``accuracy`` per scene: the default ``bake`` from scratch (asset cache off: the tetrahedral mesh is built) and
-  again with the tetrahedral mesh cached, ``mc --photons 2e6`` (seed 202) and a reference Monte Carlo of
+* ``accuracy`` per scene: the default ``bake`` from scratch (a fresh volume transport) and again reusing it (the
+  same process: what a second light set costs), ``mc --photons 2e6`` (seed 202) and a reference Monte Carlo of
   ``--reference-photons`` (seed 101, kept in the asset cache ``bench-references`` between runs). Errors: mean
   |M / ref - 1| per channel over (a) *lit* vertices (an unshadowed entry sample of positive power) and (b)
   *unlit* vertices whose reference is above 1e-2 of the channel's peak (light that crossed the body or went round
   it), for the bake and the 2e6-photon Monte Carlo alike, with wall times and their ratios (same run).
-* ``scaling``: the head (200 mm, skin1, the sun) loop-subdivided ``--levels`` times: the default bake's wall time
-  from scratch and its peak resident memory (each size in a fresh process), and the fitted cost exponent.
+* ``cli`` per scene (``--cli``): ``meshshade bake`` and ``meshshade mc --photons 2e6`` as a user runs them, each a
+  fresh process (start, imports and compiled-code loading included; numba's cache warmed by a first run that is
+  not counted), the fastest of ``--repeats``, and their ratio.
+* ``scaling``: the head (200 mm, skin1, the sun) loop-subdivided 0 .. ``--levels`` times: the default bake's wall
+  time from scratch, its stages and its peak resident memory (each size in a fresh process, with
+  NUMBA_NUM_THREADS set to each of ``--threads``), and the fitted cost exponent per thread count.
 
 Scenes (the sun along (0.3, -0.4, -0.866) unless said): sphere20 (an icosphere of radius 20 mm, level 5, 10k
 vertices, skin1, the sun from above), spot50 (spot.obj at 50 mm, skin1), head200 (the head scan at 200 mm, skin1),
 blub80 (blub.obj at
 80 mm, marble). The meshes other than the sphere come from ../shared/meshes (skipped with a note without it).
 
-    python tools/benchmarks/bench_volume.py [--scenes sphere20,spot50] [--reference-photons 2e7] [--scaling --levels 2]
+    python tools/benchmarks/bench_volume.py [--scenes sphere20,spot50] [--reference-photons 2e7] [--cli]
+                                            [--scaling --levels 3 --threads 1,2]
 """
 from __future__ import annotations
 
@@ -102,27 +108,57 @@ def accuracy(name, args):
     small = Mesh.from_arrays(*icosphere(5.0, 1))                    # compile both outside the timings
     bake(small, mat, [light])
     simulate(small, mat, [light], photons=4096, seed=1, beam_distances=False)
-    with tempfile.TemporaryDirectory() as tmp:
-        os.environ["MESHSHADE_ASSET_CACHE"] = tmp
-        t = time.perf_counter()
-        scratch = bake(mesh, mat, [light], volume_cache=AssetCache("volume"))
-        t_scratch = time.perf_counter() - t
-        t = time.perf_counter()
-        cached = bake(mesh, mat, [light], volume_cache=AssetCache("volume"))
-        t_cached = time.perf_counter() - t
-        del os.environ["MESHSHADE_ASSET_CACHE"]
+    t = time.perf_counter()
+    scratch = bake(mesh, mat, [light])
+    t_scratch = time.perf_counter() - t
+    t = time.perf_counter()
+    cached = bake(mesh, mat, [light], volume=scratch.volume)
+    t_cached = time.perf_counter() - t
     ref, ref_s = reference(name, mesh, mat, light, args.reference_photons)
     mc = simulate(mesh, mat, [light], photons=int(args.mc_photons), seed=202, beam_distances=False)
     return {"row": "accuracy", "scene": name, "vertices": int(mesh.n_vertices), "material": mat.name,
             "bake": {"seconds_from_scratch": round(t_scratch, 2), "seconds_cached": round(t_cached, 2),
                      "timings": {k: round(v, 3) for k, v in scratch.timings.items()},
-                     "tetrahedra": scratch.stats.get("volume_tetrahedra"), "model": scratch.model,
+                     "unknowns": scratch.stats.get("volume_unknowns"), "model": scratch.model,
                      **errors(scratch.radiance, ref, lit)},
             "mc": {"photons": int(args.mc_photons), "seconds": round(mc.seconds, 2), **errors(mc.radiance, ref, lit)},
             "mc_over_bake_time": {"from_scratch": round(mc.seconds / t_scratch, 2),
                                   "cached": round(mc.seconds / t_cached, 2)},
             "reference": {"photons": int(args.reference_photons), "seconds": round(ref_s, 1)},
-            "tetrahedra_identical_when_cached": bool(np.array_equal(scratch.radiance, cached.radiance))}
+            "identical_when_reused": bool(np.array_equal(scratch.radiance, cached.radiance))}
+
+
+def cli(name, args):
+    """Wall seconds of ``meshshade bake`` and ``meshshade mc`` as fresh processes on the scene's mesh."""
+    from meshshade.io import write_ply
+
+    got = scene(name)
+    if got is None:
+        return {"row": "cli", "scene": name, "skipped": f"{SHARED} not found"}
+    mesh, mat, light = got
+    d = light.direction
+    light_arg = f"directional:{d[0]:.6g},{d[1]:.6g},{d[2]:.6g}"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{name}.ply"
+        write_ply(path, mesh.vertices, mesh.faces)
+        common = [str(path), "--material", mat.name, "--light", light_arg, "-q"]
+        cmds = {"bake": ["bake", *common, "--out", str(Path(tmp) / "b.ply")],
+                "mc": ["mc", *common, "--photons", str(int(args.mc_photons)), "--seed", "202",
+                       "--out", str(Path(tmp) / "m.ply")]}
+        env = {**os.environ, "MESHSHADE_ASSET_CACHE": "off"}
+        exe = [sys.executable, "-m", "meshshade.cli"]                # what the meshshade script runs
+        best = {}
+        for key, argv in cmds.items():
+            subprocess.run([*exe, *argv], check=True, env=env, capture_output=True)
+            times = []
+            for _ in range(args.repeats):
+                t = time.perf_counter()
+                subprocess.run([*exe, *argv], check=True, env=env, capture_output=True)
+                times.append(time.perf_counter() - t)
+            best[key] = round(min(times), 2)
+    return {"row": "cli", "scene": name, "vertices": int(mesh.n_vertices), "bake_s": best["bake"], "mc_s": best["mc"],
+            "mc_photons": int(args.mc_photons), "mc_over_bake": round(best["mc"] / best["bake"], 2),
+            "repeats": args.repeats}
 
 
 def _one_size(level):
@@ -137,32 +173,42 @@ def _one_size(level):
     mesh = Mesh.from_arrays(V, F)
     bake(Mesh.from_arrays(*icosphere(5.0, 1)), mat, [light])
     os.environ["MESHSHADE_ASSET_CACHE"] = "off"
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     t = time.perf_counter()
     res = bake(mesh, mat, [light])
     sec = time.perf_counter() - t
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # MiB on Linux
+    keys = ("volume_resolution_mm", "volume_resolution_limited_by", "volume_samples", "volume_cells_per_level",
+            "volume_unknowns", "volume_solve_iterations", "near_field_pairs")
     print(json.dumps({"vertices": int(mesh.n_vertices), "seconds": round(sec, 2), "peak_rss_mib": round(rss),
-                      "tetrahedra": res.stats.get("volume_tetrahedra"),
+                      "peak_rss_before_mib": round(rss0), "model": res.model,
+                      **{k: res.stats.get(k) for k in keys},
                       "timings": {k: round(v, 2) for k, v in res.timings.items()}}))
 
 
 def scaling(args):
     if scene("head200") is None:
         return {"row": "scaling", "skipped": f"{SHARED} not found"}
-    sizes = []
-    for level in range(args.levels + 1):
-        out = subprocess.run([sys.executable, __file__, "--one-size", str(level)], capture_output=True, text=True)
-        if out.returncode:
-            lines = [x for x in out.stderr.strip().splitlines() if "Error" in x or "error" in x]
-            sizes.append({"level": level, "failed": f"exit {out.returncode}: "
-                          + (lines[-1] if lines else "no error message (killed?)")})
-            continue
-        sizes.append({"level": level, **json.loads(out.stdout.strip().splitlines()[-1])})
-    ok = [s for s in sizes if "seconds" in s]
-    exponent = (float(np.polyfit(np.log([s["vertices"] for s in ok]), np.log([s["seconds"] for s in ok]), 1)[0])
-                if len(ok) > 1 else None)
-    return {"row": "scaling", "scene": "head200 loop-subdivided", "sizes": sizes,
-            "cost_exponent": None if exponent is None else round(exponent, 3)}
+    sizes, exponents = [], {}
+    for threads in [int(t) for t in args.threads.split(",")]:
+        env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+        for level in range(args.levels + 1):
+            out = subprocess.run([sys.executable, __file__, "--one-size", str(level)], capture_output=True,
+                                 text=True, env=env)
+            if out.returncode:
+                lines = [x for x in out.stderr.strip().splitlines() if "Error" in x or "error" in x]
+                sizes.append({"level": level, "threads": threads, "failed": f"exit {out.returncode}: "
+                              + (lines[-1] if lines else "no error message (killed?)")})
+            else:
+                sizes.append({"level": level, "threads": threads,
+                              **json.loads(out.stdout.strip().splitlines()[-1])})
+            print(json.dumps({"row": "scaling-size", **sizes[-1]}), flush=True)
+        ok = [s for s in sizes if "seconds" in s and s["threads"] == threads and s["vertices"] >= 8000]
+        exponents[threads] = (round(float(np.polyfit(np.log([s["vertices"] for s in ok]),
+                                                     np.log([s["seconds"] for s in ok]), 1)[0]), 3)
+                              if len(ok) > 1 else None)
+    return {"row": "scaling", "scene": "head200 loop-subdivided", "sizes": sizes, "cost_exponent": exponents,
+            "load_average": os.getloadavg()}
 
 
 def main():
@@ -172,12 +218,19 @@ def main():
     ap.add_argument("--mc-photons", type=float, default=2e6)
     ap.add_argument("--scaling", action="store_true")
     ap.add_argument("--levels", type=int, default=2)
+    ap.add_argument("--threads", default="2", help="NUMBA_NUM_THREADS of the scaling runs, comma-separated")
+    ap.add_argument("--cli", action="store_true", help="time meshshade bake and mc as fresh processes")
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--no-accuracy", action="store_true")
     ap.add_argument("--one-size", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one_size is not None:
         return _one_size(args.one_size)
     for name in [s for s in args.scenes.split(",") if s]:
-        print(json.dumps(accuracy(name, args)), flush=True)
+        if not args.no_accuracy:
+            print(json.dumps(accuracy(name, args)), flush=True)
+        if args.cli:
+            print(json.dumps(cli(name, args)), flush=True)
     if args.scaling:
         print(json.dumps(scaling(args)), flush=True)
 
