@@ -33,7 +33,7 @@ __all__ = ["ChannelOperator", "Multigrid", "solve_channels", "SOLVE_RTOL", "COAR
 #: relative residual of the solves (the exitance is read to about 1e-5 of its peak)
 SOLVE_RTOL = 1e-6
 #: unknowns at which the hierarchy stops and the coarse problem is factorised
-COARSEST = 3000
+COARSEST = 800
 #: Chebyshev smoothing: degree, and the lower end of the smoothed spectrum as a fraction of its upper end
 CHEB_DEGREE, CHEB_RANGE = 2, 1.0 / 25.0
 

@@ -34,15 +34,17 @@ GRADE_KAPPA_H, DECAY_EFOLDS = 1.5, 2.0
 TRUNCATION_EFOLDS = 6.0
 #: the finest spacing is at most the object's smallest extent over this
 MIN_CELLS_ACROSS = 12.0
-#: level-0 cubes the default resolution allows (about 1 GB and a few seconds on 2 cores)
-DEFAULT_BUDGET = 400_000
+#: surface cubes the default resolution allows: the head scan at 200 mm in skin1 gets h0 = 1.19 mm instead of the
+#: material's 0.84 (lit error 6.1 / 6.8 / 8.9 % against Monte Carlo, 5.8 / 6.2 / 8.0 % at 1.0 mm with 400k, for 2/3
+#: of the time and 1.5 GB instead of 2.0 at 141k vertices; docs/benchmarks.md)
+DEFAULT_BUDGET = 250_000
 #: the sources' sideways spread, in units of h0
 SPREAD_OVER_H0 = 1.0
 #: levels of the lattice (2^LEVELS - 1 h0 at the coarsest)
 LEVELS = 7
 #: around an edge of light (and a beam's entry) the lattice is twice as fine, over this many decay lengths of the
-#: fastest-decaying channel
-REFINE_EFOLDS = 3.0
+#: fastest-decaying channel (3 on the Monte Carlo scenes: the same errors within 0.2 %, a third more cubes)
+REFINE_EFOLDS = 2.0
 
 
 def diffusion_constants(material, c: int) -> tuple[float, float, float]:
