@@ -45,6 +45,8 @@ __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0"]
 #: needs the light sampled, not the kernel resolved: 2 h0 is as accurate as h0 on the Monte Carlo scenes, with a
 #: quarter of the samples; docs/benchmarks.md)
 SAMPLE_SPACING_OVER_H0 = 2.0
+#: a surface point farther than this many lattice spacings outside the lattice's own surface is read on it
+OUTSIDE_READ = 0.1
 #: a vertex is buried when the winding number this far outside it (mm; at most a tenth of the mean edge) is > 1/2
 BURIED_OFFSET_MM = 0.05
 
@@ -236,10 +238,11 @@ class VolumeTransport:
         return M
 
     def _read(self, phi, points, normals):
-        """(M (p, 3) = phi / (2A) at ``points``, how many lay outside the lattice). The solution is read on its own
-        domain: a point outside it (a sharp corner or edge finer than the lattice, where the cut surface passes
-        inside the mesh's) is moved in along its normal to the lattice's surface (the zero of its interpolated
-        depth), not read from the P1 functions' extension outside, which a sliver's corner can make large. A
+        """(M (p, 3) = phi / (2A) at ``points``, how many lay outside the lattice). A point farther outside the
+        lattice's surface (the zero of its interpolated depth) than OUTSIDE_READ h0 (a sharp corner or edge finer
+        than the lattice, where the cut surface passes well inside the mesh's) is moved in along its normal to that
+        surface, not read from the P1 functions' extension outside, which a sliver's corner can make large; nearer
+        ones (a smooth surface's chords: h^2 / 8R) read the extension, the Robin solution's own continuation. A
         point of a part thinner than the lattice resolves (no cube of it kept) is read a little inside along its
         normal, else at the nearest node that holds an unknown."""
         points = np.array(points, dtype=np.float64)
@@ -248,10 +251,11 @@ class VolumeTransport:
         for _ in range(4):
             ok = np.flatnonzero(cells >= 0)
             d = np.einsum("pk,pk->p", bary[ok], self.lattice.depth[nodes[ok]])
-            out = ok[d < 0.0]
+            far = d < -OUTSIDE_READ * h
+            out = ok[far]
             if out.size == 0:
                 break
-            points[out] += (d[d < 0.0] - 0.05 * h)[:, None] * normals[out]
+            points[out] += d[far][:, None] * normals[out]
             cells[out], bary[out], nodes[out] = self.lattice.locate(points[out])
         miss = np.flatnonzero(cells < 0)
         for step in (0.5, 1.0, 2.0, 3.0, 4.0):
