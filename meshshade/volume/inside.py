@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError
+from meshshade.geometry.topology import vertex_components
 
 __all__ = ["SurfaceVolume", "WINDING_FAST", "WINDING_EXACT", "WINDING_MARGIN"]
 
@@ -64,13 +65,29 @@ class SurfaceVolume:
         return w
 
     def buried(self, vertices, normals, offset: float) -> np.ndarray:
-        """(n,) bool: vertices whose outside is inside the volume (w > 1/2 at ``offset`` mm along the outward
-        normal): a part's vertices inside another part (eyes in a head, overlapping armour) are not on the exposed
-        surface."""
+        """(n,) bool: vertices of the mesh inside *another* of its parts (eyes in a head, overlapping armour),
+        which are not on the exposed surface: ``offset`` mm outside the vertex along its normal, both the whole
+        mesh's winding number and the other parts' (the whole less the vertex's own part's) are above 1/2. The
+        second keeps a part folded into itself (common in scans) from burying anything, so a defect elsewhere
+        cannot change it; the first keeps a cavity's wall (a closed part nested inside another, oriented inward)
+        exposed to its cavity. Parts are the connected components of ``vertices`` (the mesh's, in order)."""
         V = np.asarray(vertices, dtype=np.float64)
-        if V.shape[0] == 0:
-            return np.zeros(0, dtype=bool)
-        return self.winding(V + float(offset) * np.asarray(normals, dtype=np.float64)) > 0.5
+        out = np.zeros(V.shape[0], dtype=bool)
+        n_parts, label = vertex_components(V.shape[0], self.faces)
+        if n_parts < 2:
+            return out
+        q = V + float(offset) * np.asarray(normals, dtype=np.float64)
+        used = np.flatnonzero(label >= 0)
+        w = self.winding(q[used])
+        face_part = label[self.faces[:, 0]]
+        own = np.zeros(used.size)
+        for p in range(n_parts):
+            mine = np.flatnonzero(label[used] == p)
+            bvh = igl.FastWindingNumberBVH()
+            bvh.init(self.vertices, np.ascontiguousarray(self.faces[face_part == p]), 2)
+            own[mine] = bvh.winding_number(np.ascontiguousarray(q[used[mine]]), WINDING_EXACT)
+        out[used] = (w > 0.5) & ((w - own) > 0.5)
+        return out
 
     def depth(self, points, bound: float, sign=None, exact: bool | None = True) -> np.ndarray:
         """(p,) signed distance (mm) from ``points`` (p, 3) to the surface, positive where w > 1/2, its magnitude
