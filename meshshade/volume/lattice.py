@@ -127,6 +127,24 @@ class Lattice:
         return cell, bary, nodes
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def kuhn_weights(x, y, z):
+    """(corner v1, corner v2, w0, w1, w2, w3): the Kuhn tetrahedron of the point at local cube coordinates
+    (x, y, z) (clamped to [0, 1]) and its P1 weights on the cube's corners 0, v1, v2 and 7 (corner i + 2j + 4k):
+    the path from corner 0 to 7 through the coordinates in decreasing order."""
+    u = (min(1.0, max(0.0, x)), min(1.0, max(0.0, y)), min(1.0, max(0.0, z)))
+    a, b, e = 0, 1, 2
+    if u[a] < u[b]:
+        a, b = b, a
+    if u[b] < u[e]:
+        b, e = e, b
+    if u[a] < u[b]:
+        a, b = b, a
+    v1 = 1 << a
+    v2 = v1 | (1 << b)
+    return v1, v2, 1.0 - u[a], u[a] - u[b], u[b] - u[e], u[e]
+
+
 @numba.njit(cache=True, nogil=True)
 def locate_points(P, h0, index, lo, level, ijk, cell_nodes, cell, bary, nodes):
     """For each point: the cube holding it (dense index of level-0 cells), the Kuhn tetrahedron by the order of
@@ -156,24 +174,8 @@ def locate_points(P, h0, index, lo, level, ijk, cell_nodes, cell, bary, nodes):
                 nodes[p, q] = 0
             continue
         h = h0 * (2.0 ** level[c])
-        u = np.empty(3)
-        for d in range(3):
-            v = P[p, d] / h - ijk[c, d]
-            u[d] = min(1.0, max(0.0, v))
-        # order of the coordinates, largest first
-        a, b, e = 0, 1, 2
-        if u[a] < u[b]:
-            a, b = b, a
-        if u[b] < u[e]:
-            b, e = e, b
-        if u[a] < u[b]:
-            a, b = b, a
-        v1 = 1 << a
-        v2 = v1 | (1 << b)
-        bary[p, 0] = 1.0 - u[a]
-        bary[p, 1] = u[a] - u[b]
-        bary[p, 2] = u[b] - u[e]
-        bary[p, 3] = u[e]
+        v1, v2, bary[p, 0], bary[p, 1], bary[p, 2], bary[p, 3] = kuhn_weights(
+            P[p, 0] / h - ijk[c, 0], P[p, 1] / h - ijk[c, 1], P[p, 2] / h - ijk[c, 2])
         nodes[p, 0] = cell_nodes[c, 0]
         nodes[p, 1] = cell_nodes[c, v1]
         nodes[p, 2] = cell_nodes[c, v2]

@@ -29,6 +29,7 @@ from numpy.polynomial.hermite_e import hermegauss
 from numpy.polynomial.laguerre import laggauss
 
 from meshshade.errors import MeshshadeError
+from meshshade.volume.lattice import kuhn_weights
 
 __all__ = ["SOURCE_POINTS", "line_rule", "ewald_weight", "lattice_loads", "SIDEWAYS_POINTS"]
 
@@ -57,7 +58,6 @@ def _loads(pos, refracted, normal, power, t, w, gx, gw, spread, h0, index, lo, l
     plane normal to ``normal``; ``dropped[c]`` collects power that fell outside the lattice."""
     k_ch, n_t = t.shape
     n_g = gx.size
-    u = np.empty(3)
     for p in range(p_lo, p_hi):
         nx, ny, nz = normal[p, 0], normal[p, 1], normal[p, 2]
         # a tangent basis of the normal
@@ -87,22 +87,12 @@ def _loads(pos, refracted, normal, power, t, w, gx, gw, spread, h0, index, lo, l
                             dropped[c] += q
                             continue
                         h = h0 * (2.0 ** level[cell])
-                        u[0] = min(1.0, max(0.0, px / h - ijk[cell, 0]))
-                        u[1] = min(1.0, max(0.0, py / h - ijk[cell, 1]))
-                        u[2] = min(1.0, max(0.0, pz / h - ijk[cell, 2]))
-                        i0, i1, i2 = 0, 1, 2
-                        if u[i0] < u[i1]:
-                            i0, i1 = i1, i0
-                        if u[i1] < u[i2]:
-                            i1, i2 = i2, i1
-                        if u[i0] < u[i1]:
-                            i0, i1 = i1, i0
-                        v1 = 1 << i0
-                        v2 = v1 | (1 << i1)
-                        out[cell_nodes[cell, 0], c] += q * (1.0 - u[i0])
-                        out[cell_nodes[cell, v1], c] += q * (u[i0] - u[i1])
-                        out[cell_nodes[cell, v2], c] += q * (u[i1] - u[i2])
-                        out[cell_nodes[cell, 7], c] += q * u[i2]
+                        v1, v2, w0, w1, w2, w3 = kuhn_weights(px / h - ijk[cell, 0], py / h - ijk[cell, 1],
+                                                              pz / h - ijk[cell, 2])
+                        out[cell_nodes[cell, 0], c] += q * w0
+                        out[cell_nodes[cell, v1], c] += q * w1
+                        out[cell_nodes[cell, v2], c] += q * w2
+                        out[cell_nodes[cell, 7], c] += q * w3
 
 
 @numba.njit(cache=True, inline="always")

@@ -37,14 +37,8 @@ SUN = [DirectionalLight((0.0, 0.0, -1.0), 1.0)]
 
 @pytest.fixture(scope="module")
 def ball_reference():
-    """theta -> exact exitance of the sun-lit ball (volume series + near-field continuum), on a 1/2 degree grid."""
-    theta = np.linspace(0.0, math.pi, 361)
-    ref = sun_ball.ball_reference_exitance(theta)
-
-    def at(points):
-        th = np.arccos(np.clip(points[:, 2] / np.linalg.norm(points, axis=1), -1.0, 1.0))
-        return np.interp(th, theta, ref)
-    return at
+    """points -> exact exitance of the sun-lit ball (volume series + near-field continuum)."""
+    return sun_ball.exact_at()
 
 
 def texel_points(uv, size):

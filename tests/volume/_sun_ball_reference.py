@@ -52,6 +52,18 @@ def refracted(d, n, eta):
     return d[None, :] / eta + (ci / eta - ct)[:, None] * n
 
 
+def exact_at():
+    """points (p, 3) on the ball -> the reference exitance (channel 0) at their polar angles, from
+    :func:`ball_reference_exitance` on a 1/2 degree grid (linear between)."""
+    theta = np.linspace(0.0, math.pi, 361)
+    values = ball_reference_exitance(theta)
+
+    def at(points):
+        th = np.arccos(np.clip(points[:, 2] / np.linalg.norm(points, axis=1), -1.0, 1.0))
+        return np.interp(th, theta, values)
+    return at
+
+
 def ball_reference_exitance(theta):
     """The whole reference at polar angles ``theta`` (channel 0; every channel is the same medium)."""
     D, _, A = deon_constants(float(MATERIAL.albedo_prime[0]), float(MATERIAL.eta))

@@ -7,7 +7,6 @@ Ewald split, singularity-subtracted remainder, sampling surface), on icospheres 
 coarse one has edges of 3.3 mm, longer than the model samples (its sampling surface splits them).
 """
 import importlib.util
-import math
 from pathlib import Path
 
 import numpy as np
@@ -56,13 +55,7 @@ def test_refraction_of_the_reference_follows_snell():
 
 @pytest.fixture(scope="module")
 def exact():
-    theta = np.linspace(0.0, math.pi, 361)
-    values = ref.ball_reference_exitance(theta)
-
-    def at(points):
-        th = np.arccos(np.clip(points[:, 2] / np.linalg.norm(points, axis=1), -1.0, 1.0))
-        return np.interp(th, theta, values)
-    return at
+    return ref.exact_at()
 
 
 @pytest.mark.parametrize("level, bound, shadow_bound", [
