@@ -406,27 +406,30 @@ def _to_csr(n, rows, cols, s_val, b_val, s_diag, b_diag):
     indices = np.empty(count[n], np.int64)
     sd = np.empty(count[n])
     bd = np.empty(count[n])
+    mark = np.full(n, -1, np.int64)           # the row that last met column c, and where it put it
+    slot = np.empty(n, np.int64)
     k = 0
     for i in range(n):
-        lo, hi = count[i], count[i + 1]
-        for t in range(lo + 1, hi):           # insertion sort by column (rows hold a few dozen entries)
-            x, xs, xb = other[t], sv[t], bv[t]
-            u = t - 1
-            while u >= lo and other[u] > x:
-                other[u + 1], sv[u + 1], bv[u + 1] = other[u], sv[u], bv[u]
-                u -= 1
-            other[u + 1], sv[u + 1], bv[u + 1] = x, xs, xb
-        last = -1
-        for t in range(lo, hi):
-            if other[t] == last:
-                sd[k - 1] += sv[t]
-                bd[k - 1] += bv[t]
-            else:
-                indices[k] = other[t]
+        start = k
+        for t in range(count[i], count[i + 1]):   # duplicates summed as they come (a row has ~27 columns)
+            c = other[t]
+            if mark[c] != i:
+                mark[c] = i
+                slot[c] = k
+                indices[k] = c
                 sd[k] = sv[t]
                 bd[k] = bv[t]
-                last = other[t]
                 k += 1
+            else:
+                sd[slot[c]] += sv[t]
+                bd[slot[c]] += bv[t]
+        for t in range(start + 1, k):             # insertion sort of the row's distinct columns
+            x, xs, xb = indices[t], sd[t], bd[t]
+            u = t - 1
+            while u >= start and indices[u] > x:
+                indices[u + 1], sd[u + 1], bd[u + 1] = indices[u], sd[u], bd[u]
+                u -= 1
+            indices[u + 1], sd[u + 1], bd[u + 1] = x, xs, xb
         indptr[i + 1] = k
     return indptr, indices[:k], sd[:k], bd[:k]
 

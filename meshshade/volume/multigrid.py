@@ -30,8 +30,9 @@ from meshshade.volume.lattice import coarser_lattice
 
 __all__ = ["ChannelOperator", "Multigrid", "solve_channels", "SOLVE_RTOL", "COARSEST"]
 
-#: relative residual of the solves (the exitance is read to about 1e-5 of its peak)
-SOLVE_RTOL = 1e-6
+#: relative residual of the solves: against 1e-6, the 141k-vertex head's exitance moves by at most 1.1e-5 of its
+#: peak (0.18 % at its dimmest lit vertices), for 3 fewer iterations of 19 in red (a quarter of the solve)
+SOLVE_RTOL = 1e-5
 #: unknowns at which the hierarchy stops and the coarse problem is factorised
 COARSEST = 800
 #: Chebyshev smoothing: degree, and the lower end of the smoothed spectrum as a fraction of its upper end

@@ -34,10 +34,11 @@ GRADE_KAPPA_H, DECAY_EFOLDS = 1.5, 2.0
 TRUNCATION_EFOLDS = 6.0
 #: the finest spacing is at most the object's smallest extent over this
 MIN_CELLS_ACROSS = 12.0
-#: surface cubes the default resolution allows: the head scan at 200 mm in skin1 gets h0 = 1.19 mm instead of the
-#: material's 0.84 (lit error 6.1 / 6.8 / 8.9 % against Monte Carlo, 5.8 / 6.2 / 8.0 % at 1.0 mm with 400k, for 2/3
-#: of the time and 1.5 GB instead of 2.0 at 141k vertices; docs/benchmarks.md)
-DEFAULT_BUDGET = 250_000
+#: surface cubes the default resolution allows: the head scan at 200 mm in skin1 gets h0 = 1.41 mm instead of the
+#: material's 0.84 (lit error against a 2e7-photon Monte Carlo 6.4 / 7.7 / 10.3 %, still below the 2e6-photon run's
+#: 9.0 / 10.2 / 12.4 %; 6.0 / 6.9 / 9.0 % at 1.19 mm with 250k cubes, 5.8 / 6.2 / 8.0 % at 1.0 mm with 400k), so that
+#: the head at 141k vertices bakes in about 8 s and 1.3 GB on 2 cores (10-11.6 s and 1.7 GB at 250k; docs/benchmarks.md)
+DEFAULT_BUDGET = 200_000
 #: the sources' sideways spread, in units of h0
 SPREAD_OVER_H0 = 1.0
 #: levels of the lattice (2^LEVELS - 1 h0 at the coarsest)
