@@ -49,7 +49,7 @@ def run_bake(args) -> int:
     mesh, material = mesh_and_material(args)
     options = dict(model=args.model, cutoff_tol=args.cutoff_tol, curvature_radius_mm=args.curvature_radius,
                    progress=not args.quiet, geodesic=args.geodesic, far_field=args.far_field,
-                   transport=args.transport, source_model=args.source_model, volume_cache=AssetCache("volume"))
+                   transport=args.transport, source_model=args.source_model)
     texture = None
     if args.texture:
         uv = read_uv_map(args.mesh, mesh)

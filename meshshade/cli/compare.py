@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 
 from meshshade.cli.options import image_scene_from_args
-from meshshade.asset_cache import AssetCache
 from meshshade.io import output_dir
 from meshshade.output.compare import check_floor, check_models, run_comparison, save_comparison
 from meshshade.output.render import check_image_size
@@ -29,8 +28,7 @@ def run_compare(args) -> int:
                          height=args.height, spp=args.spp, per_pixel=args.per_pixel, cutoff_tol=args.cutoff_tol,
                          floor=args.floor, mc_photons=args.photons, geodesic=args.geodesic,
                          far_field=args.far_field, transport=args.transport,
-                         progress=False if args.quiet else "compare", source_model=source_model,
-                         volume_cache=AssetCache("volume"))
+                         progress=False if args.quiet else "compare", source_model=source_model)
     for p in save_comparison(cmp, out, models=cmp["labels"], metadata=scene.metadata, operator=args.tonemap,
                              bias=args.bias, background=scene.background):
         if not args.quiet:

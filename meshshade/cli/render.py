@@ -16,7 +16,6 @@ from pathlib import Path
 
 from meshshade.cli.options import background_from_args, image_scene_from_args, material_given
 from meshshade.errors import MaterialError, MeshshadeError, MeshValidationError, OutputError
-from meshshade.asset_cache import AssetCache
 from meshshade.io import check_output_path, read_baked_ply, write_exr, write_png
 from meshshade.transport.models import DEFAULT_MODEL
 from meshshade.kernels.optics import check_eta
@@ -60,7 +59,7 @@ def run_render(args) -> int:
     mesh, material = scene.mesh, scene.material
     res = bake(mesh, material, scene.lights, model=args.model, cutoff_tol=args.cutoff_tol, geodesic=args.geodesic,
                far_field=args.far_field, transport=args.transport, progress=False if args.quiet else "render",
-               source_model=args.source_model, volume_cache=AssetCache("volume"))
+               source_model=args.source_model)
     gather = PixelGather(mesh, res) if args.per_pixel else None
     rgb, alpha = render_radiance(mesh, res.radiance, scene.camera, args.width, args.height, args.spp,
                                  eta=material.eta, exitance_at=gather)

@@ -84,18 +84,24 @@ def fresnel_moments(eta: float) -> tuple[float, float]:
 
 
 def dipole_variant(albedo_prime: float, eta: float, variant: str = "better") -> DipoleVariant:
-    """The :class:`DipoleVariant` ``variant`` ("jensen" or "better") of a material."""
-    a = float(albedo_prime)
+    """The :class:`DipoleVariant` ``variant`` ("jensen" or "better") of a material (computed once per distinct
+    albedo, index and variant: the record is frozen, and the kernels ask for it hundreds of times per bake)."""
+    if variant not in VARIANTS:
+        raise ValueError(f"dipole variant must be one of {VARIANTS}, got {variant!r}")
+    return _dipole_variant(float(albedo_prime), float(eta), variant)
+
+
+@lru_cache(maxsize=1024)
+def _dipole_variant(a: float, eta: float, variant: str) -> DipoleVariant:
+    """:func:`dipole_variant` of checked arguments (``variant`` one of VARIANTS)."""
     if variant == "jensen":
         p = diffusion_params(a, eta)
         return DipoleVariant("jensen", a, 1.0 / 3.0, float(p.mu), float(p.z_b), 0.0, 1.0)
-    if variant == "better":
-        c1, c2 = fresnel_moments(float(eta))
-        D = (2.0 - a) / 3.0
-        A = (1.0 + 3.0 * c2) / (1.0 - 2.0 * c1)
-        return DipoleVariant("better", a, D, math.sqrt(max(0.0, 1.0 - a) / D), 2.0 * A * D,
-                             (1.0 - 2.0 * c1) / 4.0, (1.0 - 3.0 * c2) / 2.0)
-    raise ValueError(f"dipole variant must be one of {VARIANTS}, got {variant!r}")
+    c1, c2 = fresnel_moments(float(eta))
+    D = (2.0 - a) / 3.0
+    A = (1.0 + 3.0 * c2) / (1.0 - 2.0 * c1)
+    return DipoleVariant("better", a, D, math.sqrt(max(0.0, 1.0 - a) / D), 2.0 * A * D,
+                         (1.0 - 2.0 * c1) / 4.0, (1.0 - 3.0 * c2) / 2.0)
 
 
 def point_source_reflectance(r_opt, depth_opt, *, albedo_prime, eta, variant="better"):

@@ -144,8 +144,8 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     field (the beam's near-field model less what the lattice carries) on top
     (:class:`meshshade.volume.transport.VolumeTransport`, docs/physics.md §15). It always takes the beam
     source model. ``volume``: a VolumeTransport built for this mesh and material (reused across lights);
-    ``volume_cache``: accepted for compatibility and unused (the lattice is built in seconds and depends on the
-    light's edges). A mesh that encloses nothing the lattice resolves (a lone sheet) takes ``model="auto"`` with
+    ``volume_cache``: deprecated and unused (the tetrahedral mesh it kept is gone; the lattice is built in seconds
+    and depends on the light's edges): a DeprecationWarning when given. A mesh that encloses nothing the lattice resolves (a lone sheet) takes ``model="auto"`` with
     the beam source model, saying why in ``stats["transport"]``. The options below (geodesics, far field,
     transport, cutoff) are the surface models'.
 
@@ -206,6 +206,9 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
                                or volume.material.describe() != material.describe()):
         raise ParameterError("the VolumeTransport passed as volume was built for another mesh or material (or the "
                              "model is not volume)")
+    if volume_cache is not None:
+        warnings.warn("bake(volume_cache=...) is deprecated and unused: the lattice volume keeps no asset cache",
+                      DeprecationWarning, stacklevel=2)
     lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
     clock = Stopwatch()
     volume_why = None

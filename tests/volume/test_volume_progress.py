@@ -1,6 +1,9 @@
 """The volume bake reports its stages as progress (issue 40): with stderr not a terminal and the line interval at
-0, one line per stage, each naming the stage that runs next, ending at 100 %; nothing with progress off."""
+0, one line per stage, each naming the stage that runs next, ending at 100 %; nothing with progress off. The
+asset cache of the tetrahedral volume is gone: its argument warns."""
 from __future__ import annotations
+
+import pytest
 
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
@@ -22,3 +25,9 @@ def test_each_stage_is_reported(monkeypatch, capsys):
     assert "100 %" in lines[-1]
     bake(mesh, Material.preset("skin1"), sun, volume=res.volume)
     assert capsys.readouterr().err == ""
+
+
+def test_the_volume_cache_argument_is_deprecated():
+    mesh = Mesh.from_arrays(*icosphere(8.0, 2))
+    with pytest.warns(DeprecationWarning, match="volume_cache"):
+        bake(mesh, Material.preset("skin1"), [DirectionalLight((0.0, 0.0, -1.0), 1.0)], volume_cache=object())

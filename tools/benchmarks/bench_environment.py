@@ -96,7 +96,7 @@ def _timed_bake(mesh, mat, light):
     with tempfile.TemporaryDirectory() as tmp:          # from scratch: an empty asset cache
         os.environ["MESHSHADE_ASSET_CACHE"] = tmp
         t = time.perf_counter()
-        r = bake(mesh, mat, [light], volume_cache=AssetCache("volume"))
+        r = bake(mesh, mat, [light])
         seconds = time.perf_counter() - t
         del os.environ["MESHSHADE_ASSET_CACHE"]
     return seconds, r
