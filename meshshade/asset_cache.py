@@ -1,4 +1,4 @@
-"""Derived data of assets kept between runs (the volume transport's tetrahedral meshes, benchmark references).
+"""Derived data of assets kept between runs (automatic UV atlases, benchmark references).
 
 ``<user cache>/meshshade/<kind>/<key>.npz`` (beside numba's folder, :func:`meshshade.compiled_cache.user_cache_root`);
 ``MESHSHADE_ASSET_CACHE`` names another root, or turns the cache off when set to ``off``. A cache: every failure to

@@ -8,6 +8,9 @@
   mean free paths ``1/sigma_t'`` per channel, so a unit mistake (a 10 m apple, a 0.01 mm head) shows at once;
 * **defects**: the validation report (open boundary, non-manifold edges, degenerate faces, components,
   unreferenced vertices, winding and orientation repairs), the same lines ``load_mesh`` warns about;
+* **volume**: what the default bake (the volume transport) makes of the mesh (:func:`volume_report`): whether it
+  can (a flat sheet encloses nothing: the surface transport), closed or holes closed by the winding number, parts,
+  vertices buried inside other parts (reported as 0), and with a material the lattice's spacing and the sampling;
 * **curvature**: the principal curvatures ``k1 >= k2`` (1/mm) the bake will use (``principal_curvatures``, same
   default neighbourhood), min/max and percentiles over the vertices that faces use, the fraction of convex,
   concave and saddle vertices, the smallest radius of curvature, and how many vertices took the fallback

@@ -29,5 +29,10 @@ class OutputError(MeshshadeError, OSError):
     """An output that cannot be written (unwritable directory, output equal to an input)."""
 
 
+class NoVolumeError(MeshshadeError):
+    """The mesh encloses no volume the volume transport can resolve (a flat sheet, a winding number below 1/2
+    everywhere): the bake falls back to the surface transport and says why."""
+
+
 class DiffusionValidityWarning(UserWarning):
     """Parameters where diffusion theory is a poor approximation (very low albedo, first order out of range)."""

@@ -1,6 +1,7 @@
 """Shared fixtures: seeded RNG, the ../shared folder (skip with a reason where absent), hypothesis profiles, the
 one loader of the reference CSVs in tests/data (``reference_csv``) and a load-independent clock for Monte Carlo
-time budgets (``mc_work_clock``)."""
+time budgets (``mc_work_clock``). tools/benchmarks/ is put on ``sys.path`` (it is not a package), so tests import its
+generators by name (``import mesh_defects``), as its own scripts do."""
 from __future__ import annotations
 
 import csv
@@ -8,6 +9,7 @@ import hashlib
 import importlib
 import os
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parent / "data"
 SHARED = Path(os.environ.get("MESHSHADE_SHARED", ROOT.parent / "shared"))
 SHARED_MESHES = SHARED / "meshes"
+if str(ROOT / "tools" / "benchmarks") not in sys.path:
+    sys.path.append(str(ROOT / "tools" / "benchmarks"))
 
 
 @pytest.fixture

@@ -11,10 +11,7 @@ vertices are used by no face: those two bakes are identical.
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,26 +21,19 @@ from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport import bake
 
-ROOT = Path(__file__).resolve().parents[1]
+import bench_defects  # tools/benchmarks/, on sys.path by tests/conftest.py
+import mesh_defects  # tools/benchmarks/, on sys.path by tests/conftest.py
+
 #: the issue's "more than 10-25 mm from the defect": the lenient end (holes move red light 10-15 mm away: p99 8.6 %
 #: at 15 mm on this hand, docs/benchmarks.md)
 EXCLUDE_MM = 25.0
 TARGET_MEAN, TARGET_P99 = 0.02, 0.06
 
 
-def _tool(name: str):
-    """A module of tools/benchmarks/ (tools/ is not a package), loaded once."""
-    key = f"_tools_benchmarks_{name}"
-    if key not in sys.modules:
-        spec = importlib.util.spec_from_file_location(key, ROOT / "tools" / "benchmarks" / f"{name}.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[key] = module
-        spec.loader.exec_module(module)
-    return sys.modules[key]
 
 
-bench = _tool("bench_defects")
-md = _tool("mesh_defects")
+bench = bench_defects
+md = mesh_defects
 
 pytestmark = pytest.mark.slow
 

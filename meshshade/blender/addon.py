@@ -47,7 +47,7 @@ LOG_NAME = "meshshade-blender.log"
 POLL_SECONDS = 0.2
 
 _MODEL_ITEMS = [("volume", "volume", "diffusion inside the object's volume with the analytic near field on top "
-                   "(recommended; a mesh that is not closed uses auto)"),
+                   "(recommended; open and many-part meshes included, a flat sheet uses auto)"),
                 ("auto", "auto", "surface kernels: meshshade chooses per entry sample the planar dipole, curvature "
                  "kernel, exact sphere or fitted model where each is needed")] + [
     (m, m, {"dipole": "planar dipole (Jensen et al. 2001): flat half-space everywhere",

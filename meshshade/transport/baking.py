@@ -24,10 +24,9 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import QhullError
 
 from meshshade import memo
-from meshshade.errors import MaterialError, MeshshadeError, ParameterError
+from meshshade.errors import MaterialError, MeshshadeError, NoVolumeError, ParameterError
 from meshshade.geometry.curvature import principal_curvatures
 from meshshade.geometry.mesh import Mesh
 from meshshade.light import entry_samples
@@ -220,6 +219,8 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
                 vt.on_stage = on_stage
                 try:
                     return _volume_bake(vt, mesh, material, lights, backend, clock, on_stage)
+                except NoVolumeError as e:     # found when the lattice is built for the light: nothing inside
+                    volume_why = f"the volume transport cannot be built ({str(e).splitlines()[0]})"
                 finally:
                     vt.on_stage = None
         finally:
@@ -320,7 +321,7 @@ def _volume_progress(progress):
 def _volume_transport(mesh, material, volume, clock, on_stage=None):
     """``(VolumeTransport or None, why not)``: the one passed in, the one kept for this mesh and material inside
     :func:`meshshade.memo.reuse`, or a new one (its stages charged to ``clock``); None where the mesh encloses no
-    volume the lattice can resolve (a lone sheet, a winding number below 1/2 everywhere)."""
+    volume the lattice can resolve (a flat sheet: :class:`~meshshade.errors.NoVolumeError`)."""
     if volume is not None:
         return volume, None
     built = []
@@ -329,7 +330,7 @@ def _volume_transport(mesh, material, volume, clock, on_stage=None):
         built.append(True)
         try:
             return VolumeTransport.build(mesh, material, on_stage=on_stage), None
-        except MeshshadeError as e:
+        except NoVolumeError as e:
             return None, f"the volume transport cannot be built ({str(e).splitlines()[0]})"
 
     vt, why = memo.cached("volume", (id(mesh), material.describe()), build, pins=(mesh,))
@@ -349,10 +350,7 @@ def _volume_bake(vt, mesh, material, lights, backend, clock, on_stage=None) -> B
     clock.lap("rays")
     if on_stage is not None:
         on_stage("rays")
-    try:
-        Ms, vstats = vt.sample_exitance(samples)
-    except MeshshadeError:
-        raise
+    Ms, vstats = vt.sample_exitance(samples)
     M = vt.to_vertices(Ms)
     clock.charge(vstats.pop("timings"))
     stats = {"entry_samples": len(samples), "cutoff_mm": vt.tables.radius_mm.tolist(), **samples.stats,

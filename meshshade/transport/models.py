@@ -6,8 +6,8 @@
 * ``fitted``: the curvature model fitted to Monte Carlo beyond first order (kernels/fitted_curvature.py);
 * ``auto``: per entry sample the cheapest of the three that the scene calls for (transport/auto.py);
 * ``volume`` (the default): diffusion inside the object's volume with the analytic near field on top
-  (meshshade/volume, docs/physics.md §15); on a mesh that encloses no volume (open, or not tetrahedralisable)
-  the bake says so and uses ``auto`` with the beam near field.
+  (meshshade/volume, docs/physics.md §15); open, many-part and coarse meshes included; on a mesh that encloses no
+  volume (a flat sheet) the bake says so and uses ``auto`` with the beam near field.
 """
 from __future__ import annotations
 

@@ -77,11 +77,6 @@ class Assembly:
     def n(self) -> int:
         return int(self.m.size)
 
-    @property
-    def constraint_arrays(self):
-        """(cptr (N+1,), cidx, cw): every lattice node as a combination of unknowns (CSR rows)."""
-        return self._cptr, self._cidx, self._cw
-
     def to_nodes(self, x):
         """(N, k) values at every lattice node of the unknowns ``x`` (n, k) (hanging nodes interpolated; nodes of
         no unknown 0)."""

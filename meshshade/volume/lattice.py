@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from meshshade.errors import MeshshadeError
+from meshshade.errors import MeshshadeError, NoVolumeError
 
 __all__ = ["Grading", "Lattice", "KUHN", "CORNERS", "build_lattice", "coarser_lattice", "check_bands", "locate_points",
            "MAX_INDEX_CELLS"]
@@ -296,7 +296,7 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
     level = np.concatenate([np.full(k.shape[0], l, dtype=np.int64) for l, k in enumerate(kept)])
     ijk = np.concatenate(kept)
     if level.size == 0:
-        raise MeshshadeError("the mesh encloses no volume the lattice can resolve (winding number below 1/2 "
+        raise NoVolumeError("the mesh encloses no volume the lattice can resolve (winding number below 1/2 "
                              f"everywhere at {h0:.3g} mm)")
     t1 = time.perf_counter()
     # every corner of a cube that may be cut was evaluated above; the others are inside

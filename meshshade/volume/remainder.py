@@ -49,8 +49,6 @@ TAIL_TOL = 1e-3
 TABLE_REACH = 30.0
 #: pairs closer than this many disc radii take f averaged over the entry's disc
 PATCH_RADII = 4.0
-#: pairs per block of entries (bounded memory on dense meshes; about 60 bytes each)
-PAIR_BLOCK = 6_000_000
 _LOG_R = np.linspace(math.log(1e-5), math.log(200.0), 1025)     # optical distances of the tables
 _N_COS = 9
 _TH_NODES, _TH_WEIGHTS = np.polynomial.legendre.leggauss(24)

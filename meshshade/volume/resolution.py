@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from meshshade.errors import MeshshadeError, ParameterError
+from meshshade.errors import MeshshadeError, NoVolumeError, ParameterError
 from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.volume.lattice import Grading
 
@@ -104,7 +104,7 @@ def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None 
         h_mat = RESOLVED_KAPPA_H / float(kappa.max())
         thinnest = float(np.min(extent_mm))
         if not (thinnest > 0.0 and area_mm2 > 0.0):
-            raise MeshshadeError("the mesh is flat (a sheet of zero thickness): it encloses no volume")
+            raise NoVolumeError("the mesh is flat (a sheet of zero thickness): it encloses no volume")
         h_obj = thinnest / MIN_CELLS_ACROSS
         h, why = (h_mat, "material") if h_mat <= h_obj else (h_obj, "object")
         h = _round_h(h) if why == "material" else float(2.0 ** (math.floor(4.0 * math.log2(h)) / 4.0))

@@ -3,10 +3,7 @@ independent counts and by meshshade's own mesh validation), keeps the input's ve
 deterministic. Fast: icospheres of 642 vertices."""
 from __future__ import annotations
 
-import importlib.util
-import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,22 +13,15 @@ from scipy.sparse import csgraph
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 
-ROOT = Path(__file__).resolve().parents[2]
+import mesh_defects  # tools/benchmarks/, on sys.path by tests/conftest.py
+import real_models  # tools/benchmarks/, on sys.path by tests/conftest.py
 
 
-def _tool(name: str):
-    """A module of tools/benchmarks/ (tools/ is not a package), loaded once."""
-    key = f"_tools_benchmarks_{name}"
-    if key not in sys.modules:
-        spec = importlib.util.spec_from_file_location(key, ROOT / "tools" / "benchmarks" / f"{name}.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[key] = module
-        spec.loader.exec_module(module)
-    return sys.modules[key]
 
 
-md = _tool("mesh_defects")
-counts = _tool("real_models").topology_counts
+
+md = mesh_defects
+counts = real_models.topology_counts
 
 
 @pytest.fixture(scope="module")

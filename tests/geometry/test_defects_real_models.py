@@ -4,29 +4,18 @@ with the files (shared/models/ or ../shared/models/, never committed; skipped ot
 file at the recorded size."""
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+import real_models  # tools/benchmarks/, on sys.path by tests/conftest.py
 
 
-def _tool(name: str):
-    """A module of tools/benchmarks/ (tools/ is not a package), loaded once."""
-    key = f"_tools_benchmarks_{name}"
-    if key not in sys.modules:
-        spec = importlib.util.spec_from_file_location(key, ROOT / "tools" / "benchmarks" / f"{name}.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[key] = module
-        spec.loader.exec_module(module)
-    return sys.modules[key]
 
 
-rm = _tool("real_models")
+
+rm = real_models
 ENTRIES = rm.entries()
 
 

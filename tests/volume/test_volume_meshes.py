@@ -83,3 +83,16 @@ def test_check_reports_what_the_bake_will_do():
     res = bake(flat, SKIN, [DirectionalLight((0.0, 0.0, -1.0), 1.0)])
     assert res.model != "volume" or res.stats.get("transport") != "volume"
     assert mesh_note(res).startswith("surface transport: the volume transport cannot be built (the mesh is flat")
+
+
+def test_a_curved_double_sided_sheet_falls_back_when_its_lattice_is_empty():
+    """A spherical cap with every face duplicated with the opposite winding encloses nothing (winding number 0
+    everywhere), which only the lattice finds: the bake falls back to the surface transport and says why, as for
+    a flat sheet (before: a one-line error)."""
+    V, F = icosphere(20.0, 3)
+    cap = F[V[F].mean(axis=1)[:, 2] > 10.0]
+    with pytest.warns(Warning):
+        mesh = Mesh.from_arrays(V, np.vstack([cap, cap[:, ::-1]]))
+    res = bake(mesh, SKIN, [DirectionalLight((0.0, 0.0, -1.0), 1.0)])
+    assert res.model == "auto"
+    assert "winding number below 1/2 everywhere" in mesh_note(res)

@@ -43,7 +43,6 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from meshshade.asset_cache import AssetCache  # noqa: E402
 from meshshade.geometry.mesh import Mesh  # noqa: E402
 from meshshade.geometry.procedural import icosphere  # noqa: E402
 from meshshade.io import load_mesh, read_mesh_arrays, write_exr  # noqa: E402
@@ -51,6 +50,7 @@ from meshshade.light import DirectionalLight, EnvironmentLight, parse_light_spec
 from meshshade.materials import Material  # noqa: E402
 from meshshade.montecarlo import simulate  # noqa: E402
 from meshshade.transport import bake  # noqa: E402
+from bench_volume import reference  # noqa: E402  (kept in the asset cache "bench-references", seed 101)
 from studio_hdri import studio_hdri  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "meshes"
@@ -197,17 +197,6 @@ def _errors(M, ref):
     return out
 
 
-def reference(name, mesh, mat, light, photons):
-    cache = AssetCache("bench-references")
-    key = f"{name}-studio-{light.digest}-{int(photons)}-seed101"
-    got = cache.read(key)
-    if got is not None and got["radiance"].shape == (mesh.n_vertices, 3):
-        return got["radiance"], float(got["seconds"])
-    ref = simulate(mesh, mat, [light], photons=int(photons), seed=101, beam_distances=False)
-    cache.write(key, radiance=ref.radiance, seconds=ref.seconds)
-    return ref.radiance, ref.seconds
-
-
 def mc(name, args, folder):
     mesh = mesh_of(name)
     if mesh is None:
@@ -217,7 +206,7 @@ def mc(name, args, folder):
     _compile(mat, [light])
     simulate(Mesh.from_arrays(*icosphere(5.0, 1)), mat, [light], photons=4096, seed=1, beam_distances=False)
     t_bake, baked = _timed_bake(mesh, mat, light)
-    ref, ref_s = reference(name, mesh, mat, light, args.reference_photons)
+    ref, ref_s = reference(f"{name}-studio-{light.digest}", mesh, mat, light, args.reference_photons)
     run = simulate(mesh, mat, [light], photons=int(args.mc_photons), seed=202, beam_distances=False)
     return {"row": "mc", "scene": name, "vertices": int(mesh.n_vertices), "material": "skin1",
             "bake": {"seconds_from_scratch": round(t_bake, 2), "error": _errors(baked.radiance, ref),

@@ -14,7 +14,6 @@ with like. Without ../shared/meshes the row is "skipped".
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import sys
 import time
@@ -31,22 +30,16 @@ from meshshade.montecarlo import simulate
 from meshshade.raycast import make_scene
 from meshshade.transport import bake
 
-HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # tools/ is not a package: the defect benchmark beside this
 
-
-def _tool(name):
-    spec = importlib.util.spec_from_file_location(f"_bench_{name}", HERE / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+import bench_defects as bench  # noqa: E402
+import mesh_defects as md  # noqa: E402
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reference-photons", type=float, default=2e7)
     args = ap.parse_args(argv)
-    bench, md = _tool("bench_defects"), _tool("mesh_defects")
     got = bench.scene_arrays("hand190")
     if got is None:
         print(json.dumps({"row": "open_scan_mc", "skipped": f"{bench.SHARED} not found"}))

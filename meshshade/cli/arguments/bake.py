@@ -37,5 +37,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="texels around each UV island filled from its border, against bleeding in filtering and "
                         "mipmaps (default 16)")
     p.add_argument("--texture-refine", default="auto", metavar="auto|N",
-                   help="segments per edge of the surface the texture bake solves on (default auto: the mesh split "
-                        "until its edges are about what the material resolves; 1: the mesh as it is)")
+                   help="segments per edge of the surface the texture bake solves on (default auto: the mesh as it "
+                        "is for the volume model, which samples the surface itself; for the surface models the mesh "
+                        "split until its edges are about what the material resolves; 1: the mesh as it is)")

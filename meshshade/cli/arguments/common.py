@@ -91,9 +91,9 @@ def add_light_arg(p: argparse.ArgumentParser) -> None:
 def add_model_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default=DEFAULT_MODEL, choices=list(MODELS),
                    help=f"transport model (default {DEFAULT_MODEL}): volume, diffusion inside the object's volume "
-                        "with the analytic near field on top (a mesh that is not closed falls back to auto, "
-                        "saying so); dipole, curved, exact-sphere, fitted, surface kernels over geodesic "
-                        "neighbourhoods; auto picks per entry sample the cheapest surface kernel and geodesic "
+                        "(open, many-part and coarse meshes included; a flat sheet, which encloses nothing, falls "
+                        "back to auto, saying so) with the analytic near field on top; dipole, curved, "
+                        "exact-sphere, fitted, surface kernels over geodesic neighbourhoods; auto picks per entry sample the cheapest surface kernel and geodesic "
                         "method the scene calls for and reports its choices")
 
 
