@@ -38,8 +38,9 @@ from scipy.spatial import cKDTree
 from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.kernels.near_field import incidence_gain, near_field_profile, near_field_ring, near_field_total
 from meshshade.kernels.robin_halfspace import robin_smoothed_exitances
-from meshshade.pacing import run_in_blocks
+from meshshade.pacing import default_threads, run_in_blocks
 from meshshade.volume.long_range import line_rule
+from meshshade.volume.triangle_tree import morton_order, prefix_tree
 
 __all__ = ["RemainderTables", "TAIL_TOL", "PATCH_RADII", "remainder_exitance"]
 
@@ -171,53 +172,36 @@ def _lookup(tab, c, k, frac, x, log_r0, dlog, n_r, beyond_zero):
     return (1.0 - frac) * lo + frac * hi
 
 
-@numba.njit(cache=True)
 def _build_tree(pos, power, normal, cos_t, leaf):
-    """A k-d tree over the entries (median splits on the widest axis): ``perm``, per node its range ``lo``/``hi``
-    in perm, ``child`` (first child, -1 for a leaf; the second is child + 1), bounding ``box`` (n, 6), and the
+    """A tree over the entries (the Morton order of their positions split where the codes' highest differing bit
+    changes: :func:`meshshade.volume.triangle_tree.prefix_tree`): ``perm``, per node its range ``lo``/``hi`` in
+    perm, ``child`` (first child, -1 for a leaf; the second is child + 1), bounding ``box`` (n, 6), and the
     power-weighted aggregates ``agg`` (n, 9): total power, centroid (3), cos theta_t, unit mean normal (3), the
     cosine of the widest angle between a member's normal and the mean."""
-    k = pos.shape[0]
-    cap = 2 * (k // max(1, leaf) + 1) * 2 + 1
-    perm = np.arange(k)
-    lo = np.zeros(cap, np.int64)
-    hi = np.zeros(cap, np.int64)
-    child = np.full(cap, -1, np.int64)
-    box = np.zeros((cap, 6))
-    agg = np.zeros((cap, 9))
-    n_nodes = 1
-    lo[0], hi[0] = 0, k
-    stack = np.zeros(128, np.int64)
-    top = 1
-    stack[0] = 0
-    while top > 0:
-        top -= 1
-        nd = stack[top]
-        a, b = lo[nd], hi[nd]
+    if pos.shape[0] == 0:
+        return (np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64), np.full(1, -1, np.int64),
+                np.zeros((1, 6)), np.zeros((1, 9)))
+    perm, codes = morton_order(pos)
+    lo, hi, child = prefix_tree(codes, leaf)
+    box = np.zeros((lo.size, 6))
+    agg = np.zeros((lo.size, 9))
+    _aggregates(pos, power, normal, cos_t, perm.astype(np.int64), lo, hi, box, agg)
+    return perm.astype(np.int64), lo, hi, child, box, agg
+
+
+@numba.njit(cache=True, nogil=True)
+def _aggregates(pos, power, normal, cos_t, perm, lo, hi, box, agg):
+    """Each node's box and aggregates (:func:`_build_tree`) over its members perm[lo:hi]."""
+    n_nodes = lo.size
+    for nd in range(n_nodes):
         for d in range(3):
             box[nd, d] = np.inf
             box[nd, 3 + d] = -np.inf
-        for t in range(a, b):
+        for t in range(lo[nd], hi[nd]):
             j = perm[t]
             for d in range(3):
                 box[nd, d] = min(box[nd, d], pos[j, d])
                 box[nd, 3 + d] = max(box[nd, 3 + d], pos[j, d])
-        if b - a <= leaf:
-            continue
-        ext = np.array([box[nd, 3] - box[nd, 0], box[nd, 4] - box[nd, 1], box[nd, 5] - box[nd, 2]])
-        ax = int(np.argmax(ext))
-        seg = perm[a:b].copy()
-        order = np.argsort(pos[seg, ax])
-        perm[a:b] = seg[order]
-        mid = (a + b) // 2
-        c0 = n_nodes
-        n_nodes += 2
-        child[nd] = c0
-        lo[c0], hi[c0] = a, mid
-        lo[c0 + 1], hi[c0 + 1] = mid, b
-        stack[top] = c0
-        stack[top + 1] = c0 + 1
-        top += 2
     for nd in range(n_nodes):
         tot = 0.0
         cx = cy = cz = cc = nx = ny = nz = 0.0
@@ -244,7 +228,6 @@ def _build_tree(pos, power, normal, cos_t, leaf):
             if power[j] > 0.0:
                 worst = min(worst, normal[j, 0] * agg[nd, 5] + normal[j, 1] * agg[nd, 6] + normal[j, 2] * agg[nd, 7])
         agg[nd, 8] = worst
-    return perm, lo[:n_nodes], hi[:n_nodes], child[:n_nodes], box[:n_nodes], agg[:n_nodes]
 
 
 #: the disc averages are tabulated for d / a from 0 to PATCH_RADII in DISC_STEPS steps, and for disc radii from
@@ -352,11 +335,11 @@ def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_pos, src_n, src_p, src_area, src_a,
               src_cos, src_light, f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
-              near, theta, mode, out, counts, r_lo, r_hi):
-    """Receivers r_lo:r_hi: eq. (103)'s pair sum (``mode`` 0: the entries within ``near`` only, 1: those beyond
-    only, 2: all). Entries within ``near`` of the receiver one by one, their weight
-    P_j - E_l(x) A_j; beyond, nodes whose extent over distance is below ``theta`` (and whose normals agree) as
-    one entry of their total power at their centroid; the rest one by one without the subtraction."""
+              near, mid, theta, mode, out, counts, r_lo, r_hi):
+    """Receivers r_lo:r_hi: eq. (103)'s pair sum over the entries at distance d (``mode`` 0: d < ``mid``, 1:
+    d >= ``mid``, 2: all). Entries within ``near`` of the receiver one by one, their weight P_j - E_l(x) A_j;
+    beyond, nodes wholly on one side of ``mid`` whose extent over distance is below ``theta`` (and whose normals
+    agree) as one entry of their total power at their centroid; the rest one by one without the subtraction."""
     rmax = 0.0
     for c in range(3):
         rmax = max(rmax, radius[c])
@@ -365,29 +348,32 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
         x0, x1, x2 = rec_pos[r, 0], rec_pos[r, 1], rec_pos[r, 2]
         a0 = a1 = a2 = 0.0
         n_pairs = 0
+        unlit = True
+        for l in range(rec_E.shape[1]):
+            if rec_E[r, l] != 0.0:
+                unlit = False
         top = 1
         stack[0] = 0
         while top > 0:
             top -= 1
             nd = stack[top]
-            if agg[nd, 0] <= 0.0 and True:
-                # no power below this node: only its subtraction terms could matter, and they are near ones
-                pass
-            # distance from the receiver to the node's box
+            # nearest and farthest distance from the receiver to the node's box
             dx = max(box[nd, 0] - x0, 0.0, x0 - box[nd, 3])
             dy = max(box[nd, 1] - x1, 0.0, x1 - box[nd, 4])
             dz = max(box[nd, 2] - x2, 0.0, x2 - box[nd, 5])
             dmin = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if dmin > rmax or (mode == 0 and dmin >= near):
+            if dmin > rmax or (mode == 0 and dmin >= mid):
                 continue
-            if mode == 1:
-                # far only: a node wholly within ``near`` holds nothing for this pass
-                fx = max(abs(box[nd, 0] - x0), abs(box[nd, 3] - x0))
-                fy = max(abs(box[nd, 1] - x1), abs(box[nd, 4] - x1))
-                fz = max(abs(box[nd, 2] - x2), abs(box[nd, 5] - x2))
-                if fx * fx + fy * fy + fz * fz < near * near:
-                    continue
-            if mode != 0 and child[nd] >= 0 and dmin >= near and agg[nd, 0] > 0.0 and agg[nd, 8] > 0.9:
+            if agg[nd, 0] <= 0.0 and (unlit or dmin >= near):
+                continue                       # no power below, and no subtraction term (weights all 0)
+            fx = max(abs(box[nd, 0] - x0), abs(box[nd, 3] - x0))
+            fy = max(abs(box[nd, 1] - x1), abs(box[nd, 4] - x1))
+            fz = max(abs(box[nd, 2] - x2), abs(box[nd, 5] - x2))
+            dmax = math.sqrt(fx * fx + fy * fy + fz * fz)
+            if mode == 1 and dmax < mid:
+                continue                       # wholly within ``mid``: the local pass's
+            one_side = mode == 2 or (mode == 0 and dmax < mid) or (mode == 1 and dmin >= mid)
+            if child[nd] >= 0 and one_side and dmin >= near and agg[nd, 0] > 0.0 and agg[nd, 8] > 0.9:
                 ex = max(box[nd, 3] - box[nd, 0], box[nd, 4] - box[nd, 1], box[nd, 5] - box[nd, 2])
                 cx, cy, cz = agg[nd, 1] - x0, agg[nd, 2] - x1, agg[nd, 3] - x2
                 dc = math.sqrt(cx * cx + cy * cy + cz * cz)
@@ -411,7 +397,7 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                     continue
                 qx, qy, qz = src_pos[j, 0] - x0, src_pos[j, 1] - x1, src_pos[j, 2] - x2
                 d = math.sqrt(qx * qx + qy * qy + qz * qz)
-                if d > rmax or (mode == 0 and d >= near) or (mode == 1 and d < near):
+                if d > rmax or (mode == 0 and d >= mid) or (mode == 1 and d < mid):
                     continue
                 w = src_p[j]
                 if d < near:
@@ -431,16 +417,22 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
         counts[r] = n_pairs
 
 
-#: entries within this many mm of a receiver are summed one by one with the subtraction of eq. (103)
+#: the local pass reaches this many mm from each receiver; beyond, the pair sum (smooth on this scale) is evaluated
+#: at one receiver per cube of this side and interpolated
 NEAR_MM = 2.5
-#: beyond it, a node of the entries' tree whose extent is below THETA times its distance counts as one entry
-THETA = 0.35
+#: entries within this many sampling spacings (at most NEAR_MM) of a receiver are summed one by one with the
+#: subtraction of eq. (103); the subtraction needs the light sampled, and a fixed radius would hold pairs growing as
+#: the square of a fine mesh's density (566k vertices: 310M pairs in 2.5 mm)
+NEAR_SPACINGS = 3.0
+#: beyond the subtracted zone, a node of the entries' tree whose extent is below THETA times its distance counts as
+#: one entry
+THETA = 0.3
 #: entries per leaf of the tree
-LEAF = 16
+LEAF = 4
 
 
 def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NEAR_MM, theta: float = THETA,
-                       coarse_far: bool = True):
+                       coarse_far: bool = True, spacing_mm: float | None = None):
     """Eq. (103) at the receivers: ((n, 3) W/mm^2, pair evaluations).
 
     ``src``: dict of entry arrays ``pos`` (k, 3) mm, ``normal`` (k, 3), ``power`` (k,) W, ``area`` (k,) mm^2
@@ -448,18 +440,20 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     ``radius`` (n,) mm (the receiver's patch, for point entries), ``E`` (n, L) W/mm^2 and ``cos_t`` (n, L): the
     irradiance of each light at the receiver and the cosine its light travels inside at there.
 
-    Entries within ``near_mm`` are summed one by one with the subtraction, and the receiver gets
-    E_l(x) [int_0^near f + the energy beyond the radius] analytically; beyond, the entries' k-d tree is opened
-    until a node's extent is below ``theta`` times its distance (Barnes-Hut), so the cost per receiver grows with
-    the log of the radius over the spacing, not with its square. With ``coarse_far`` the part beyond ``near_mm``
-    (smooth on that scale) is summed at one receiver per cube of side ``near_mm`` and interpolated."""
+    Entries within the subtracted radius (``near_mm``, or NEAR_SPACINGS times ``spacing_mm``, the entries'
+    spacing, where that is less) are summed one by one with the subtraction, and the receiver gets
+    E_l(x) [int_0^r f + the energy beyond the table's radius] analytically; beyond, the entries' k-d tree is
+    opened until a node's extent is below ``theta`` times its distance (Barnes-Hut), so the cost per receiver
+    grows with the log of the radius over the spacing, not with its square. With ``coarse_far`` the part beyond
+    ``near_mm`` (smooth on that scale) is summed at one receiver per cube of side ``near_mm`` and interpolated."""
+    sub_mm = float(near_mm) if spacing_mm is None else min(float(near_mm), NEAR_SPACINGS * float(spacing_mm))
     n = rec["pos"].shape[0]
     out = np.zeros((n, 3))
     E, rc = np.ascontiguousarray(rec["E"], dtype=np.float64), np.asarray(rec["cos_t"], dtype=np.float64)
     for l in range(E.shape[1]):
         lit = E[:, l] > 0
         if lit.any():
-            out[lit] += E[lit, l, None] * tables.near_and_beyond(rc[lit, l], near_mm)
+            out[lit] += E[lit, l, None] * tables.near_and_beyond(rc[lit, l], sub_mm)
     k = src["pos"].shape[0]
     if k == 0:
         return out, 0
@@ -480,8 +474,8 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
 
     def run(pos_, nrm_, rad_, E_, mode, dest, cnt):
         run_in_blocks(lambda a, b: _traverse(pos_, nrm_, rad_, E_, perm, lo, hi, child, box, agg, pos, nrm, pw, area,
-                                             disc, cos_s, light, *tabs, float(near_mm), float(theta), mode, dest,
-                                             cnt, a, b), pos_.shape[0])
+                                             disc, cos_s, light, *tabs, sub_mm, float(near_mm), float(theta), mode,
+                                             dest, cnt, a, b), pos_.shape[0])
 
     if not coarse_far:
         run(rp, rn, ra, E, 2, out, counts)
@@ -491,8 +485,10 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     # side (and facing) and interpolated to the others from their nearest such receivers facing their way
     octant = (rn > 0).astype(np.int64) @ np.array([1, 2, 4])
     cell = np.floor(rp / near_mm).astype(np.int64)
-    key = np.concatenate([cell, octant[:, None]], axis=1)
-    _, first = np.unique(key, axis=0, return_index=True)
+    cell -= cell.min(axis=0)
+    span = cell.max(axis=0) + 1
+    key = ((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]) * 8 + octant
+    _, first = np.unique(key, return_index=True)
     cp, cn = rp[first], rn[first]
     far = np.zeros((first.size, 3))
     cnt = np.zeros(first.size, dtype=np.int64)
@@ -508,7 +504,7 @@ def _interpolate(cp, cn, cv, rp, rn, scale, k: int = 6):
     them if none is)."""
     tree = cKDTree(cp)
     k = min(k, cp.shape[0])
-    d, idx = tree.query(rp, k=k)
+    d, idx = tree.query(rp, k=k, workers=default_threads())
     d, idx = d.reshape(rp.shape[0], k), idx.reshape(rp.shape[0], k)
     agree = np.einsum("pkd,pd->pk", cn[idx], rn) > 0.5
     w = np.where(agree, 1.0 / (d + 1e-3 * scale), 0.0)

@@ -205,7 +205,8 @@ class VolumeTransport:
         M, outside = self._read(phi, surf.vertices, surf.vertex_normals)
         _lap(timings, "volume solve", t, on_stage)
         t = time.perf_counter()
-        Mf, pairs = remainder_exitance(self.tables, *self._remainder_inputs(samples, cos_t))
+        Mf, pairs = remainder_exitance(self.tables, *self._remainder_inputs(samples, cos_t),
+                                       spacing_mm=float(surf.mean_edge_length))
         M += Mf
         _lap(timings, "near field", t, on_stage)
         if not np.all(np.isfinite(M)):

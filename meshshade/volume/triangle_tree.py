@@ -30,16 +30,16 @@ import numpy as np
 
 from meshshade.pacing import run_in_blocks
 
-__all__ = ["TriangleTree", "LEAF"]
+__all__ = ["TriangleTree", "LEAF", "morton_order", "prefix_tree"]
 
 #: triangles per leaf
 LEAF = 8
 _INV_4PI = 1.0 / (4.0 * math.pi)
 
 
-def _morton_codes(centroids):
-    """(order, sorted codes): ``centroids`` (t, 3) sorted along the Z-order curve of their box (21 bits per
-    axis)."""
+def morton_order(centroids):
+    """(order, sorted codes): the points ``centroids`` (t, 3) sorted along the Z-order curve of their box (21 bits
+    per axis)."""
     lo = centroids.min(axis=0)
     ext = float(np.max(centroids.max(axis=0) - lo))
     q = np.zeros(centroids.shape, dtype=np.uint64) if ext <= 0 else \
@@ -58,7 +58,7 @@ def _morton_codes(centroids):
 
 
 @numba.njit(cache=True, nogil=True)
-def _split_tree(codes, leaf):
+def prefix_tree(codes, leaf):
     """(lo, hi, child) of the binary tree over the sorted Morton ``codes``: a node's triangles lo..hi are split
     where their highest differing bit changes (each node a cell of the Morton octree: Lauterbach et al.'s linear
     BVH), at the middle where their codes are equal; a node of at most ``leaf`` triangles is a leaf (child -1).
@@ -367,12 +367,12 @@ class TriangleTree:
         self.n_threads = n_threads
         self.n_tri = int(F.shape[0])
         if self.n_tri:
-            order, codes = _morton_codes(V[F].mean(axis=1))
+            order, codes = morton_order(V[F].mean(axis=1))
             F = F[order]
         else:
             codes = np.zeros(0, dtype=np.uint64)
         self.A, self.B, self.C = (np.ascontiguousarray(V[F[:, k]]) for k in range(3))
-        self.lo, self.hi, self.child = _split_tree(codes, LEAF)
+        self.lo, self.hi, self.child = prefix_tree(codes, LEAF)
         n = self.lo.size
         self.box = np.zeros((n, 6))
         self.N = np.zeros((n, 3))
