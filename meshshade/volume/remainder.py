@@ -99,18 +99,25 @@ class RemainderTables:
                     PATCH_RADII, DISC_STEPS, math.log(DISC_A[0]), math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1),
                     self.disc)
 
-    def near_and_beyond(self, cos_t, near_mm: float):
-        """(p, 3): int_0^near f plus the energy beyond the radius, per channel, at ``cos_t`` (p,): what a receiver
-        of irradiance 1 gets from its own neighbourhood and the far tail in eq. (103)."""
-        c = np.asarray(cos_t, dtype=np.float64)
+    def near_and_beyond(self, cos_t, near_mm):
+        """(p, 3): int_0^near f plus the energy beyond the radius, per channel, at ``cos_t`` (p,) and radius
+        ``near_mm`` (a number or (p,), mm): what a receiver of irradiance 1 gets from its own neighbourhood and the
+        far tail in eq. (103)."""
+        c = np.atleast_1d(np.asarray(cos_t, dtype=np.float64))
+        r = np.broadcast_to(np.asarray(near_mm, dtype=np.float64), c.shape)
         out = np.empty((c.size, 3))
         for k in range(3):
-            u = (math.log(near_mm) - self.log_r0[k]) / self.dlog
-            j = int(min(max(u, 0.0), self.n_r[k] - 1.0001))
-            w = min(max(u - j, 0.0), 1.0)
-            at = (1 - w) * self.cum[k, :, j] + w * self.cum[k, :, min(j + 1, self.n_r[k] - 1)]
-            val = at + self.rest[k]
-            out[:, k] = np.interp(np.clip(c, self.cos_t[k, 0], self.cos_t[k, -1]), self.cos_t[k], val)
+            u = (np.log(r) - self.log_r0[k]) / self.dlog
+            j = np.clip(u, 0.0, self.n_r[k] - 1.0001).astype(np.int64)
+            w = np.clip(u - j, 0.0, 1.0)
+            val = (1 - w) * self.cum[k][:, j] + w * self.cum[k][:, np.minimum(j + 1, self.n_r[k] - 1)] \
+                + self.rest[k][:, None]                                     # (9, p): at the cos nodes
+            g = self.cos_t[k]
+            t = (np.clip(c, g[0], g[-1]) - g[0]) / (g[1] - g[0])
+            i = np.minimum(t.astype(np.int64), g.size - 2)
+            f = t - i
+            cols = np.arange(c.size)
+            out[:, k] = (1 - f) * val[i, cols] + f * val[i + 1, cols]
         return out
 
     def totals(self, cos_t):
@@ -335,9 +342,9 @@ def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_pos, src_n, src_p, src_area, src_a,
               src_cos, src_light, f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
-              near, mid, theta, mode, out, counts, r_lo, r_hi):
+              rec_near, mid, theta, mode, out, counts, r_lo, r_hi):
     """Receivers r_lo:r_hi: eq. (103)'s pair sum over the entries at distance d (``mode`` 0: d < ``mid``, 1:
-    d >= ``mid``, 2: all). Entries within ``near`` of the receiver one by one, their weight P_j - E_l(x) A_j;
+    d >= ``mid``, 2: all). Entries within ``rec_near[r]`` of receiver r one by one, their weight P_j - E_l(x) A_j;
     beyond, nodes wholly on one side of ``mid`` whose extent over distance is below ``theta`` (and whose normals
     agree) as one entry of their total power at their centroid; the rest one by one without the subtraction."""
     rmax = 0.0
@@ -346,6 +353,7 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
     stack = np.zeros(256, np.int64)
     for r in range(r_lo, r_hi):
         x0, x1, x2 = rec_pos[r, 0], rec_pos[r, 1], rec_pos[r, 2]
+        near = rec_near[r]
         a0 = a1 = a2 = 0.0
         n_pairs = 0
         unlit = True
@@ -424,6 +432,9 @@ NEAR_MM = 2.5
 #: subtraction of eq. (103); the subtraction needs the light sampled, and a fixed radius would hold pairs growing as
 #: the square of a fine mesh's density (566k vertices: 310M pairs in 2.5 mm)
 NEAR_SPACINGS = 3.0
+#: the local pass reaches at most this many sampling spacings (the far part, smooth on that scale, then evaluated at
+#: one receiver per cube of that side: fine meshes are summed at a few receivers per cube, not at every vertex)
+MID_SPACINGS = 3.0
 #: beyond the subtracted zone, a node of the entries' tree whose extent is below THETA times its distance counts as
 #: one entry
 THETA = 0.3
@@ -440,20 +451,30 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     ``radius`` (n,) mm (the receiver's patch, for point entries), ``E`` (n, L) W/mm^2 and ``cos_t`` (n, L): the
     irradiance of each light at the receiver and the cosine its light travels inside at there.
 
-    Entries within the subtracted radius (``near_mm``, or NEAR_SPACINGS times ``spacing_mm``, the entries'
-    spacing, where that is less) are summed one by one with the subtraction, and the receiver gets
-    E_l(x) [int_0^r f + the energy beyond the table's radius] analytically; beyond, the entries' k-d tree is
-    opened until a node's extent is below ``theta`` times its distance (Barnes-Hut), so the cost per receiver
-    grows with the log of the radius over the spacing, not with its square. With ``coarse_far`` the part beyond
-    ``near_mm`` (smooth on that scale) is summed at one receiver per cube of side ``near_mm`` and interpolated."""
-    sub_mm = float(near_mm) if spacing_mm is None else min(float(near_mm), NEAR_SPACINGS * float(spacing_mm))
+    Entries within a receiver's subtracted radius (``near_mm``; with ``spacing_mm``, the entries' mean spacing,
+    NEAR_SPACINGS times the receiver's own spacing where that is less) are summed one by one with the
+    subtraction, and the receiver gets E_l(x) [int_0^r f + the energy beyond the table's radius] analytically;
+    beyond, the entries' tree is opened until a node's extent is below ``theta`` times its distance
+    (Barnes-Hut), so the cost per receiver grows with the log of the radius over the spacing, not with its
+    square. With ``coarse_far`` the part beyond the local pass's reach (``near_mm``, or MID_SPACINGS times
+    ``spacing_mm`` where less; smooth on that scale) is summed at one receiver per cube of that side and
+    interpolated."""
     n = rec["pos"].shape[0]
+    ra = np.ascontiguousarray(rec["radius"], dtype=np.float64)
+    if spacing_mm is None:
+        mid_mm = float(near_mm)
+        sub = np.full(n, mid_mm)
+    else:
+        mid_mm = min(float(near_mm), MID_SPACINGS * float(spacing_mm))
+        # the receiver's own spacing: its patch of area pi a^2 is that of a vertex of a regular triangulation of
+        # edge sqrt(2 pi / sqrt 3) a
+        sub = np.clip(NEAR_SPACINGS * math.sqrt(2.0 * math.pi / math.sqrt(3.0)) * ra, 1e-3 * mid_mm, mid_mm)
     out = np.zeros((n, 3))
     E, rc = np.ascontiguousarray(rec["E"], dtype=np.float64), np.asarray(rec["cos_t"], dtype=np.float64)
     for l in range(E.shape[1]):
         lit = E[:, l] > 0
         if lit.any():
-            out[lit] += E[lit, l, None] * tables.near_and_beyond(rc[lit, l], sub_mm)
+            out[lit] += E[lit, l, None] * tables.near_and_beyond(rc[lit, l], sub[lit])
     k = src["pos"].shape[0]
     if k == 0:
         return out, 0
@@ -469,22 +490,21 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
             PATCH_RADII, math.log(DISC_A[0]), math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1))
     rp = np.ascontiguousarray(rec["pos"], dtype=np.float64)
     rn = np.ascontiguousarray(rec["normal"], dtype=np.float64)
-    ra = np.ascontiguousarray(rec["radius"], dtype=np.float64)
     counts = np.zeros(n, dtype=np.int64)
 
-    def run(pos_, nrm_, rad_, E_, mode, dest, cnt):
+    def run(pos_, nrm_, rad_, E_, sub_, mode, dest, cnt):
         run_in_blocks(lambda a, b: _traverse(pos_, nrm_, rad_, E_, perm, lo, hi, child, box, agg, pos, nrm, pw, area,
-                                             disc, cos_s, light, *tabs, sub_mm, float(near_mm), float(theta), mode,
+                                             disc, cos_s, light, *tabs, sub_, mid_mm, float(theta), mode,
                                              dest, cnt, a, b), pos_.shape[0])
 
     if not coarse_far:
-        run(rp, rn, ra, E, 2, out, counts)
+        run(rp, rn, ra, E, sub, 2, out, counts)
         return out, int(counts.sum())
-    run(rp, rn, ra, E, 0, out, counts)
+    run(rp, rn, ra, E, sub, 0, out, counts)
     # beyond ``near`` the sum is smooth on the scale of ``near``: it is evaluated at one receiver per cube of that
     # side (and facing) and interpolated to the others from their nearest such receivers facing their way
     octant = (rn > 0).astype(np.int64) @ np.array([1, 2, 4])
-    cell = np.floor(rp / near_mm).astype(np.int64)
+    cell = np.floor(rp / mid_mm).astype(np.int64)
     cell -= cell.min(axis=0)
     span = cell.max(axis=0) + 1
     key = ((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]) * 8 + octant
@@ -492,8 +512,8 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     cp, cn = rp[first], rn[first]
     far = np.zeros((first.size, 3))
     cnt = np.zeros(first.size, dtype=np.int64)
-    run(np.ascontiguousarray(cp), np.ascontiguousarray(cn), ra[first], E[first], 1, far, cnt)
-    out += _interpolate(cp, cn, far, rp, rn, near_mm)
+    run(np.ascontiguousarray(cp), np.ascontiguousarray(cn), ra[first], E[first], sub[first], 1, far, cnt)
+    out += _interpolate(cp, cn, far, rp, rn, mid_mm)
     counts[first] += cnt
     return out, int(counts.sum())
 
