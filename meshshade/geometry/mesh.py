@@ -223,14 +223,43 @@ def nonmanifold_vertices(n_vertices: int, faces, topo=None) -> np.ndarray:
     fwd = topo.halfedge_forward.reshape(-1)
     low, high = np.where(fwd, start, end), np.where(fwd, end, start)  # the corners at the edge's lower/higher vertex
     order = counting_order(he_edge, topo.edges.shape[0])
-    first = np.r_[True, he_edge[order][1:] != he_edge[order][:-1]]
-    head = order[np.maximum.accumulate(np.where(first, np.arange(order.size), 0))]  # each edge's first half-edge
-    rows, cols = np.r_[low[order], high[order]], np.r_[low[head], high[head]]
-    graph = sparse.coo_matrix((np.ones(rows.size, np.int8), (rows, cols)), shape=(corners, corners))
-    _, fan = csgraph.connected_components(graph, directed=False)
-    key = np.sort(Ft.reshape(-1) * np.int64(corners) + fan)
-    distinct = key[np.r_[True, key[1:] != key[:-1]]] // corners
-    return np.bincount(distinct, minlength=n_vertices) > 1
+    # corners linked through an edge (the corners at its lower vertex of all its half-edges, and at its higher
+    # vertex) are in one fan: union-find over the corners, then the distinct fans at each vertex
+    fans = _fans_per_vertex(Ft.reshape(-1), he_edge[order], low[order], high[order], n_vertices)
+    return fans > 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _fans_per_vertex(corner_vertex, edge, low, high, n_vertices):
+    """(n,) the number of fans at each vertex: corners joined when half-edges of one edge (consecutive in
+    ``edge``) meet at the same end; a union-find with path halving."""
+    k = corner_vertex.size
+    parent = np.arange(k)
+    for t in range(1, edge.size):
+        if edge[t] != edge[t - 1]:
+            continue
+        # join this half-edge's corners with those of the edge's previous half-edge (transitively: all of them)
+        for a, b in ((low[t], low[t - 1]), (high[t], high[t - 1])):
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            while parent[b] != b:
+                parent[b] = parent[parent[b]]
+                b = parent[b]
+            if a != b:
+                if a < b:
+                    parent[b] = a
+                else:
+                    parent[a] = b
+    # a fan per root; count distinct roots at each vertex
+    count = np.zeros(n_vertices, np.int64)
+    for c in range(k):
+        r = c
+        while parent[r] != r:
+            r = parent[r]
+        if r == c:
+            count[corner_vertex[c]] += 1
+    return count
 
 
 def validate_mesh(vertices, faces, *, emit_warnings: bool = True) -> MeshReport:

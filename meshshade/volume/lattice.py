@@ -259,8 +259,9 @@ class Lattice:
         cell = np.empty(P.shape[0], dtype=np.int64)
         bary = np.empty((P.shape[0], 4))
         nodes = np.empty((P.shape[0], 4), dtype=np.int64)
-        locate_points(P, self.grading.h0, self._index, self._index_lo, self.level, self.ijk, self.cell_nodes,
-                      cell, bary, nodes)
+        run_in_blocks(lambda a, b: locate_points(P, self.grading.h0, self._index, self._index_lo, self.level,
+                                                 self.ijk, self.cell_nodes, cell, bary, nodes, a, b),
+                      P.shape[0], min_block=16384)
         return cell, bary, nodes
 
 
@@ -283,11 +284,12 @@ def kuhn_weights(x, y, z):
 
 
 @numba.njit(cache=True, nogil=True)
-def locate_points(P, h0, index, lo, level, ijk, cell_nodes, cell, bary, nodes):
-    """For each point: the cube holding it (dense index of level-0 cells), the Kuhn tetrahedron by the order of
-    its coordinates in the cube, the barycentrics and the corner nodes; cell -1 (weights 0) outside the lattice."""
+def locate_points(P, h0, index, lo, level, ijk, cell_nodes, cell, bary, nodes, p0, p1):
+    """For each point p0..p1: the cube holding it (dense index of level-0 cells), the Kuhn tetrahedron by the
+    order of its coordinates in the cube, the barycentrics and the corner nodes; cell -1 (weights 0) outside the
+    lattice."""
     nx, ny, nz = index.shape
-    for p in range(P.shape[0]):
+    for p in range(p0, p1):
         # lattice coordinates, nudged up by a rounding's worth: a node at k h0 computed as k - 1e-15 stays on k
         fx, fy, fz = P[p, 0] / h0 + _EPS, P[p, 1] / h0 + _EPS, P[p, 2] / h0 + _EPS
         i0 = int(math.floor(fx)) - lo[0]

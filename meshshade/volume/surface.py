@@ -16,6 +16,7 @@ vertices and (104) is the identity.
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
@@ -41,14 +42,14 @@ def split_long_edges(vertices, faces, spacing: float, *, max_vertices: int = MAX
     bary = np.broadcast_to(np.eye(3), (F.shape[0], 3, 3)).copy()
     complete = True
     for _ in range(MAX_ROUNDS):
-        e = np.concatenate([F[:, [1, 2]], F[:, [2, 0]], F[:, [0, 1]]])        # edge k of a face: opposite corner k
-        lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
-        key = lo * np.int64(V.shape[0]) + hi
-        length = np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1)
-        long_ = length > spacing
-        if not long_.any():
+        long_ = np.empty(3 * F.shape[0], dtype=bool)                   # edge k of face f at k nf + f: opposite k
+        if not _long_edges(V, F, float(spacing), long_):
             break
-        ukeys, inv = np.unique(key[long_], return_inverse=True)
+        which = np.flatnonzero(long_)
+        k, f = which // F.shape[0], which % F.shape[0]
+        a, b = F[f, (k + 1) % 3], F[f, (k + 2) % 3]
+        key = np.minimum(a, b) * np.int64(V.shape[0]) + np.maximum(a, b)
+        ukeys, inv = np.unique(key, return_inverse=True)
         if V.shape[0] + ukeys.size > max_vertices:
             complete = False
             break
@@ -61,6 +62,22 @@ def split_long_edges(vertices, faces, spacing: float, *, max_vertices: int = MAX
         split = split.reshape(3, nf).T                                           # (f, k): midpoint opposite k
         F, origin, bary = _subdivide(F, origin, bary, split)
     return V, F, origin, bary, complete
+
+
+@numba.njit(cache=True, nogil=True)
+def _long_edges(V, F, spacing, out):
+    """out[k nf + f] = whether edge k of face f (opposite corner k) is longer than ``spacing``; whether any is."""
+    nf = F.shape[0]
+    any_long = False
+    s2 = spacing * spacing
+    for k in range(3):
+        for f in range(nf):
+            a, b = F[f, (k + 1) % 3], F[f, (k + 2) % 3]
+            dx, dy, dz = V[a, 0] - V[b, 0], V[a, 1] - V[b, 1], V[a, 2] - V[b, 2]
+            long_ = dx * dx + dy * dy + dz * dz > s2
+            out[k * nf + f] = long_
+            any_long |= long_
+    return any_long
 
 
 def _subdivide(F, origin, bary, split):

@@ -35,7 +35,7 @@ from meshshade.volume.inside import SurfaceVolume
 from meshshade.volume.lattice import build_lattice
 from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
 from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
-from meshshade.volume.remainder import RemainderTables, remainder_exitance
+from meshshade.volume.remainder import RemainderTables, longest_edges, remainder_exitance
 from meshshade.volume.resolution import DEFAULT_BUDGET, diffusion_constants, volume_resolution
 from meshshade.volume.surface import SamplingSurface
 
@@ -70,6 +70,7 @@ class VolumeTransport:
         self.A = np.array([c[2] for c in consts])
         self.coef = np.array([(D, 1.0 / (2.0 * A), sa) for D, sa, A in consts])
         self._lattice_key = None
+        self._spacing = None          # each sampling vertex's longest edge (eq. (103)'s subtracted radius)
         self.on_stage = None          # called with each stage's name as it ends (progress), or None
         self.lattice = self.assembly = self.operator = self.multigrid = None
         self.buried = self._buried_vertices()
@@ -295,6 +296,8 @@ class VolumeTransport:
                "area": np.concatenate([area, np.zeros(int(pt.sum()))]),
                "cos_t": np.concatenate([cos_v, cos_t[pt]]),
                "light": np.zeros(nv + int(pt.sum()), dtype=np.int64)}
+        if self._spacing is None:
+            self._spacing = longest_edges(surf.vertices, surf.faces)
         rec = {"pos": surf.vertices, "normal": surf.vertex_normals, "radius": np.sqrt(area / math.pi),
-               "E": E[:, None], "cos_t": cos_v[:, None]}
+               "E": E[:, None], "cos_t": cos_v[:, None], "spacing": self._spacing}
         return src, rec
