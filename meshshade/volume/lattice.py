@@ -410,7 +410,7 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
     # first each corner's side; the distance only at the corners of cubes the surface cuts (mixed sides): the
     # others' magnitude is never read (a cube with its corners on one side is whole or dropped)
     pts = grid.coords.astype(np.float64) * h0
-    bnd = 4.0 * math.sqrt(3.0) * h0 if refine is not None else 2.0 * math.sqrt(3.0) * h0
+    bnd = 2.0 * math.sqrt(3.0) * h0        # the depths are clipped there (:func:`_finish`, h_cut = h0)
     cd = np.asarray(depth(pts, bnd, sign=known, exact=None), dtype=np.float64)
     inside = cd > 0.0
     need = np.zeros(n_corners, dtype=bool)
