@@ -94,10 +94,26 @@ class RemainderTables:
             self.long_fraction[c] = long_total / near_total
         self.dlog = float(_LOG_R[1] - _LOG_R[0])
         # f averaged over an entry's disc, for every disc radius of the grid and distance up to PATCH_RADII radii
+        # (rows computed for the disc radii a bake meets: :meth:`ensure_discs`)
         self.disc = np.zeros((3, _N_COS, DISC_A[2], DISC_STEPS + 1))
-        _disc_table(self.f, self.cum, self.rest, self.n_r, self.log_r0, self.dlog, _TH_NODES, _TH_WEIGHTS,
-                    PATCH_RADII, DISC_STEPS, math.log(DISC_A[0]), math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1),
-                    self.disc)
+        self._disc_rows = np.zeros(DISC_A[2], dtype=bool)
+
+    def ensure_discs(self, radii) -> None:
+        """Tabulate the disc averages (``disc``) for the disc radii ``radii`` (mm; their range, and the grid rows
+        either side that the interpolation reads)."""
+        r = np.asarray(radii, dtype=np.float64)
+        r = r[r > 0.0]
+        if r.size == 0:
+            return
+        log_a0 = math.log(DISC_A[0])
+        dlog_a = math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1)
+        lo = int(np.clip(math.floor((math.log(r.min()) - log_a0) / dlog_a), 0, DISC_A[2] - 1))
+        hi = int(np.clip(math.floor((math.log(r.max()) - log_a0) / dlog_a) + 1, 0, DISC_A[2] - 1))
+        rows = np.flatnonzero(~self._disc_rows[lo:hi + 1]) + lo
+        if rows.size:
+            _disc_table(self.f, self.cum, self.rest, self.n_r, self.log_r0, self.dlog, _TH_NODES, _TH_WEIGHTS,
+                        PATCH_RADII, DISC_STEPS, log_a0, dlog_a, rows.astype(np.int64), self.disc)
+            self._disc_rows[rows] = True
 
     def near_and_beyond(self, cos_t, near_mm):
         """(p, 3): int_0^near f plus the energy beyond the radius, per channel, at ``cos_t`` (p,) and radius
@@ -267,14 +283,14 @@ def _disc_average(f, cum, rest, c, k, frac, d, a, log_r0, dlog, nr, th_x, th_w):
 
 
 @numba.njit(cache=True)
-def _disc_table(f, cum, rest, n_r, log_r0, dlog, th_x, th_w, patch_radii, steps, log_a0, dlog_a, out):
-    """out[c, k, i, j]: f (channel c, cos node k) averaged over a disc of radius a_i = exp(log_a0 + i dlog_a) mm
-    at distance j / steps * patch_radii * a_i."""
+def _disc_table(f, cum, rest, n_r, log_r0, dlog, th_x, th_w, patch_radii, steps, log_a0, dlog_a, rows, out):
+    """out[c, k, i, j] for the radius rows i in ``rows``: f (channel c, cos node k) averaged over a disc of radius
+    a_i = exp(log_a0 + i dlog_a) mm at distance j / steps * patch_radii * a_i."""
     for c in range(out.shape[0]):
         for k in range(out.shape[1]):
             kk = min(k, out.shape[1] - 2)
             fr = 0.0 if k < out.shape[1] - 1 else 1.0
-            for i in range(out.shape[2]):
+            for i in rows:
                 a = math.exp(log_a0 + i * dlog_a)
                 for j in range(steps + 1):
                     d = j * patch_radii * a / steps
@@ -488,6 +504,7 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     perm, lo, hi, child, box, agg = _build_tree(pos, pw, nrm, cos_s, LEAF)
     area = np.ascontiguousarray(src["area"], dtype=np.float64)
     disc = np.sqrt(np.maximum(area, 0.0) / math.pi)
+    tables.ensure_discs(np.concatenate([disc, ra]))
     light = np.ascontiguousarray(src["light"], dtype=np.int64)
     tabs = (tables.f, tables.disc, tables.cos_t, tables.n_r, tables.log_r0, tables.dlog, tables.radius_mm,
             PATCH_RADII, math.log(DISC_A[0]), math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1))
