@@ -14,7 +14,12 @@ Rows (JSON, one object per line on stdout):
   not counted), the fastest of ``--repeats``, and their ratio.
 * ``scaling``: the head (200 mm, skin1, the sun) loop-subdivided 0 .. ``--levels`` times: the default bake's wall
   time from scratch, its stages and its peak resident memory (each size in a fresh process, with
-  NUMBA_NUM_THREADS set to each of ``--threads``), and the fitted cost exponent per thread count.
+  NUMBA_NUM_THREADS set to each of ``--threads``), and the fitted cost exponent per thread count; with several
+  thread counts, ``threads`` rows: per size, the whole bake's and each stage's speed-up from the first thread count
+  to the others (the stages over 0.3 s below 1.5x listed);
+* ``cli-scaling`` (``--cli-scaling``): the same sizes through the command line, as a user runs them: ``meshshade
+  bake head.ply`` in a fresh process (start, imports, reading the file, writing the result), its wall time and
+  peak resident memory (the child's, from the operating system), at each of ``--threads``.
 
 Scenes (the sun along (0.3, -0.4, -0.866) unless said): sphere20 (an icosphere of radius 20 mm, level 5, 10k
 vertices, skin1, the sun from above), spot50 (spot.obj at 50 mm, skin1), head200 (the head scan at 200 mm, skin1),
@@ -22,7 +27,7 @@ blub80 (blub.obj at
 80 mm, marble). The meshes other than the sphere come from ../shared/meshes (skipped with a note without it).
 
     python tools/benchmarks/bench_volume.py [--scenes sphere20,spot50] [--reference-photons 2e7] [--cli]
-                                            [--scaling --levels 3 --threads 1,2]
+                                            [--scaling --levels 3 --threads 1,2] [--cli-scaling --levels 4]
 """
 from __future__ import annotations
 
@@ -207,8 +212,81 @@ def scaling(args):
         exponents[threads] = (round(float(np.polyfit(np.log([s["vertices"] for s in ok]),
                                                      np.log([s["seconds"] for s in ok]), 1)[0]), 3)
                               if len(ok) > 1 else None)
+    for row in thread_rows(sizes):
+        print(json.dumps(row), flush=True)
     return {"row": "scaling", "scene": "head200 loop-subdivided", "sizes": sizes, "cost_exponent": exponents,
             "load_average": os.getloadavg()}
+
+
+def thread_rows(sizes):
+    """Per size: the whole bake's and each stage's speed-up from the first thread count to each other one."""
+    rows = []
+    counts = sorted({s["threads"] for s in sizes if "seconds" in s})
+    for level in sorted({s["level"] for s in sizes}):
+        base = next((s for s in sizes if s["level"] == level and s["threads"] == counts[0] and "seconds" in s), None)
+        for t in counts[1:]:
+            other = next((s for s in sizes if s["level"] == level and s["threads"] == t and "seconds" in s), None)
+            if base is None or other is None:
+                continue
+            stages = {k: round(v / max(other["timings"].get(k, 0.0), 1e-9), 2)
+                      for k, v in base["timings"].items() if k in other["timings"]}
+            slow = sorted(k for k, v in base["timings"].items() if v > 0.3 and stages.get(k, 0.0) < 1.5)
+            rows.append({"row": "threads", "level": level, "vertices": base["vertices"], "from": counts[0], "to": t,
+                         "speedup": round(base["seconds"] / other["seconds"], 2), "stage_speedup": stages,
+                         "stages_over_0.3s_below_1.5x": slow})
+    return rows
+
+
+def cli_scaling(args):
+    """``meshshade bake`` of the head subdivided 0 .. ``--levels`` times, each a fresh process: wall seconds and the
+    child's peak resident memory, at each of ``--threads``."""
+    import igl
+
+    from meshshade.io import write_ply
+
+    got = scene("head200")
+    if got is None:
+        return [{"row": "cli-scaling", "skipped": f"{SHARED} not found"}]
+    mesh, mat, light = got
+    d = light.direction
+    light_arg = f"directional:{d[0]:.6g},{d[1]:.6g},{d[2]:.6g}"
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = []
+        for level in range(args.levels + 1):
+            V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+            if level:
+                V, F = igl.loop(V, F, level)
+            path = Path(tmp) / f"head{level}.ply"
+            write_ply(path, V, F)
+            paths.append((level, int(V.shape[0]), path))
+        exe = [sys.executable, "-m", "meshshade.cli"]
+        for threads in [int(t) for t in args.threads.split(",")]:
+            env = {**os.environ, "MESHSHADE_ASSET_CACHE": "off", "NUMBA_NUM_THREADS": str(threads)}
+            warm = [*exe, "bake", str(paths[0][2]), "--material", mat.name, "--light", light_arg, "-q", "--out",
+                    str(Path(tmp) / "warm.ply")]
+            subprocess.run(warm, check=True, env=env, capture_output=True)       # numba's cache, not counted
+            for level, n, path in paths:
+                argv = [*exe, "bake", str(path), "--material", mat.name, "--light", light_arg, "-q", "--out",
+                        str(Path(tmp) / f"out{level}.ply")]
+                times, peaks = [], []
+                for _ in range(args.repeats if level < 3 else 1):
+                    t = time.perf_counter()
+                    child = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                             text=True)
+                    err = child.stderr.read()
+                    _, status, usage = os.wait4(child.pid, 0)           # this child's own resource usage
+                    times.append(time.perf_counter() - t)
+                    peaks.append(usage.ru_maxrss / 1024.0)               # KiB on Linux
+                    code = child.returncode = os.waitstatus_to_exitcode(status)
+                row = {"row": "cli-scaling", "level": level, "vertices": n, "threads": threads,
+                       "seconds": round(min(times), 2), "repeats": len(times), "peak_rss_mib": round(max(peaks)),
+                       "exit": code}
+                if code:
+                    row["error"] = err.strip().splitlines()[-1:] or ["(none)"]
+                print(json.dumps(row), flush=True)
+                rows.append(row)
+    return rows
 
 
 def main():
@@ -220,6 +298,8 @@ def main():
     ap.add_argument("--levels", type=int, default=2)
     ap.add_argument("--threads", default="2", help="NUMBA_NUM_THREADS of the scaling runs, comma-separated")
     ap.add_argument("--cli", action="store_true", help="time meshshade bake and mc as fresh processes")
+    ap.add_argument("--cli-scaling", action="store_true", help="time meshshade bake of the subdivided head as fresh "
+                    "processes, with the children's peak memory")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--no-accuracy", action="store_true")
     ap.add_argument("--one-size", type=int, default=None, help=argparse.SUPPRESS)
@@ -233,6 +313,8 @@ def main():
             print(json.dumps(cli(name, args)), flush=True)
     if args.scaling:
         print(json.dumps(scaling(args)), flush=True)
+    if args.cli_scaling:
+        cli_scaling(args)
 
 
 if __name__ == "__main__":
