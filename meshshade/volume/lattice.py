@@ -363,6 +363,8 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
     g = np.meshgrid(*[np.arange(a[i], b[i]) for i in range(3)], indexing="ij")
     cand = np.stack([x.ravel() for x in g], axis=1)
     cand_sign = np.zeros(cand.shape[0], dtype=np.int8)     # known side of each candidate (0: unknown)
+    centre_sign = cand_sign                                  # known side of each candidate's centre
+    parent_d = np.zeros(cand.shape[0])                       # its parent's depth bound at the parent's centre
     kept, counts, evaluated = [None] * (L + 1), [0] * (L + 1), 0
     surface = None              # which cubes kept at level 1 may be cut (they are evaluated with level 0)
     for l in range(L, 0, -1):
@@ -370,7 +372,7 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
         r = 0.5 * math.sqrt(3.0) * h
         bound = max(bands[l] + 4 * r, grading.depth_max + 2 * r) if l == L else bands[l] + 4 * r
         centres = (cand + 0.5) * h
-        d = depth(centres, bound, sign=cand_sign, exact=False)
+        d = depth(centres, bound, sign=centre_sign, exact=False)
         evaluated += cand.shape[0]
         out = d < -r
         shallow = d - r < bands[l]
@@ -386,11 +388,15 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
         kept[l] = cand[keep]
         counts[l] = int(keep.sum())
         sub = ~out & split
-        # a parent wholly on one side (|d| > r) gives its children its side: only children of parents the
-        # surface may cross need the winding number
-        side = np.where(np.abs(d[sub]) > r, np.sign(d[sub]), 0).astype(np.int8)
+        # a parent wholly on one side (|d| > r) gives its children its side, and a parent whose centre lies
+        # farther than r / 2 from the surface (|d| is a lower bound) its children's centres: only the rest need the
+        # winding number
+        ds = d[sub]
+        side = np.where(np.abs(ds) > r, np.sign(ds), 0).astype(np.int8)
         cand = (2 * cand[sub][:, None, :] + CORNERS[None, :, :]).reshape(-1, 3)
         cand_sign = np.repeat(side, 8)
+        centre_sign = np.repeat(np.where(np.abs(ds) > 0.5 * r, np.sign(ds), 0).astype(np.int8), 8)
+        parent_d = np.repeat(ds, 8)
     # the corners of the finest candidates and of the coarser cubes that may be cut are numbered and evaluated once
     t_mid = time.perf_counter()
     coarse = kept[1][surface] if surface is not None and surface.any() else np.zeros((0, 3), dtype=np.int64)
@@ -404,9 +410,9 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
     n_corners = grid.number()
     fine_ids = grid.corners(cand, 1)                                   # (C0, 8)
     coarse_ids = grid.corners(coarse, 2)                               # (C1, 8)
-    # a corner of a level-0 candidate whose parent lies wholly inside is inside
+    # a corner of a level-0 candidate nearer its parent's centre than the parent's depth bound is on its side
     known = np.zeros(n_corners, dtype=np.int8)
-    run_in_blocks(lambda a, b: _spread_sign(fine_ids, cand_sign, known, a, b), cand.shape[0], min_block=4096)
+    run_in_blocks(lambda a, b: _spread_sign(fine_ids, parent_d, h0, known, a, b), cand.shape[0], min_block=4096)
     # first each corner's side; the distance only at the corners of cubes the surface cuts (mixed sides): the
     # others' magnitude is never read (a cube with its corners on one side is whole or dropped)
     pts = grid.coords.astype(np.float64) * h0
@@ -449,13 +455,21 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
 
 
 @numba.njit(cache=True, nogil=True)
-def _spread_sign(ids, sign, known, c0, c1):
-    """known[corner] = the side of each item c0..c1 whose side is known (sign != 0) at its 8 corners (items on
-    known sides never disagree: a cube wholly inside touches none wholly outside)."""
+def _spread_sign(ids, parent_d, h, known, c0, c1):
+    """known[corner] = the side of the parent's centre at the 8 corners of items c0..c1 that lie nearer that
+    centre than the parent's depth bound |parent_d| (item c is child c % 8 of its parent, a cube of side 2h; its
+    corner k lies at offsets in {-1, 0, 1} h from the parent's centre). Corners on known sides never disagree."""
     for c in range(c0, c1):
-        s = sign[c]
-        if s != 0:
-            for k in range(8):
+        pd = parent_d[c]
+        if pd == 0.0:
+            continue
+        o = c % 8
+        s = 1 if pd > 0.0 else -1
+        for k in range(8):
+            ox = (o & 1) + (k & 1) - 1
+            oy = ((o >> 1) & 1) + ((k >> 1) & 1) - 1
+            oz = ((o >> 2) & 1) + ((k >> 2) & 1) - 1
+            if abs(pd) > h * math.sqrt(ox * ox + oy * oy + oz * oz):
                 known[ids[c, k]] = s
 
 
