@@ -154,7 +154,7 @@ def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, s
         out = run(a, b)
         return out, time.perf_counter() - t
 
-    ex = ThreadPoolExecutor(max_workers=n_threads)
+    ex = _shared_pool(n_threads)      # the process's pool: no threads started or joined per call
     pending: dict = {}
     # signals are polled between the executor's calls, never raised inside them (progress.polled_interrupts)
     with polled_interrupts() as poll:
@@ -181,7 +181,7 @@ def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, s
         finally:  # on an interrupt or error: queued blocks are dropped, running ones finish (or stop early)
             for f in pending:
                 f.cancel()
-            ex.shutdown(wait=True)
+            wait(pending)
     return [results[a] for a in sorted(results)]
 
 
