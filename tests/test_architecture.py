@@ -113,7 +113,7 @@ PARAMS_ALLOWED = {
     ("meshshade/transport/baking.py", "check_bake_options"): PUBLIC_OPTIONS + "; the options of bake, checked",
     ("meshshade/output/compare.py", "run_comparison"): PUBLIC_OPTIONS,
     ("meshshade/montecarlo/simulation.py", "simulate"): PUBLIC_OPTIONS,
-    ("meshshade/transport/hierarchical.py", "SurfaceTransport.build"): PUBLIC_OPTIONS,
+    ("meshshade/surface/hierarchical.py", "SurfaceTransport.build"): PUBLIC_OPTIONS,
     **{(path, f"{cls}.query"): ("the geodesic query: the sources' columns (positions, faces, barycentrics, vertex, "
                                 "normals, radius) and keyword-only frame options (d1, d2, k1, k2, progress...), "
                                 "named at every call")

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from meshshade.bench.scenes import SCENES, Scene
 from meshshade.errors import ParameterError
 from meshshade.transport import MODELS, bake
-from meshshade.transport.source_factors import check_source_model, source_model_keyword
+from meshshade.surface.source_factors import check_source_model, source_model_keyword
 
 KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons", "source_model")
 #: models for which bake's rtol (series tolerance) changes nothing

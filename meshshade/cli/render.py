@@ -17,7 +17,7 @@ from pathlib import Path
 from meshshade.cli.options import background_from_args, image_scene_from_args, material_given
 from meshshade.errors import MaterialError, MeshshadeError, MeshValidationError, OutputError
 from meshshade.io import check_output_path, read_baked_ply, write_exr, write_png
-from meshshade.transport.models import DEFAULT_MODEL
+from meshshade.surface.models import DEFAULT_MODEL
 from meshshade.kernels.optics import check_eta
 from meshshade.output.render import (PixelGather, check_image_size, display_rgba, image_rgba, parse_camera,
                                      render_radiance)

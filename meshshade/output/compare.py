@@ -23,8 +23,8 @@ from meshshade.output import render
 from meshshade.output.tonemap import luminance
 from meshshade.raycast import make_scene
 from meshshade.transport.baking import bake, check_bake_options
-from meshshade.transport.models import DEFAULT_MODEL, MODELS
-from meshshade.transport.source_factors import SOURCE_MODELS, check_source_model, source_model_keyword
+from meshshade.surface.models import DEFAULT_MODEL, MODELS
+from meshshade.surface.source_factors import SOURCE_MODELS, check_source_model, source_model_keyword
 
 #: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
 DEFAULT_FLOOR = 1e-3

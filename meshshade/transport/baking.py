@@ -1,14 +1,14 @@
 """The bake: per-vertex radiant exitance M(x_o) = sum_i Phi_i R(x_o; x_i) over the light's entry samples.
 
 The kernel is expanded at the entry point x_i (docs/physics.md §1.3; pair_kernel.py). Models
-(:data:`meshshade.transport.models.MODELS`):
+(:data:`meshshade.surface.models.MODELS`):
 
 * ``dipole``: Jensen's usage, R_d(|x_o - x_i|) (chord distance);
 * ``curved``: the first-order k1/k2 kernel with its positivity policy (kernels/curvature.py);
 * ``exact-sphere``: the exact sphere series with the local radius 2/(k1 + k2) (for validation on spheres;
   where the surface is not convex it falls back to the dipole and counts it);
 * ``auto``: per entry sample the cheapest of these that the scene calls for, and exact or arc geodesics
-  (meshshade/transport/auto.py; the decisions are counted in ``stats``).
+  (meshshade/surface/auto.py; the decisions are counted in ``stats``).
 
 :func:`bake` runs the stages in order: validate the options, principal curvatures, entry samples (rays), then the
 volume transport (meshshade/volume), the hierarchical transport (hierarchical.py) or the direct sum (direct_sum.py:
@@ -36,13 +36,13 @@ from meshshade.materials import Material
 from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
-from meshshade.transport.farfield import (DEFAULT_FAR_TOL)
-from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
+from meshshade.surface.farfield import (DEFAULT_FAR_TOL)
+from meshshade.surface.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
                                               vertex_drift, vertex_power)
-from meshshade.transport.gather import Stopwatch, cutoff_radii
-from meshshade.transport.direct_sum import SumOptions, direct_sum, merge_plans, subset_samples
-from meshshade.transport.models import DEFAULT_MODEL, MODELS
-from meshshade.transport.source_factors import (check_source_model, near_field_factors, source_model_keyword)
+from meshshade.surface.gather import Stopwatch, cutoff_radii
+from meshshade.surface.direct_sum import SumOptions, direct_sum, merge_plans, subset_samples
+from meshshade.surface.models import DEFAULT_MODEL, MODELS
+from meshshade.surface.source_factors import (check_source_model, near_field_factors, source_model_keyword)
 from meshshade.volume.transport import VolumeTransport
 
 log = logging.getLogger("meshshade")
@@ -78,7 +78,7 @@ class BakeResult:
                     (inf beyond the neighbourhood)
     cutoff_mm : (3,) — neighbourhood radius per channel
     timings : dict stage -> seconds; stats : dict of counts (pairs, skipped work, fallbacks, auto decisions)
-    plan : meshshade.transport.auto.AutoPlan or None — the per-sample decisions of ``model="auto"``
+    plan : meshshade.surface.auto.AutoPlan or None — the per-sample decisions of ``model="auto"``
     volume : meshshade.volume.transport.VolumeTransport or None — the volume transport of ``model="volume"``
              (reuse it for further lights: ``bake(..., volume=result.volume)``; per-pixel renders use its near field)
     sample_exitance : (n_s, 3) W/mm^2 or None — the volume model's solution at the vertices of the surface it
@@ -152,7 +152,7 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     chords over an edge-path search: 1e-4 on smooth meshes such as spheres and tori and about 5x faster, but
     1-11 % low on average on bumpy scanned meshes; see geometry/geodesics/arc.py). With ``model="auto"``
     the geodesic method is chosen per entry sample ("arc" restricts it to arc) and ``auto_options`` may override
-    the tolerances of :func:`meshshade.transport.auto.plan_sources`.
+    the tolerances of :func:`meshshade.surface.auto.plan_sources`.
 
     ``far_field``: "off", "clustered" or "pairwise" (default: "clustered" for ``auto``, "off" otherwise; "off" with
     ``auto`` also turns off the shared far-zone geodesics, leaving exact or arc geodesics per sample). When on,
@@ -168,10 +168,10 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     cosines in the tangent plane (sample_groups.py), or the arc method.
 
     ``transport``: how the vertex samples of directional and point lights are summed: "direct" (every pair
-    within the cutoff, the reference; the options above), "hierarchical" (transport/hierarchical.py: a
+    within the cutoff, the reference; the options above), "hierarchical" (surface/hierarchical.py: a
     near zone of a few patch radii and source clusters beyond, cost near-linear in the vertex count), "auto"
     (default: hierarchical where its distance check passes on this mesh, else direct; ``stats["transport"]``
-    says which and why), or a :class:`~meshshade.transport.hierarchical.SurfaceTransport` built for this
+    says which and why), or a :class:`~meshshade.surface.hierarchical.SurfaceTransport` built for this
     mesh, material and model (reused across lights and frames). Beam samples always use the direct sum.
 
     ``source_model``: what enters the medium at each entry sample. "point" (default; "beam" for ``volume``): each
@@ -179,7 +179,7 @@ def bake(mesh, material: Material, lights, *, model: str = DEFAULT_MODEL, cutoff
     sources along the beam fitted to exact transport (docs/physics.md §13), carried by every model as the factor
     of eq. (79): pairs are multiplied by the ratio of the near-field model to the planar dipole (patch-averaged
     near the source; for beams over the receiver's patch), and the far field by the ratio of their tails
-    (transport/source_factors.py, eq. (80)). ``near_field``: the former name of ``source_model`` (deprecated: a
+    (surface/source_factors.py, eq. (80)). ``near_field``: the former name of ``source_model`` (deprecated: a
     DeprecationWarning).
 
     ``progress``: False (default), True or the task named in the progress lines ("bake"; ``render`` and

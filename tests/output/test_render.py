@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from meshshade.transport.models import DEFAULT_MODEL
+from meshshade.surface.models import DEFAULT_MODEL
 from meshshade import Material, io
 from meshshade.output import render
 from meshshade.cli.main import main

@@ -9,8 +9,8 @@ from meshshade.kernels.sphere import sphere_series_profile, sphere_total_reflect
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.baking import bake
-from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.patch_average import patch_average_factor
+from meshshade.surface.gather import cutoff_radii
+from meshshade.surface.patch_average import patch_average_factor
 
 SKIN = Material(1.0, 0.01, 1.3, name="skin-like")  # the skin test case of docs/physics.md §11
 

@@ -34,8 +34,8 @@ from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.montecarlo.simulation import simulate
 from meshshade.transport.baking import bake
-from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.hierarchical import far_distance_check
+from meshshade.surface.gather import cutoff_radii
+from meshshade.surface.hierarchical import far_distance_check
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "meshes"
 LOW_ABSORPTION = Material([1.0, 1.0, 1.0], [0.01, 0.01, 0.01], eta=1.3, name="sigma_s'=1, sigma_a=0.01")

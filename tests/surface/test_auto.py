@@ -1,4 +1,4 @@
-"""``--model auto``: the per-sample decisions (meshshade/transport/auto.py) and their use in the bake and the CLI."""
+"""``--model auto``: the per-sample decisions (meshshade/surface/auto.py) and their use in the bake and the CLI."""
 import contextlib
 
 import numpy as np
@@ -17,8 +17,8 @@ from meshshade.kernels.curvature import curvature_ratios
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import material_from_options
-from meshshade.transport import auto, zones
-from meshshade.transport.models import Kernel
+from meshshade.surface import auto, zones
+from meshshade.surface.models import Kernel
 
 SKIN = material_from_options("skin1")
 

@@ -17,9 +17,9 @@ from meshshade.kernels.fitted_curvature import chord_curvature, helix_chord_curv
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.profiles import Shape, reflectance_profile
-from meshshade.transport import auto, cutoff_radii
+from meshshade.surface import auto, cutoff_radii
 from meshshade.transport.baking import bake
-from meshshade.transport.models import Kernel
+from meshshade.surface.models import Kernel
 
 MAT = Material(1.0, 0.01, 1.3, name="skin-like")
 R = 10.0

@@ -2,7 +2,7 @@
 
 Scene: the bench's ``sphere_r20_directional`` (meshshade/bench/scenes.py: radius 20 mm, 1.5 mm edges at icosphere
 level 4), sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3, a directional light along -z, ``model="exact-sphere"``.
-The reference (tests/transport/_sphere_reference.py) integrates the exact sphere series over the lit cap with the
+The reference (tests/surface/_sphere_reference.py) integrates the exact sphere series over the lit cap with the
 Fresnel entry written out independently; it is checked here first (convergence, energy, planar limit, Fresnel
 edges), then the bake is held to it. Errors are relative, over every vertex whose reference exitance exceeds
 1e-3 of its peak (here the whole sphere, shadow side included).
@@ -26,7 +26,7 @@ from meshshade.kernels.sphere import sphere_total_reflectance
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.baking import bake
-from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
+from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
 
 _spec = importlib.util.spec_from_file_location("_sphere_reference", Path(__file__).with_name("_sphere_reference.py"))
 ref = importlib.util.module_from_spec(_spec)
@@ -183,7 +183,7 @@ def test_level4_direct_sum_meets_the_issue_target():
 
 @pytest.mark.xfail(strict=True, reason="the default cutoff (cutoff_tol 1e-4 of the planar dipole's total: 39.7 mm) "
                    "is shorter than the sphere's half circumference (62.8 mm), and the sphere kernel's far tail is "
-                   "far above the dipole's: the shadow side loses up to 70 % (transport/gather.py cutoff_radii)")
+                   "far above the dipole's: the shadow side loses up to 70 % (surface/gather.py cutoff_radii)")
 def test_default_cutoff_reaches_the_shadow_side(level3):
     res = bake(level3, MAT, [SUN], model="exact-sphere")
     err = _errors(res, level3)

@@ -1,4 +1,4 @@
-"""The light's sideways drift inside (docs/physics.md §13.4, eqs. (87)-(88); transport/source_factors.py).
+"""The light's sideways drift inside (docs/physics.md §13.4, eqs. (87)-(88); surface/source_factors.py).
 
 Light refracted at theta_t drifts a transport length along its direction before it forgets it, so its diffusion
 sources sit sin(theta_t)/sigma_t' sideways of the entry point. References: Snell's law in vector form, scipy's
@@ -22,8 +22,8 @@ from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.montecarlo.simulation import simulate
 from meshshade.transport.baking import bake
-from meshshade.transport.hierarchy_loops import bessel_i0e, drift_factor
-from meshshade.transport.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.hierarchy_loops import bessel_i0e, drift_factor
+from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
 
 SKIN = Material.preset("skin1")
 BENCH = Material(1.0, 0.01, 1.3, 0.0)

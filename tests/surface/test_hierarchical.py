@@ -1,4 +1,4 @@
-"""The hierarchical transport (meshshade/transport/hierarchical.py) against the direct sum, its clusters against
+"""The hierarchical transport (meshshade/surface/hierarchical.py) against the direct sum, its clusters against
 their own leaves, the sigma points' moments, the distance check, reuse across lights, and the CLI option.
 
 Reference values: the direct sum (transport="direct", every pair within the cutoff with exact polyhedral
@@ -19,10 +19,10 @@ from meshshade.io import write_ply
 from meshshade.light import BeamLight, DirectionalLight, entry_samples
 from meshshade.materials import material_from_options
 from meshshade.transport.baking import bake
-from meshshade.transport.farfield_loops import kd_permutation, node_ranges, tree_depth
-from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
+from meshshade.surface.farfield_loops import kd_permutation, node_ranges, tree_depth
+from meshshade.surface.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
                                               vertex_power)
-from meshshade.transport.hierarchy_loops import cluster_geometry
+from meshshade.surface.hierarchy_loops import cluster_geometry
 
 SKIN = material_from_options("skin1")
 MARBLE = material_from_options("marble")
@@ -238,7 +238,7 @@ def test_far_field_does_not_depend_on_threads_or_blocks(sphere3, monkeypatch):
     computed on its own; a scratch value carried from one receiver to the next within a block would differ)."""
     import numba
 
-    from meshshade.transport import hierarchical
+    from meshshade.surface import hierarchical
 
     core = SurfaceTransport.build(sphere3, SKIN, "curved")
     rng = np.random.default_rng(5)

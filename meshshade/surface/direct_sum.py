@@ -15,13 +15,13 @@ import numpy as np
 
 from meshshade.light import BeamLight
 from meshshade.progress import Progress, kernel_interrupts
-from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
-from meshshade.transport.farfield import far_field_exitance, far_field_exitance_pairwise, far_field_radius
-from meshshade.transport.gather import PairStream, chunk_size, gather
-from meshshade.transport.source_factors import drift_angles, near_field_factors, refracted_drift
-from meshshade.transport.pair_kernel import PairKernel, source_frames
-from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
-from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay, neighbourhood_solver
+from meshshade.surface.auto import AutoPlan, neighbourhood_curvature, plan_sources
+from meshshade.surface.farfield import far_field_exitance, far_field_exitance_pairwise, far_field_radius
+from meshshade.surface.gather import PairStream, chunk_size, gather
+from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.pair_kernel import PairKernel, source_frames
+from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
+from meshshade.surface.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay, neighbourhood_solver
 
 log = logging.getLogger("meshshade")
 
@@ -124,7 +124,7 @@ def _near_radius(mesh, material, samples, cut, far_field: str, far_tol: float) -
 
 def _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, auto_options):
     """The AutoPlan of the entry samples: curvature maxima within each sample's near radius and cutoff, then
-    :func:`~meshshade.transport.auto.plan_sources` (exact geodesics switched off when ``geodesic`` is "arc")."""
+    :func:`~meshshade.surface.auto.plan_sources` (exact geodesics switched off when ``geodesic`` is "arc")."""
     k = len(samples)
     area = samples.vertex >= 0
     near_radius = (np.where(area, NEAR_MARGIN * near.max(), cut.max()) if far_field != "off"

@@ -1,4 +1,4 @@
-"""The near-field model in the bake (``source_model="beam"``, transport/source_factors.py, docs/physics.md eq. (80)).
+"""The near-field model in the bake (``source_model="beam"``, surface/source_factors.py, docs/physics.md eq. (80)).
 
 References are independent of the bake's sums: the near-field model's closed-form total and profile
 (kernels.near_field, eq. (76)) and the planar dipole's closed-form total. A 100 mm sphere stands in for the
@@ -20,7 +20,7 @@ from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.output.render import PixelGather
 from meshshade.transport.baking import bake
-from meshshade.transport.source_factors import near_field_factors
+from meshshade.surface.source_factors import near_field_factors
 
 SKIN = Material.preset("skin1")
 R = 100.0

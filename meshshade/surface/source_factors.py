@@ -46,7 +46,7 @@ from meshshade.kernels.dipole import dipole_profile
 from meshshade.kernels.near_field import (incidence_gain, near_field_profile, near_field_ring, near_field_sources,
                                           near_field_total)
 from meshshade.materials import Material
-from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, _disc_average
+from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, _disc_average
 
 #: the source models: what enters the medium at an entry sample, the kernels' own point source at z_r ("point") or
 #: the near-field model ("beam")
