@@ -43,7 +43,6 @@ from scipy.spatial import cKDTree
 
 from meshshade.errors import ParameterError
 from meshshade.kernels.dipole import dipole_cutoff_radius
-from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
 from meshshade.pacing import run_in_blocks
 from meshshade.surface.farfield_loops import (accumulate_pairs, kd_permutation, node_moments, node_ranges,
@@ -97,7 +96,7 @@ def _radii(name, value, *, allow_zero) -> np.ndarray:
 
 def _channel_params(material: Material):
     """(sigma_t' [1/mm], alpha', mu = sigma_tr/sigma_t', z_v [optical]) per channel, (3,) each."""
-    p = diffusion_params(material.albedo_prime, material.eta)
+    p = material.medium.jensen
     return (np.ascontiguousarray(material.sigma_t_prime, dtype=np.float64), np.ascontiguousarray(p.albedo_prime),
             np.ascontiguousarray(p.mu), np.ascontiguousarray(p.z_v))
 

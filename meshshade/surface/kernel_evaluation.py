@@ -35,7 +35,6 @@ from meshshade.kernels.curvature.table import curved_dipole, kernel_ratios
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
 from meshshade.kernels.fitted_curvature import (effective_coefficients, euler_curvatures, fitted_dipole,
                                                 fitted_row_table, matched_table, shipped_coefficients)
-from meshshade.kernels.optics import diffusion_params
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
 from meshshade.surface.models import Kernel
@@ -85,7 +84,7 @@ def kernel_params(material: Material, rho_max_mm, sphere: "SphereTables | None" 
     channel; 1.25 times that, at least 10 transport lengths: the kernels compute beyond a table directly) and the
     exact-sphere tables of ``sphere`` (none when None). ``curvature=False``: no curvature or fitted tables (the
     dipole and exact-sphere kernels do not read them)."""
-    p = diffusion_params(material.albedo_prime, material.eta)
+    p = material.medium.jensen
     st = np.ascontiguousarray(material.sigma_t_prime, dtype=np.float64)
     b3 = lambda v: np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (3,)))  # noqa: E731
     al, mu, zr, zv = b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_v)
