@@ -17,11 +17,11 @@ from meshshade.volume.lattice import Grading, Lattice, build_lattice, coarser_la
 from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
 from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
 from meshshade.volume.remainder import RemainderTables, remainder_exitance
-from meshshade.volume.resolution import VolumeResolution, diffusion_constants, volume_resolution
+from meshshade.volume.resolution import VolumeResolution, volume_resolution
 from meshshade.volume.surface import SamplingSurface, split_long_edges
 from meshshade.volume.transport import VolumeTransport
 
 __all__ = ["Assembly", "assemble", "cut_tetrahedron", "SurfaceVolume", "Grading", "Lattice", "build_lattice",
            "coarser_lattice", "ewald_weight", "lattice_loads", "line_rule", "ChannelOperator", "Multigrid",
-           "solve_channels", "RemainderTables", "remainder_exitance", "VolumeResolution", "diffusion_constants",
-           "volume_resolution", "SamplingSurface", "split_long_edges", "VolumeTransport"]
+           "solve_channels", "RemainderTables", "remainder_exitance", "VolumeResolution", "volume_resolution",
+           "SamplingSurface", "split_long_edges", "VolumeTransport"]

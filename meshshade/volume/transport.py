@@ -36,7 +36,7 @@ from meshshade.volume.lattice import build_lattice
 from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
 from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
 from meshshade.volume.remainder import RemainderTables, remainder_exitance
-from meshshade.volume.resolution import DEFAULT_BUDGET, diffusion_constants, volume_resolution
+from meshshade.volume.resolution import DEFAULT_BUDGET, volume_resolution
 from meshshade.volume.surface import SamplingSurface
 
 __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0"]
@@ -66,9 +66,9 @@ class VolumeTransport:
         self.mesh, self.material, self.resolution = mesh, material, resolution
         self.surface, self.inside, self.tables = surface, inside, tables
         self.timings = timings
-        consts = [diffusion_constants(material, c) for c in range(3)]
-        self.A = np.array([c[2] for c in consts])
-        self.coef = np.array([(D, 1.0 / (2.0 * A), sa) for D, sa, A in consts])
+        m = material.medium   # d'Eon's D [mm], boundary mismatch A and sigma_a [1/mm] per channel (eq. (74))
+        self.A = np.array(m.A, dtype=np.float64)
+        self.coef = np.stack([m.D, 1.0 / (2.0 * m.A), m.sigma_a], axis=1)
         self._lattice_key = None
         self.on_stage = None          # called with each stage's name as it ends (progress), or None
         self.lattice = self.assembly = self.operator = self.multigrid = None
