@@ -8,7 +8,6 @@ vertices (:func:`gather`).
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -84,25 +83,6 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
             for cc in same:
                 M[:, cc] += acc
     return M, {"pairs_evaluated": int(n_pairs.sum()), "channels_computed": len(kernel.channels)}
-
-
-class Stopwatch:
-    """Wall time per stage: :meth:`lap` charges the time since the previous lap to a stage (seconds, summed)."""
-
-    def __init__(self):
-        self.timings: dict = {}
-        self._t0 = time.perf_counter()
-
-    def lap(self, name: str) -> None:
-        t = time.perf_counter()
-        self.timings[name] = self.timings.get(name, 0.0) + t - self._t0
-        self._t0 = t
-
-    def charge(self, timings: dict) -> None:
-        """Add stage times measured elsewhere (``{stage: seconds}``) and restart the lap there."""
-        for name, seconds in timings.items():
-            self.timings[name] = self.timings.get(name, 0.0) + seconds
-        self._t0 = time.perf_counter()
 
 
 def chunk_size(mesh, src_cut) -> int:
