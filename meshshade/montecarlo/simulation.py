@@ -45,7 +45,7 @@ import math
 import os
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -61,7 +61,8 @@ from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
 
-__all__ = ["DEFAULT_BATCHES", "TOTAL_KEYS", "MCResult", "batch_stats", "check_mc_options", "simulate"]
+__all__ = ["DEFAULT_BATCHES", "TOTAL_KEYS", "MCOptions", "MCResult", "batch_stats", "check_mc_options", "simulate",
+           "mc_options_from_keywords"]
 
 DEFAULT_BATCHES = 16
 TOTAL_KEYS = ("specular_reflectance", "diffuse_reflectance", "transmittance", "absorbed")
@@ -213,17 +214,11 @@ def check_mc_options(photons=100_000, *, seed=0, time_budget=None, n_batches=DEF
     return photons, seed, time_budget, n_batches, pool
 
 
-def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000, seed: int = 0,
-             time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int | None = None,
-             keep_beam_exits: bool = True, beam_distances: bool = True, fast_interior: bool = True,
-             engine: str = "auto", progress: bool | str = False, client=None) -> MCResult:
-    """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
+@dataclass(frozen=True)
+class MCOptions:
+    """How :func:`simulate` walks; a frozen record, checked where it is made (:func:`check_mc_options`: a one-line
+    MeshshadeError naming the option, its value and what is allowed).
 
-    Parameters
-    ----------
-    mesh : Mesh (closed, outward faces; vertices in mm)
-    material : Material (uses sigma_s', sigma_a, eta and g)
-    lights : light or sequence of BeamLight / DirectionalLight / PointLight
     photons : photons per channel group (with ``time_budget``: an upper bound, None = unbounded)
     seed : int >= 0, makes the run reproducible: with the pooled engine photon ``i`` of channel group ``k`` draws
         every random number from a stream keyed by (seed, k, i), so the result is bitwise identical for any
@@ -236,14 +231,70 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         wavefront, ``fast_interior=False``, finishes all photons in flight)
     n_batches : batches for the standard errors (>= 2)
     pool : photon slots advanced together (default 2**18 for the pooled engine, 2**16 for the baseline)
-    beam_distances : compute per-vertex geodesic distances from the first beam's entry point
-    fast_interior : True: the pooled engine (numba interior walks inside a conservative safe-distance grid,
-        one batched Embree query per round, :mod:`meshshade.montecarlo.engine`); False: the plain numpy
-        wavefront with an Embree query every step (the baseline: same distribution, different random streams)
     engine : pooled engine's Embree calls: "fused" (rtcIntersect1 from the numba threads, inside the walk,
         :mod:`meshshade.raycast.embree_direct`), "batched" (one embreex call per round) or "auto" (fused when the
         Embree library can be bound, else batched). Both give the same photon paths up to float32 ties. "direct":
         the former spelling of "fused" (deprecated: a DeprecationWarning).
+    fast_interior : True: the pooled engine (numba interior walks inside a conservative safe-distance grid,
+        one batched Embree query per round, :mod:`meshshade.montecarlo.engine`); False: the plain numpy
+        wavefront with an Embree query every step (the baseline: same distribution, different random streams)
+    keep_beam_exits : keep the exit points of a beam's photons (``MCResult.beam_exits``)
+    beam_distances : compute per-vertex geodesic distances from the first beam's entry point
+    """
+
+    photons: int | None = 100_000
+    seed: int = 0
+    time_budget: float | None = None
+    n_batches: int = DEFAULT_BATCHES
+    pool: int | None = None
+    engine: str = "auto"
+    fast_interior: bool = True
+    keep_beam_exits: bool = True
+    beam_distances: bool = True
+
+    def __post_init__(self):
+        engine = check_engine(self.engine, stacklevel=4)
+        photons, seed, time_budget, n_batches, pool = check_mc_options(
+            self.photons, seed=self.seed, time_budget=self.time_budget, n_batches=self.n_batches, pool=self.pool,
+            engine=engine)
+        for name, value in (("photons", photons), ("seed", seed), ("time_budget", time_budget),
+                            ("n_batches", n_batches), ("pool", pool), ("engine", engine)):
+            object.__setattr__(self, name, value)
+        for name in ("fast_interior", "keep_beam_exits", "beam_distances"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise MeshshadeError(f"{name} must be True or False, got {getattr(self, name)!r}")
+
+
+def mc_options_from_keywords(options: MCOptions | None, keywords: dict, where: str = "simulate",
+                             stacklevel: int = 3) -> MCOptions:
+    """``options`` (default ones for None) with the former keyword arguments ``keywords`` of ``where`` (the fields
+    of :class:`MCOptions`) applied, with a DeprecationWarning attributed ``stacklevel`` frames up; an unknown
+    keyword is a TypeError, as Python's own."""
+    options = MCOptions() if options is None else options
+    if not isinstance(options, MCOptions):
+        raise MeshshadeError(f"{where}: options must be MCOptions or None, got {type(options).__name__}")
+    if not keywords:
+        return options
+    unknown = sorted(set(keywords) - set(MCOptions.__dataclass_fields__))
+    if unknown:
+        raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}")
+    warnings.warn(f"{where}({', '.join(f'{k}=' for k in keywords)}...) is deprecated; pass "
+                  "options=MCOptions(...) (meshshade.montecarlo)", DeprecationWarning, stacklevel=stacklevel)
+    return replace(options, **keywords)
+
+
+def simulate(mesh, material: Material, lights, options: MCOptions | None = None, *, progress: bool | str = False,
+             client=None, **deprecated) -> MCResult:
+    """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
+
+    Parameters
+    ----------
+    mesh : Mesh (closed, outward faces; vertices in mm)
+    material : Material (its medium's sigma_s, sigma_a, and eta, g)
+    lights : light or sequence of BeamLight / DirectionalLight / PointLight
+    options : MCOptions or None (the defaults: 1e5 photons per channel group, seed 0): photons, seed, time
+        budget, batches, pool, engine (:class:`MCOptions`). Its former keyword arguments (``photons=``,
+        ``seed=``...) are accepted with a DeprecationWarning.
     progress : False, True or the task named in the progress lines (default "mc"): photons emitted, as a bar on
         a terminal and as periodic lines otherwise (:class:`meshshade.progress.Progress`)
     client : a :class:`distributed.Client`: split the photons across its workers in tasks of whole entry chunks
@@ -266,13 +317,16 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     LightError
         No light, a beam that misses, no light reaching the mesh (as the bake: :class:`Emitter`).
     """
+    options = mc_options_from_keywords(options, deprecated, "simulate", stacklevel=3)
     if not isinstance(material, Material):
         raise MaterialError(f"Monte Carlo needs a Material, got {type(material).__name__}")
     groups = channel_groups(material)
-    engine = check_engine(engine)
-    photons, seed, time_budget, n_batches, pool = check_mc_options(
-        photons, seed=seed, time_budget=time_budget, n_batches=n_batches, pool=pool, engine=engine,
+    o = options
+    photons, seed, time_budget, n_batches, pool = check_mc_options(   # the run's estimate needs the groups
+        o.photons, seed=o.seed, time_budget=o.time_budget, n_batches=o.n_batches, pool=o.pool, engine=o.engine,
         groups=len(groups))
+    engine, fast_interior, keep_beam_exits, beam_distances = o.engine, o.fast_interior, o.keep_beam_exits, \
+        o.beam_distances
     if client is not None:
         if time_budget is not None:
             raise MeshshadeError("a time budget cannot be split across Dask workers (the split needs a photon "

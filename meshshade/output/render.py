@@ -36,10 +36,10 @@ from meshshade.errors import MeshshadeError
 from meshshade.kernels.fresnel import fresnel_transmittance_entry, refract_in
 from meshshade.output.tonemap import srgb_encode, tonemap_linear
 from meshshade.raycast import make_scene
-from meshshade.transport.gather import gather
-from meshshade.transport.source_factors import drift_angles, near_field_factors, refracted_drift
-from meshshade.transport.pair_kernel import PairKernel, source_frames
-from meshshade.transport.patch_average import source_patch_radius
+from meshshade.surface.gather import gather
+from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.pair_kernel import PairKernel, source_frames
+from meshshade.surface.patch_average import source_patch_radius
 
 
 # ------------------------------------------------------------------------------------------------ camera

@@ -42,7 +42,9 @@ from meshshade.geometry.uv import automatic_atlas, check_uv, dilate, rasterise_u
 from meshshade.names import DEFAULT_MODEL
 from meshshade.output.render import PixelGather
 from meshshade.output.tonemap import to_uint8, tonemap_linear
-from meshshade.transport.baking import BakeResult, bake
+from meshshade.transport.baking import bake
+from meshshade.transport.options import BakeOptions, bake_options_from_keywords
+from meshshade.transport.result import BakeResult
 from meshshade.volume.resolution import volume_resolution
 
 __all__ = ["TextureBake", "bake_texture", "texture_refinement", "refinement_budget", "REFINE_SPACING", "MAX_REFINE",
@@ -165,13 +167,14 @@ def texture_atlas(mesh, size: int, padding: int, cache=None) -> tuple[np.ndarray
     return uv, {**stats, "uv_atlas_cached": False}
 
 
-def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: int = 16, refine=None,
-                 atlas_cache=None, **bake_options) -> TextureBake:
+def bake_texture(mesh, material, lights, options: BakeOptions | None = None, *, uv=None, size: int = 2048,
+                 padding: int = 16, refine=None, atlas_cache=None, **deprecated) -> TextureBake:
     """Bake ``mesh`` (mm) into a ``size`` x ``size`` texture of its UV map ``uv`` ((m, 3, 2) per-corner, or None
     for an automatic atlas by xatlas, kept in ``atlas_cache`` when given: :func:`texture_atlas`); module docstring
     for what each texel holds. ``refine``: segments per edge of the surface the transport runs on (None:
-    :func:`texture_refinement`); ``bake_options`` go to :func:`meshshade.transport.baking.bake` (model,
-    progress, ...)."""
+    :func:`texture_refinement`); ``options``: the bake's (:class:`~meshshade.transport.options.BakeOptions`; its
+    former keyword arguments are accepted with a DeprecationWarning)."""
+    options = bake_options_from_keywords(options, deprecated, "bake_texture")
     size, padding, refine = check_texture_options(size, padding, refine)
     timings, stats = {}, {}
     t0 = time.perf_counter()
@@ -188,7 +191,7 @@ def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: 
     texel, face, bary, rstats = rasterise_uv(uv, size, size)
     stats.update(rstats)
     timings["texture rasterise"] = time.perf_counter() - t0
-    n = texture_refinement(mesh, material, bake_options.get("model", DEFAULT_MODEL)) if refine is None else refine
+    n = texture_refinement(mesh, material, options.model) if refine is None else refine
     if refine is None and n > refinement_budget(mesh):
         wanted, n = n, refinement_budget(mesh)
         stats["texture_refine_wanted"] = wanted
@@ -200,7 +203,7 @@ def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: 
     t0 = time.perf_counter()
     surface = refined_mesh(mesh, n)
     timings["texture refine"] = time.perf_counter() - t0
-    result = bake(surface, material, lights, **bake_options)
+    result = bake(surface, material, lights, options)
     t0 = time.perf_counter()
     sub_face, sub_bary = refined_location(face, bary, n)
     points = np.einsum("ij,ijk->ik", sub_bary, surface.vertices[surface.faces[sub_face]])

@@ -35,8 +35,6 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from meshshade.kernels.beam_diffusion import dipole_variant
-from meshshade.kernels.near_field import incidence_gain, near_field_profile, near_field_ring, near_field_total
 from meshshade.kernels.robin_halfspace import robin_smoothed_exitances
 from meshshade.pacing import default_threads, run_in_blocks
 from meshshade.volume.long_range import line_rule
@@ -61,7 +59,6 @@ class RemainderTables:
     ``total`` (3, 9) the whole integral, on ``cos_t`` (3, 9) and ln-distance offsets ``log_r0`` (3,)."""
 
     def __init__(self, material, spread_mm: float):
-        eta, g = float(material.eta), float(material.g)
         self.sigma_t_prime = np.asarray(material.sigma_t_prime, dtype=np.float64)
         r_all = np.exp(_LOG_R)
         built = {}
@@ -70,7 +67,7 @@ class RemainderTables:
             a, st = float(material.albedo_prime[c]), float(self.sigma_t_prime[c])
             key = (a, round(spread_mm * st, 12))
             if key not in built:
-                built[key] = _channel(a, eta, g, spread_mm * st, r_all)
+                built[key] = _channel(material.medium.near_field(c), spread_mm * st, r_all)
             rows.append(built[key])
         n_r = max(r[4] for r in rows)
         self.f = np.zeros((3, _N_COS, n_r))
@@ -143,9 +140,10 @@ class RemainderTables:
                          for k in range(3)], axis=-1)
 
 
-def _channel(albedo_prime, eta, g, spread_opt, r_all):
-    """(cos_t (9,), f (9, n), cum (9, n), total (9,), n_r, long total at cos 1, near total) in optical units."""
-    v = dipole_variant(albedo_prime, eta, "better")
+def _channel(model, spread_opt, r_all):
+    """(cos_t (9,), f (9, n), cum (9, n), total (9,), n_r, long total at cos 1, near total) in optical units, of
+    one medium channel's :class:`~meshshade.kernels.near_field.NearFieldModel` ``model``."""
+    eta, v = model.eta, model.dipole
     A = v.z_b / (2.0 * v.D)
     c_min = math.sqrt(max(0.0, 1.0 - 1.0 / (eta * eta))) if eta > 1.0 else 0.05
     cos_t = np.linspace(max(c_min, 0.05), 1.0, _N_COS)
@@ -153,18 +151,17 @@ def _channel(albedo_prime, eta, g, spread_opt, r_all):
     # preset; a medium whose tail reaches further gets the whole table, and the rest beyond it at the entry)
     n_use = int(np.searchsorted(r_all, TABLE_REACH))
     r = r_all[:n_use]
-    kw = {"albedo_prime": albedo_prime, "eta": eta}
-    near = near_field_profile(r, g=g, **kw)
-    near_cum = np.pi * r * r * near_field_ring(0.0 * r, r, g=g, **kw)
-    near_total = near_field_total(g=g, **kw)
-    x, wq = line_rule(albedo_prime)
+    near = model.profile(r)
+    near_cum = np.pi * r * r * model.ring(0.0 * r, r)
+    near_total = model.total()
+    x, wq = line_rule(model.albedo_prime)
     f = np.empty((_N_COS, r.size))
     cum = np.empty((_N_COS, r.size))
     total = np.empty(_N_COS)
     Ms, Cs, Ts = robin_smoothed_exitances(r, np.outer(cos_t, x), np.broadcast_to(wq, (cos_t.size, wq.size)),
                                           D=v.D, mu=v.mu, A=A, spread=spread_opt)
     for i, ct in enumerate(cos_t):
-        gain = incidence_gain(g=g, cos_t=float(ct), **kw)
+        gain = model.incidence_gain(float(ct))
         f[i] = gain * near - Ms[i]
         cum[i] = gain * near_cum - Cs[i]
         total[i] = gain * near_total - Ts[i]

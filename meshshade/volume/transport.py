@@ -36,7 +36,8 @@ from meshshade.volume.lattice import build_lattice
 from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
 from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
 from meshshade.volume.remainder import RemainderTables, longest_edges, remainder_exitance
-from meshshade.volume.resolution import DEFAULT_BUDGET, diffusion_constants, volume_resolution
+from meshshade.volume.options import VolumeOptions
+from meshshade.volume.resolution import volume_resolution
 from meshshade.volume.surface import SamplingSurface
 
 __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0"]
@@ -66,12 +67,13 @@ class VolumeTransport:
         self.mesh, self.material, self.resolution = mesh, material, resolution
         self.surface, self.inside, self.tables = surface, inside, tables
         self.timings = timings
-        consts = [diffusion_constants(material, c) for c in range(3)]
-        self.A = np.array([c[2] for c in consts])
-        self.coef = np.array([(D, 1.0 / (2.0 * A), sa) for D, sa, A in consts])
+        m = material.medium   # d'Eon's D [mm], boundary mismatch A and sigma_a [1/mm] per channel (eq. (74))
+        self.A = np.array(m.A, dtype=np.float64)
+        self.coef = np.stack([m.D, 1.0 / (2.0 * m.A), m.sigma_a], axis=1)
         self._lattice_key = None
         self._spacing = None          # each sampling vertex's longest edge (eq. (103)'s subtracted radius)
         self.on_stage = None          # called with each stage's name as it ends (progress), or None
+        self.options = VolumeOptions()   # the resolution's and the solve's (build sets the ones it was given)
         self.lattice = self.assembly = self.operator = self.multigrid = None
         self.buried = self._buried_vertices()
         self.stats = {
@@ -85,14 +87,17 @@ class VolumeTransport:
         }
 
     @classmethod
-    def build(cls, mesh, material, *, h0: float | None = None, budget: int = DEFAULT_BUDGET,
-              sample_spacing: float | None = None, on_stage=None):
-        """Sample ``mesh``, find its inside and tabulate the correction (module docstring); ``h0`` forces the
-        lattice's surface spacing (mm), ``budget`` caps its surface cubes (:mod:`meshshade.volume.resolution`);
+    def build(cls, mesh, material, options: VolumeOptions | None = None, *, sample_spacing: float | None = None,
+              on_stage=None):
+        """Sample ``mesh``, find its inside and tabulate the correction (module docstring); ``options``
+        (:class:`~meshshade.volume.options.VolumeOptions`, default ones for None): the lattice's surface spacing or
+        its budget of surface cubes (:mod:`meshshade.volume.resolution`) and the solve's tolerance;
         ``on_stage(name)`` is called as each stage ends (progress)."""
+        options = VolumeOptions() if options is None else options
         timings = {}
         t = time.perf_counter()
-        res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm, h0=h0, budget=budget)
+        res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm, h0=options.h0,
+                                budget=options.budget)
         surface = SamplingSurface(mesh, SAMPLE_SPACING_OVER_H0 * res.h0 if sample_spacing is None else sample_spacing)
         inside = SurfaceVolume(mesh.vertices, mesh.nondegenerate_faces, surface.samples.vertices,
                                surface.spacing)
@@ -102,6 +107,7 @@ class VolumeTransport:
         _lap(timings, "near-field tables", t, on_stage)
         vt = cls(mesh, material, res, surface, inside, tables, timings)
         vt.on_stage = on_stage
+        vt.options = options
         return vt
 
     def _buried_vertices(self):
@@ -201,7 +207,7 @@ class VolumeTransport:
         _lap(timings, "volume sources", t, on_stage)
         t = time.perf_counter()
         with kernel_interrupts():
-            x, its = solve_channels(self.operator, self.multigrid, b)
+            x, its = solve_channels(self.operator, self.multigrid, b, rtol=self.options.solve_rtol)
         phi = self.assembly.to_nodes(x)
         M, outside = self._read(phi, surf.vertices, surf.vertex_normals)
         _lap(timings, "volume solve", t, on_stage)

@@ -24,6 +24,7 @@ from meshshade.materials import Material
 from meshshade.output.render import PixelGather
 from meshshade.output.texture import bake_texture, texture_refinement
 from meshshade.transport.baking import bake
+from meshshade.transport import BakeOptions
 
 _spec = importlib.util.spec_from_file_location(
     "sun_ball_reference", Path(__file__).parents[1] / "volume" / "_sun_ball_reference.py")
@@ -170,6 +171,6 @@ def test_the_automatic_refinement_keeps_to_its_vertex_budget(monkeypatch):
     assert texture_refinement(mesh, SKIN) == 1                     # the volume model samples the surface itself
     monkeypatch.setattr(texture, "MAX_REFINED_VERTICES", 4 * mesh.n_vertices)
     with pytest.warns(UserWarning, match=r"split 2x2, not the 8x8"):
-        tex = bake_texture(mesh, SKIN, SUN, uv=spherical_uv(mesh.vertices, mesh.faces), size=32, padding=0,
-                           model="dipole")
+        tex = bake_texture(mesh, SKIN, SUN, BakeOptions(model="dipole"), uv=spherical_uv(mesh.vertices, mesh.faces),
+                           size=32, padding=0)
     assert tex.refine == 2 and tex.stats["texture_refine_wanted"] == 8

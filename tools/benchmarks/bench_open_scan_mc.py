@@ -26,7 +26,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.light import DirectionalLight
 from meshshade.light.samples import entry_samples
 from meshshade.materials import Material
-from meshshade.montecarlo import simulate
+from meshshade.montecarlo import MCOptions, simulate
 from meshshade.raycast import make_scene
 from meshshade.transport import bake
 
@@ -55,8 +55,9 @@ def main(argv=None) -> int:
     t_bake = time.perf_counter() - t
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")                     # the open mesh's warning, said in the docstring
-        mc = simulate(mesh, mat, [light], photons=2_000_000, seed=202, beam_distances=False)
-        ref = simulate(mesh, mat, [light], photons=int(args.reference_photons), seed=101, beam_distances=False)
+        mc = simulate(mesh, mat, [light], MCOptions(photons=2_000_000, seed=202, beam_distances=False))
+        ref = simulate(mesh, mat, [light], MCOptions(
+            photons=int(args.reference_photons), seed=101, beam_distances=False))
     es = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, [light],
                        make_scene(mesh.vertices, mesh.faces), mat.eta)
     lit = np.zeros(mesh.n_vertices, dtype=bool)

@@ -50,7 +50,7 @@ from meshshade.io import read_mesh_arrays
 from meshshade.light import DirectionalLight
 from meshshade.light.samples import entry_samples
 from meshshade.materials import Material
-from meshshade.montecarlo import simulate
+from meshshade.montecarlo import MCOptions, simulate
 from meshshade.raycast import make_scene
 from meshshade.transport import bake
 
@@ -96,7 +96,7 @@ def reference(name, mesh, mat, light, photons):
     got = cache.read(key)
     if got is not None and got["radiance"].shape == (mesh.n_vertices, 3):
         return got["radiance"], float(got["seconds"])
-    ref = simulate(mesh, mat, [light], photons=int(photons), seed=101, beam_distances=False)
+    ref = simulate(mesh, mat, [light], MCOptions(photons=int(photons), seed=101, beam_distances=False))
     cache.write(key, radiance=ref.radiance, seconds=ref.seconds)
     return ref.radiance, ref.seconds
 
@@ -112,15 +112,15 @@ def accuracy(name, args):
     lit[es.vertex[(es.vertex >= 0) & (es.power > 0)]] = True
     small = Mesh.from_arrays(*icosphere(5.0, 1))                    # compile both outside the timings
     bake(small, mat, [light])
-    simulate(small, mat, [light], photons=4096, seed=1, beam_distances=False)
+    simulate(small, mat, [light], MCOptions(photons=4096, seed=1, beam_distances=False))
     t = time.perf_counter()
     scratch = bake(mesh, mat, [light])
     t_scratch = time.perf_counter() - t
     t = time.perf_counter()
-    cached = bake(mesh, mat, [light], volume=scratch.volume)
+    cached = bake(mesh, mat, [light], reuse=scratch.volume)
     t_cached = time.perf_counter() - t
     ref, ref_s = reference(name, mesh, mat, light, args.reference_photons)
-    mc = simulate(mesh, mat, [light], photons=int(args.mc_photons), seed=202, beam_distances=False)
+    mc = simulate(mesh, mat, [light], MCOptions(photons=int(args.mc_photons), seed=202, beam_distances=False))
     return {"row": "accuracy", "scene": name, "vertices": int(mesh.n_vertices), "material": mat.name,
             "bake": {"seconds_from_scratch": round(t_scratch, 2), "seconds_cached": round(t_cached, 2),
                      "timings": {k: round(v, 3) for k, v in scratch.timings.items()},
