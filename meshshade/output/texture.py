@@ -6,9 +6,10 @@ evaluated there, not interpolated from the mesh's vertex values:
 
 1. **The volume model (the default)** samples the surface on its own where the mesh is coarser than the material
    resolves (:class:`meshshade.volume.surface.SamplingSurface`: long edges split on the facets) and solves there;
-   a texel takes that solution P1 within the split triangle holding it (``BakeResult.sample_exitance``), not the
-   input's vertex averages (eq. (104)). The mesh itself is not refined, so a texture costs the vertex bake plus
-   the texels' lookups.
+   a texel takes that solution P1 within the split triangle holding it (``BakeResult.sample_exitance``). The
+   vertex bake reads the same solution at the vertices (vertices of the split surface too): texels and vertices
+   are one field, read at points. The mesh itself is not refined, so a texture costs the vertex bake plus the
+   texels' lookups.
    **The surface models** are refined instead to what the material resolves: where the mesh's mean edge is longer
    than REFINE_SPACING x half the volume's surface spacing, each triangle is split into n^2 on its own facet
    (same polyhedron, normals of the original interpolated; :mod:`meshshade.geometry.refine`; within
@@ -22,7 +23,8 @@ evaluated there, not interpolated from the mesh's vertex values:
 3. **Padding**: texels outside every UV triangle, up to ``padding`` texels away, take the nearest covered texel's
    value (:func:`meshshade.geometry.uv.dilate`), so filtering and mipmaps do not bleed the background in.
 
-Where neither the mesh nor the sampling surface is split, a texel at a vertex equals the vertex bake exactly.
+A texel at a vertex equals the vertex bake (``TextureBake.vertex_radiance``, the same solve read at the same point):
+tools/benchmarks/bench_texel_vertex.py looks the texture up at a UV sphere's vertices.
 """
 from __future__ import annotations
 

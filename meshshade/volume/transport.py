@@ -17,7 +17,8 @@ exitance at the mesh's vertices:
     M = phi / (2A)                       [the lattice's solution for the smoothed line sources, eqs. (99)-(100)]
         + M_f                            [the near field less what the lattice carries, eqs. (102)-(103)]
 
-averaged over each vertex's patch (eq. (104)). Each stage is timed.
+at the sampling surface's vertices, P1 between them; a vertex of the mesh takes it at its own point (as texels and
+pixels do, :mod:`meshshade.volume.surface`). Each stage is timed.
 """
 from __future__ import annotations
 
@@ -120,7 +121,8 @@ class VolumeTransport:
         return self.inside.buried(mesh.vertices, mesh.vertex_normals, offset)
 
     def to_vertices(self, sample_values):
-        """(n, 3) eq. (104) of values at the sampling surface's vertices, 0 at buried vertices."""
+        """(n, 3) values at the sampling surface's vertices read at the mesh's vertices (the same points), 0 at
+        buried vertices."""
         out = np.array(self.surface.to_vertices(sample_values), dtype=np.float64)
         out[self.buried] = 0.0
         return out
@@ -179,14 +181,14 @@ class VolumeTransport:
 
     def exitance(self, samples):
         """(M (n, 3) W/mm^2 at the mesh's vertices, stats with ``timings``) for ``samples``, the lights' entry
-        samples on ``self.surface.samples``: eq. (104) of :meth:`sample_exitance`."""
+        samples on ``self.surface.samples``: :meth:`sample_exitance` at the mesh's vertices."""
         Ms, stats = self.sample_exitance(samples)
         return self.to_vertices(Ms), stats
 
     def sample_exitance(self, samples):
         """(M (n_s, 3) W/mm^2 at the sampling surface's vertices, stats with ``timings``): the solution itself,
-        P1 on the sampling surface, which textures and per-pixel renders interpolate
-        (:meth:`meshshade.volume.surface.SamplingSurface.locate`)."""
+        P1 on the sampling surface: the mesh's vertices read it at their points (:meth:`to_vertices`), textures and
+        per-pixel renders between them (:meth:`meshshade.volume.surface.SamplingSurface.locate`)."""
         mat, surf = self.material, self.surface.samples
         stats = {}
         if len(samples) == 0:
