@@ -48,6 +48,17 @@ class BakeResult:
     volume: object = None
     sample_exitance: np.ndarray | None = None
 
+    def patch_averaged(self) -> np.ndarray:
+        """(n, 3) W/mm^2: the exitance averaged over each vertex's patch with the vertex's hat function (eq. (104)),
+        which is what the in-mesh Monte Carlo tallies at a vertex (:func:`meshshade.montecarlo.simulate`): the
+        quantity to compare with it. ``radiance`` is the field's value at the vertex (what textures and renders read
+        there too); the surface models, which have no field between vertices, give ``radiance`` itself."""
+        if self.volume is None or self.sample_exitance is None:
+            return self.radiance
+        out = np.array(self.volume.surface.patch_average(self.sample_exitance), dtype=np.float64)
+        out[self.volume.buried] = 0.0
+        return out
+
     def __repr__(self) -> str:
         n = self.radiance.shape[0]
         peak = self.radiance.max(axis=0)

@@ -71,7 +71,7 @@ def main(argv=None) -> int:
     for D in (0.0, 10.0, 25.0):
         far = md.far_from(mesh.vertices, d.points, D) & referenced & lit
         errs = {}
-        for name, M in (("bake", np.asarray(res.radiance)), ("mc2e6", np.asarray(mc.radiance))):
+        for name, M in (("bake", np.asarray(res.patch_averaged())), ("mc2e6", np.asarray(mc.radiance))):
             errs[name] = [round(100.0 * float(np.mean(np.abs(M[far & (R[:, c] > 0), c] / R[far & (R[:, c] > 0), c]
                                                               - 1.0))), 2) for c in range(3)]
         errs["vertices"] = int(far.sum())
