@@ -30,6 +30,7 @@ import numba
 import numpy as np
 
 from meshshade.errors import MeshshadeError, NoVolumeError
+from meshshade.geometry.sorting import sorted_unique
 from meshshade.pacing import default_threads, run_in_blocks
 
 __all__ = ["Grading", "Lattice", "NodeGrid", "KUHN", "CORNERS", "build_lattice", "coarser_lattice", "check_bands",
@@ -531,7 +532,7 @@ def coarser_lattice(lattice: Lattice, depth) -> Lattice:
     already of the coarsest level."""
     lmin = int(lattice.level.min())
     fine = lattice.level == lmin
-    parents = np.unique(_pack(np.floor_divide(lattice.ijk[fine], 2)))
+    parents = sorted_unique(_pack(np.floor_divide(lattice.ijk[fine], 2)))
     level = np.concatenate([lattice.level[~fine], np.full(parents.size, lmin + 1, dtype=np.int64)])
     ijk = np.concatenate([lattice.ijk[~fine], _unpack(parents)])
     g = lattice.grading

@@ -250,42 +250,94 @@ class ChannelOperator:
         return S
 
 
-@numba.njit(cache=True)
-def _interp_rows(cells, bary, nodes, cptr, cidx, cw, n_coarse, rows_out, cols_out, vals_out):
-    """Prolongation triplets: each fine unknown's coarse P1 weights expanded to the coarse unknowns."""
-    q = 0
-    for i in range(cells.size):
+@numba.njit(cache=True, nogil=True)
+def _prolong_rows(bary, nodes, cptr, cidx, cw, ptr, idx, val, distinct, r0, r1):
+    """Rows r0..r1 of the prolongation: each fine point's coarse P1 weights expanded to the coarse free nodes
+    (hanging nodes' constraints), duplicates summed, zeros dropped, columns sorted, from ptr[i]; distinct[i] their
+    count."""
+    for i in range(r0, r1):
+        start = ptr[i]
+        k = start
         for t in range(4):
             w = bary[i, t]
             if w == 0.0:
                 continue
             nd = nodes[i, t]
             for r in range(cptr[nd], cptr[nd + 1]):
-                rows_out[q] = i
-                cols_out[q] = cidx[r]
-                vals_out[q] = w * cw[r]
-                q += 1
-    return q
+                c = cidx[r]
+                v = w * cw[r]
+                u = start
+                while u < k and idx[u] != c:
+                    u += 1
+                if u == k:
+                    idx[k] = c
+                    val[k] = v
+                    k += 1
+                else:
+                    val[u] += v
+        # drop exact zeros, then sort the row's columns (a few each)
+        m = start
+        for u in range(start, k):
+            if val[u] != 0.0:
+                idx[m] = idx[u]
+                val[m] = val[u]
+                m += 1
+        for t in range(start + 1, m):
+            x, xv = idx[t], val[t]
+            u = t - 1
+            while u >= start and idx[u] > x:
+                idx[u + 1], val[u + 1] = idx[u], val[u]
+                u -= 1
+            idx[u + 1], val[u + 1] = x, xv
+        distinct[i] = m - start
+
+
+@numba.njit(cache=True, nogil=True)
+def _compact_columns(ptr, idx, val, distinct, out_ptr, used_id, out_idx, out_val, r0, r1):
+    """Rows r0..r1 copied to out_ptr, their columns renumbered by used_id."""
+    for i in range(r0, r1):
+        k = out_ptr[i]
+        for t in range(ptr[i], ptr[i] + distinct[i]):
+            out_idx[k] = used_id[idx[t]]
+            out_val[k] = val[t]
+            k += 1
 
 
 def prolongation(points, coarse):
     """(P CSR (p, n_c), nodes (n_c,)): the P1 functions of the lattice ``coarse`` evaluated at ``points`` (p, 3),
-    on the coarse lattice's free nodes that any point sees (hanging nodes expanded); ``nodes`` those nodes."""
+    on the coarse lattice's free nodes that any point sees (hanging nodes expanded); ``nodes`` those nodes. Rows in
+    blocks on the worker threads."""
     cells, bary, nodes = coarse.locate(points)
     if np.any(cells < 0):
         raise MeshshadeError("a node of the volume's lattice lies outside its coarser level")
     cptr, cidx, cw, n_free = constraint_map(coarse.n_nodes, coarse.hanging, coarse.parents)
-    size = int(np.sum(np.diff(cptr)[nodes]))
-    rows = np.empty(size, np.int64)
-    cols = np.empty(size, np.int64)
-    vals = np.empty(size)
-    q = _interp_rows(cells, bary, nodes, cptr, cidx, cw, n_free, rows, cols, vals)
-    used, cols_c = np.unique(cols[:q], return_inverse=True)
-    P = sp.csr_matrix((vals[:q], (rows[:q], cols_c)), shape=(points.shape[0], used.size))
-    P.sum_duplicates()
-    P.eliminate_zeros()
-    free_nodes = np.flatnonzero(np.isin(np.arange(coarse.n_nodes), coarse.hanging, invert=True))
-    return P, free_nodes[used]
+    p = points.shape[0]
+    width = np.diff(cptr)[nodes].sum(axis=1)                     # each row's entries at most
+    ptr = np.zeros(p + 1, dtype=np.int64)
+    np.cumsum(width, out=ptr[1:])
+    idx = np.empty(int(ptr[-1]), dtype=np.int64)
+    val = np.empty(int(ptr[-1]))
+    distinct = np.zeros(p, dtype=np.int64)
+    parallel_for(lambda a, b: _prolong_rows(bary, nodes, cptr, cidx, cw, ptr, idx, val, distinct, a, b), p,
+                 min_block=8192)
+    used = np.zeros(n_free, dtype=bool)
+    keep = np.repeat(np.arange(p), distinct)
+    pos = np.arange(keep.size) - np.repeat(np.cumsum(distinct) - distinct, distinct) + ptr[keep]
+    used[idx[pos]] = True
+    used_nodes = np.flatnonzero(used)
+    used_id = np.full(n_free, -1, dtype=np.int64)
+    used_id[used_nodes] = np.arange(used_nodes.size)
+    out_ptr = np.zeros(p + 1, dtype=np.int64)
+    np.cumsum(distinct, out=out_ptr[1:])
+    out_idx = np.empty(int(out_ptr[-1]), dtype=np.int32)
+    out_val = np.empty(int(out_ptr[-1]))
+    parallel_for(lambda a, b: _compact_columns(ptr, idx, val, distinct, out_ptr, used_id, out_idx, out_val, a, b),
+                 p, min_block=8192)
+    P = sp.csr_matrix((out_val, out_idx, out_ptr), shape=(p, used_nodes.size))
+    is_hanging = np.zeros(coarse.n_nodes, dtype=bool)
+    is_hanging[coarse.hanging] = True
+    free_nodes = np.flatnonzero(~is_hanging)
+    return P, free_nodes[used_nodes]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -360,12 +412,12 @@ class _Level:
         self.n = int(m.size)
 
 
-def galerkin(P, fine) -> _Level:
+def galerkin(P, fine, Pt=None) -> _Level:
     """The coarse level P^T S P, P^T B P (one pattern) and P^T m of the level ``fine`` (anything with indptr,
     indices, s_data, b_data, m, n) under the prolongation ``P`` (CSR, (n_fine, n_coarse)): two sparse products,
     S P and B P together, then P^T times both."""
     P = P.tocsr()
-    Pt = P.T.tocsr()
+    Pt = P.T.tocsr() if Pt is None else Pt
     n_f, n_c = P.shape
     pi, pj = P.indptr.astype(np.int64), P.indices.astype(np.int64)
     pv = np.repeat(P.data[:, None], 2, axis=1)
@@ -441,9 +493,9 @@ class Multigrid:
                 P, cnodes = prolongation(lat.nodes[nodes_of], clat)
             if P.shape[1] >= 0.8 * P.shape[0]:
                 break
-            coarse = galerkin(P, fine)
-            self.P.append(P)
             Pt = P.T.tocsr()
+            coarse = galerkin(P, fine, Pt)
+            self.P.append(P)
             self._Pt.append((Pt.indptr.astype(np.int64), Pt.indices.astype(np.int64), Pt.data))
             self.ops.append(ChannelOperator(coarse, op.coef))
             lat, fine, nodes_of = clat, coarse, cnodes
