@@ -215,7 +215,7 @@ class VolumeTransport:
         _lap(timings, "volume solve", t, on_stage)
         t = time.perf_counter()
         Mf, pairs = remainder_exitance(self.tables, *self._remainder_inputs(samples, cos_t),
-                                       spacing_mm=float(surf.mean_edge_length))
+                                       spacing_mm=self._mean_spacing())
         M += Mf
         _lap(timings, "near field", t, on_stage)
         if not np.all(np.isfinite(M)):
@@ -283,6 +283,12 @@ class VolumeTransport:
             nodes[miss, 0] = have[near]
         M = np.einsum("pk,pkc->pc", bary, phi[nodes]) / (2.0 * self.A[None, :])
         return M, int(np.sum(cells < 0))
+
+    def _mean_spacing(self) -> float:
+        """The sampling surface's mean edge (mm) as a regular triangulation of its area and faces would have it,
+        sqrt(4 area / (sqrt 3 faces)): the scale of the near field's local reach (no pass over the edges)."""
+        surf = self.surface.samples
+        return math.sqrt(4.0 * float(surf.total_area) / (math.sqrt(3.0) * max(1, surf.n_faces)))
 
     def _remainder_inputs(self, samples, cos_t):
         """The entries and receivers of eq. (103) on the sampling surface: one entry per sampling vertex (every
