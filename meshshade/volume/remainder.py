@@ -456,6 +456,13 @@ THETA = 0.3
 LEAF = 4
 
 
+def _arg(a, dtype=np.float64):
+    """``a`` as a C-contiguous, writeable array of ``dtype`` (a copy only where it is not one): every call of the
+    compiled loops then has one signature (a read-only receiver array, such as the sampling surface's vertices,
+    made numba compile :func:`_traverse` a second time on the first run, 3 s; issue 48)."""
+    return np.require(a, dtype=dtype, requirements=("C", "W"))
+
+
 def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NEAR_MM, theta: float = THETA,
                        coarse_far: bool = True, spacing_mm: float | None = None):
     """Eq. (103) at the receivers: ((n, 3) W/mm^2, pair evaluations).
@@ -475,7 +482,7 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     ``spacing_mm`` where less; smooth on that scale) is summed at one receiver per cube of that side and
     interpolated."""
     n = rec["pos"].shape[0]
-    ra = np.ascontiguousarray(rec["radius"], dtype=np.float64)
+    ra = _arg(rec["radius"])
     if spacing_mm is None:
         mid_mm = float(near_mm)
         sub = np.full(n, mid_mm)
@@ -486,7 +493,7 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
         own = rec["spacing"] if "spacing" in rec else math.sqrt(2.0 * math.pi / math.sqrt(3.0)) * ra
         sub = np.clip(NEAR_SPACINGS * np.asarray(own, dtype=np.float64), 1e-3 * mid_mm, mid_mm)
     out = np.zeros((n, 3))
-    E, rc = np.ascontiguousarray(rec["E"], dtype=np.float64), np.asarray(rec["cos_t"], dtype=np.float64)
+    E, rc = _arg(rec["E"]), np.asarray(rec["cos_t"], dtype=np.float64)
     for l in range(E.shape[1]):
         lit = E[:, l] > 0
         if lit.any():
@@ -494,19 +501,19 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     k = src["pos"].shape[0]
     if k == 0:
         return out, 0
-    pos = np.ascontiguousarray(src["pos"], dtype=np.float64)
-    nrm = np.ascontiguousarray(src["normal"], dtype=np.float64)
-    pw = np.ascontiguousarray(src["power"], dtype=np.float64)
-    cos_s = np.ascontiguousarray(src["cos_t"], dtype=np.float64)
+    pos = _arg(src["pos"])
+    nrm = _arg(src["normal"])
+    pw = _arg(src["power"])
+    cos_s = _arg(src["cos_t"])
     perm, lo, hi, child, box, agg = _build_tree(pos, pw, nrm, cos_s, LEAF)
-    area = np.ascontiguousarray(src["area"], dtype=np.float64)
+    area = _arg(src["area"])
     disc = np.sqrt(np.maximum(area, 0.0) / math.pi)
     tables.ensure_discs(np.concatenate([disc, ra]))
-    light = np.ascontiguousarray(src["light"], dtype=np.int64)
+    light = _arg(src["light"], np.int64)
     tabs = (tables.f, tables.disc, tables.cos_t, tables.n_r, tables.log_r0, tables.dlog, tables.radius_mm,
             PATCH_RADII, math.log(DISC_A[0]), math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1))
-    rp = np.ascontiguousarray(rec["pos"], dtype=np.float64)
-    rn = np.ascontiguousarray(rec["normal"], dtype=np.float64)
+    rp = _arg(rec["pos"])
+    rn = _arg(rec["normal"])
     counts = np.zeros(n, dtype=np.int64)
 
     def run(pos_, nrm_, rad_, E_, sub_, mode, dest, cnt):
