@@ -208,8 +208,8 @@ def run_comparison(mesh, material, lights, models=(DEFAULT_MODEL, "dipole"), opt
     (``curved+beam``).
 
     Everything is checked before any work (MeshshadeError, one line): ``models`` two different names among
-    ``COMPARE_MODELS``; each side's bake options (a volume side refuses the surface models' far field or
-    transport); with ``mc``, the photons the run can finish; ``camera`` a Camera or None; the lights.
+    ``COMPARE_MODELS``; each side's bake options (``surface`` applies to the surface-model sides: a volume side
+    takes only its source model from it); with ``mc``, the photons the run can finish; ``camera`` a Camera or None; the lights.
     ``progress`` (False, True or a task name, default "compare") is passed to each bake and Monte Carlo run.
     The former keyword arguments (``width=``, ``floor=``, ``source_model=``, ``cutoff_tol=``, ``geodesic=``,
     ``far_field=``, ``transport=``, ``mc_photons=``, ``seed=``...) are accepted with a DeprecationWarning.
@@ -224,8 +224,12 @@ def run_comparison(mesh, material, lights, models=(DEFAULT_MODEL, "dipole"), opt
         raise MaterialError(f"run_comparison needs a Material, got {type(material).__name__}")
     lights = light_list(lights)
     task = (progress if isinstance(progress, str) else "compare") if progress else False
-    sides = [None if m == "mc" else BakeOptions(model=m, volume=volume, surface=replace(surface, source_model=sm),
-                                                progress=task) for m, sm in zip(models, sources)]
+    # ``surface`` is the surface-model sides' (a volume side takes only its source model from it), so a comparison of
+    # the volume with the dipole can choose the dipole's transport or far field
+    sides = [None if m == "mc" else BakeOptions(model=m, volume=volume, progress=task,
+                                                surface=(SurfaceOptions(source_model=sm) if m == "volume"
+                                                         else replace(surface, source_model=sm)))
+             for m, sm in zip(models, sources)]
     if "mc" in models:   # the run must finish: the estimate counts the material's channel groups
         groups = len(set(zip(material.sigma_s_prime.tolist(), material.sigma_a.tolist())))
         check_mc_options(mc.photons, seed=mc.seed, time_budget=mc.time_budget, groups=groups)

@@ -319,7 +319,6 @@ def _image(**kw):
     (lambda r: r(options=_image(width=0)), "width"), (lambda r: r(options=_image(spp=1.5)), "spp"),
     (lambda r: r(surface=SurfaceOptions(cutoff_tol=np.nan)), "cutoff"),
     (lambda r: r(surface=SurfaceOptions(geodesic="straight")), "geodesic"),
-    (lambda r: r(models=("volume", "dipole"), surface=SurfaceOptions(far_field="off")), "far-field"),
     (lambda r: r(camera="auto"), "Camera"), (lambda r: r(surface={"geodesic": "arc"}), "SurfaceOptions"),
 ])
 def test_api_run_comparison_checks_everything_first(sphere_mesh, monkeypatch, call, needle):

@@ -12,6 +12,7 @@ from meshshade.materials import Material
 from meshshade.montecarlo import MCOptions, simulate
 from meshshade.output.compare import (CompareOptions, compare_stats, relative_difference, run_comparison,
                                       split_image)
+from meshshade.surface.options import SurfaceOptions
 
 
 def test_compare_stats_synthetic_pair():
@@ -98,3 +99,15 @@ def test_run_comparison_with_mc():
     rse = np.maximum(se_mc / exit_mc, ref_rse * np.sqrt(400_000 / 4000))
     ratio = np.array(st["total_exitance_W"]["dipole"]) / exit_mc
     assert np.all(np.abs(ratio / ref - 1) <= 4 * np.hypot(rse, ref_rse)), (ratio, ref, rse)
+
+
+def test_run_comparison_surface_options_are_the_surface_sides():
+    """``surface`` applies to the surface-model side: a comparison of the volume with the dipole sums the dipole
+    directly when asked (its stats say which transport ran), the volume side unaffected. (Planted: the volume side
+    given ``surface`` -> BakeOptions refuses its transport, ParameterError.)"""
+    V, F = procedural.icosphere(10.0, 2)
+    mesh = Mesh.from_arrays(V, F)
+    cmp = run_comparison(mesh, Material.preset("skin1"), [DirectionalLight((0, 0, -1))], ("volume", "dipole"),
+                         CompareOptions(width=16, height=16, spp=1), surface=SurfaceOptions(transport="direct"))
+    assert cmp["bakes"][1].stats["transport"].split(" ")[0] == "direct"
+    assert cmp["bakes"][0].model == "volume"
