@@ -153,7 +153,7 @@ def _det3(a0, a1, a2, b0, b1, b2, c0, c1, c2):
     return a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _sub(B, i0, i1, i2, i3, vol_full, m):
     """Add int of each barycentric over the sub-tetrahedron with barycentric corners rows i0..i3 of B to m;
     return its volume."""
@@ -165,7 +165,7 @@ def _sub(B, i0, i1, i2, i3, vol_full, m):
     return v
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _tri(B, P, i0, i1, i2, bm, bb):
     """Add int over the triangle (barycentric corners i0, i1, i2) of l_k (to bm) and of l_k l_j (to bb); return
     its area."""
@@ -346,7 +346,7 @@ def _entries(nodes, depth, cell_nodes, level, h0, cptr, cidx, cw, ref_pairs, ref
     expanded), each cube's in its slots start[c]..start[c + 1] (unused slots row -1): the upper triangle and
     diagonal as (row <= col) triplets, the lumped mass as (row, -1); totals[chunk] the inside volume and the cut
     area."""
-    kuhn = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])
+    kuhn = _KUHN
     P = np.zeros((4, 3))
     s = np.zeros(4)
     G = np.zeros((4, 3))
