@@ -17,8 +17,12 @@ others at ``bake``'s defaults; rows ``knob="default"`` are the baseline):
 * ``source_model``: the other source model of ``bake`` (docs/physics.md §13; "beam" when the baseline is "point"),
   on the scenes with a Monte Carlo reference only (the exact references are diffusion's own point source).
 
+* ``lattice``: the volume model's lattice spacing h0 as a multiple of its default (the spacing
+  :func:`~meshshade.volume.resolution.volume_resolution` picks for the material, the object and the cell budget):
+  what a coarser or a finer lattice costs and gains.
+
 The ``volume`` model always takes the beam source model and has no series, cutoff or geodesics: it gets the
-``default``, ``resolution`` and ``render`` rows only.
+``default``, ``resolution``, ``lattice`` and ``render`` rows only.
 """
 from __future__ import annotations
 
@@ -29,7 +33,7 @@ from meshshade.errors import ParameterError
 from meshshade.transport import MODELS, SurfaceOptions
 from meshshade.surface.source_factors import check_source_model, source_model_keyword
 
-KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons", "source_model")
+KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "lattice", "geodesic", "render", "photons", "source_model")
 #: models for which bake's rtol (series tolerance) changes nothing
 NO_SERIES = ("dipole", "curved", "fitted")
 
@@ -65,6 +69,7 @@ class BenchConfig:
     cutoff: tuple = ()
     cutoff_scenes: tuple = ()
     resolution: dict = field(default_factory=dict)   # scene name -> levels
+    lattice: tuple = ()          # the volume's h0 as multiples of its default, on every scene
     geodesic_scenes: tuple = ()
     render_scenes: tuple = ()
     render_width: int = 128
@@ -83,6 +88,7 @@ QUICK = BenchConfig(
     rtol=(1e-2, 1e-4, 1e-6, 1e-13), rtol_scenes=("sphere_r20_beam",),
     cutoff=(1e-2, 1e-3, 1e-5), cutoff_scenes=("sphere_r20_directional",),
     resolution={"sphere_r20_beam": (3, 5), "sphere_r20_directional": (2,), "sphere_r100_beam": (4,)},
+    lattice=(2.0,),
     geodesic_scenes=("sphere_r20_beam",),
     render_scenes=("sphere_r20_beam",), render_width=64,
     photons=(10_000, 100_000), photon_scenes=("sphere_r20_beam", "torus_beam"),
@@ -98,6 +104,7 @@ FULL = BenchConfig(
                                                       "sphere_r100_directional", "torus_directional"),
     resolution={"sphere_r5_beam": (3, 4, 6), "sphere_r20_beam": (3, 4, 6), "sphere_r20_directional": (2, 3),
                 "sphere_r100_directional": (3,), "cylinder_r10_beam": (3, 5), "torus_beam": (3, 5)},
+    lattice=(2.0, 0.5),
     geodesic_scenes=("sphere_r5_beam", "sphere_r20_beam", "sphere_r100_beam", "cylinder_r10_beam", "torus_beam",
                      "spot_50mm_beam", "head_200mm_beam", "sphere_r5_directional", "head_200mm_directional",
                      "spot_50mm_directional"),
@@ -144,6 +151,7 @@ def bench_plan(*, quick: bool = False, scenes=None, models=None, config: BenchCo
                 vb = {**base, "source_model": "beam"}
                 runs.append(Run(sc, m, "default", "", L, dict(vb)))
                 runs += [Run(sc, m, "resolution", str(v), v, dict(vb)) for v in cfg.resolution.get(n, ()) if v != L]
+                runs += [Run(sc, m, "lattice", f"{f:g}", L, {**vb, "h0_factor": f}) for f in cfg.lattice]
                 if n in cfg.render_scenes and sc.reference == "exact" and sc.light == "beam":
                     runs += [Run(sc, m, "render", mode, L, {**vb, "render": mode, "width": cfg.render_width})
                              for mode in ("per-vertex", "per-pixel")]

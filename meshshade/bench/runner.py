@@ -38,6 +38,8 @@ from meshshade.montecarlo import MCOptions, simulate
 from meshshade.output.render import Camera, PixelGather, render_radiance
 from meshshade.raycast import make_scene
 from meshshade.transport import BakeOptions, SurfaceOptions, bake
+from meshshade.volume.options import VolumeOptions
+from meshshade.volume.resolution import volume_resolution
 
 #: columns of the rows (and of accuracy_vs_time.csv)
 COLUMNS = ("scene", "model", "knob", "value", "error_max", "error_mean", "error_energy", "time_s", "ref_kind",
@@ -157,7 +159,11 @@ class _Runner:
         else:
             kw = {k: st[k] for k in ("rtol", "cutoff_tol", "geodesic")}
             kw["source_model"] = st.get("source_model", "point")
-            options = BakeOptions(model=r.model, surface=SurfaceOptions(**kw))
+            volume = VolumeOptions()
+            if "h0_factor" in st:   # the lattice knob: a multiple of the spacing the volume would choose here
+                h = volume_resolution(MATERIAL, float(mesh.total_area), mesh.bbox_size_mm).h0
+                volume = VolumeOptions(h0=float(st["h0_factor"]) * h)
+            options = BakeOptions(model=r.model, surface=SurfaceOptions(**kw), volume=volume)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 t = time.perf_counter()
@@ -169,8 +175,9 @@ class _Runner:
             if "render" in st:  # the cost of the image: bake + render
                 err, dt_render = self._render(sc, mesh, res, ref, light, st["render"], st["width"])
                 dt += dt_render
-            else:
-                err = vertex_errors(mesh, res.radiance[:, 0], ref)
+            else:   # a Monte Carlo reference tallies patch averages: the bake's, like with like (eq. (104))
+                M = res.patch_averaged() if ref.kind == "mc" else res.radiance
+                err = vertex_errors(mesh, M[:, 0], ref)
         return {"scene": sc.name, "model": r.model, "knob": r.knob, "value": r.value, **err, "time_s": dt,
                 "ref_kind": sc.reference, "ref_stderr": ref.stderr_median if ref.kind == "mc" else None,
                 "n_vertices": mesh.n_vertices, "light": sc.light}

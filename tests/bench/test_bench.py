@@ -89,7 +89,24 @@ def test_bench_plan_iterates_over_transport_models():
                if r.knob not in ("source_model", "photons") and r.model != "volume")
     volume = [r for r in full if r.model == "volume"]
     assert volume and all(r.settings["source_model"] == "beam" for r in volume)
-    assert {r.knob for r in volume} <= {"default", "resolution", "render"}
+    assert {r.knob for r in volume} <= {"default", "resolution", "lattice", "render"}
+    # the lattice knob: the volume on every scene at each multiple of its default spacing, and no other model
+    lattice = [r for r in full if r.knob == "lattice"]
+    assert {(r.scene.name, r.settings["h0_factor"]) for r in lattice} == {
+        (n, f) for n in {r.scene.name for r in volume} for f in bench.FULL.lattice}
+    assert {r.model for r in lattice} == {"volume"} and len(bench.FULL.lattice) >= 2
+
+
+def test_bench_lattice_knob_bakes_the_volume_at_its_spacing():
+    """A lattice row bakes the volume at the multiple of its default spacing: twice the spacing is farther from the
+    exact sphere (planted: the factor ignored -> the two rows' errors equal, the test fails)."""
+    plan = bench.bench_plan(config=bench.BenchConfig(scenes=(TINY_SPHERE,), levels={}, lattice=(2.0,)),
+                            models=("volume",))
+    assert [r.knob for r in plan] == ["default", "lattice"]
+    rows = bench.run_bench(plan, seed=3).rows
+    assert len(rows) == 2 and all(math.isfinite(r["error_mean"]) for r in rows)
+    default, coarse = rows
+    assert coarse["value"] == "2" and coarse["error_mean"] > default["error_mean"]
 
 
 def test_bench_tiny_rows_finite_with_required_columns(tiny_result):
