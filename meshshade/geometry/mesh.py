@@ -113,8 +113,9 @@ def face_geometry(vertices, faces):
     cross : (m, 3) float64, ``(v1 - v0) x (v2 - v0)``; its norm is twice the face area
     degenerate : (m,) bool, ``|cross| <= DEGENERATE_REL_TOL * longest_edge**2`` (includes repeated indices)
     """
-    V = np.ascontiguousarray(vertices, np.float64)
-    F = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    # C-contiguous and writeable always: a mesh's read-only arrays made numba compile the loop three times
+    V = np.require(vertices, np.float64, ("C", "W"))
+    F = np.require(np.reshape(faces, (-1, 3)), np.int64, ("C", "W"))
     cross = np.empty((F.shape[0], 3))
     degenerate = np.empty(F.shape[0], dtype=bool)
     _face_geometry(V, F, DEGENERATE_REL_TOL, cross, degenerate)

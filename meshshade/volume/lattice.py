@@ -171,8 +171,9 @@ class NodeGrid:
 
     def _cubes(self, ijk, scale):
         ijk = np.ascontiguousarray(ijk, dtype=np.int64).reshape(-1, 3)
-        scale = np.ascontiguousarray(np.broadcast_to(np.asarray(scale, dtype=np.int64) // self.unit,
-                                                     ijk.shape[:1]))
+        # C-contiguous and writeable always (a read-only one made numba compile the loops twice)
+        scale = np.require(np.broadcast_to(np.asarray(scale, dtype=np.int64) // self.unit, ijk.shape[:1]),
+                           requirements=("C", "W"))
         return ijk, scale
 
     def mark(self, ijk, scale, stride: int = 1) -> None:
