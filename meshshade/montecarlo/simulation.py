@@ -54,9 +54,9 @@ from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 from meshshade.light import BeamLight
 from meshshade.light.samples import check_exitance
 from meshshade.materials import Material
+from meshshade.montecarlo.boundary import WalkSurface, walk_surface
 from meshshade.montecarlo.distributed import walk_on_client
-from meshshade.montecarlo.emitter import Emitter
-from meshshade.montecarlo.walks import channel_groups, check_engine, prepare_walks, walk_group
+from meshshade.montecarlo.walks import channel_groups, check_engine, make_emitter, prepare_walks, walk_group
 from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
@@ -81,6 +81,9 @@ class MCResult:
         first beam light (for radial profiles); beam_entry : (face, bary) of that beam, or None;
     boundary_tests : ray casts (Embree queries) made by the walk; seconds / cpu_seconds : wall-clock and process
         CPU time (all threads) of the walk, without the set-up (scene, safe-distance grid, emitter).
+    surface : the :class:`~meshshade.montecarlo.boundary.WalkSurface` walked in (the medium's boundary: the mesh
+        itself when closed, else its boundary faces and the lids of its holes); lid_power, lid_power_stderr : (3,)
+        W leaving through the lids (part of the diffuse and transmitted totals, on no vertex and no face).
     """
 
     material: Material
@@ -104,6 +107,9 @@ class MCResult:
     boundary_tests: int = 0
     cpu_seconds: float = 0.0
     photons_per_channel: np.ndarray | None = None
+    surface: WalkSurface | None = None
+    lid_power: np.ndarray | None = None
+    lid_power_stderr: np.ndarray | None = None
 
     @property
     def events_per_second(self) -> float:
@@ -216,12 +222,15 @@ def check_mc_options(photons=100_000, *, seed=0, time_budget=None, n_batches=DEF
 def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000, seed: int = 0,
              time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int | None = None,
              keep_beam_exits: bool = True, beam_distances: bool = True, fast_interior: bool = True,
-             engine: str = "auto", progress: bool | str = False, client=None) -> MCResult:
+             engine: str = "auto", progress: bool | str = False, client=None,
+             surface: WalkSurface | None = None) -> MCResult:
     """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
 
     Parameters
     ----------
-    mesh : Mesh (closed, outward faces; vertices in mm)
+    mesh : Mesh (vertices in mm). The medium is the bake's inside {w > 1/2} of its generalised winding number
+        (:mod:`meshshade.montecarlo.boundary`): holes are closed by lids on the level surface w = 1/2, faces with
+        the medium on both sides or neither are passed through; a closed mesh is walked as it is
     material : Material (uses sigma_s', sigma_a, eta and g)
     lights : light or sequence of BeamLight / DirectionalLight / PointLight
     photons : photons per channel group (with ``time_budget``: an upper bound, None = unbounded)
@@ -251,6 +260,9 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         tallies are added in a fixed order, so the result is bitwise the same for any number of workers, and
         the same as without a client up to the order of the sums (~1e-15). Needs a photon count (no
         ``time_budget``) and the pooled engine. ``seconds`` is then the wall time of the split run.
+    surface : the :class:`~meshshade.montecarlo.boundary.WalkSurface` to walk in; default
+        :func:`~meshshade.montecarlo.boundary.walk_surface` of ``mesh``. ``WalkSurface.of_faces(mesh)`` walks the
+        mesh's faces alone, every face a boundary (the walk before issue 47, to measure against).
 
     Returns
     -------
@@ -286,16 +298,17 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     bar = Progress(progress if isinstance(progress, str) else "mc",
                    None if photons is None else n_photons * len(groups), "photons", enabled=bool(progress))
     try:
+        surface = walk_surface(mesh) if surface is None else surface
         if client is not None:
             # the lights are checked here, before any task (a beam that misses is one line, as in one process)
-            emitter = Emitter(mesh.vertices, mesh.faces, mesh.face_normals, mesh.face_areas, lights,
-                              make_scene(mesh.vertices, mesh.faces), material.eta)
+            emitter = make_emitter(mesh, surface, lights, material.eta, make_scene(surface.vertices, surface.faces))
             t0, c0 = time.perf_counter(), time.process_time()
             tallies = walk_on_client(client, mesh, material, lights, n_photons, seed=seed, n_batches=n_batches,
-                                     pool=pool, keep_beam=keep_beam_exits, engine=engine, progress=bar)
+                                     pool=pool, keep_beam=keep_beam_exits, engine=engine, progress=bar,
+                                     surface=surface)
         else:
             setup = prepare_walks(mesh, material, lights, engine=engine, fast_interior=fast_interior,
-                                  half_space_certificates=time_budget is None)
+                                  half_space_certificates=time_budget is None, surface=surface)
             emitter = setup.emitter
             children = np.random.SeedSequence(seed).spawn(len(groups))
             t0, c0 = time.perf_counter(), time.process_time()
@@ -311,8 +324,11 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
         bar.close()
     V, F = mesh.vertices, mesh.faces
+    n = V.shape[0]
     face_p = np.zeros((F.shape[0], 3)); face_se = np.zeros_like(face_p)
-    vert_p = np.zeros((V.shape[0], 3)); vert_se = np.zeros_like(vert_p)
+    vert_p = np.zeros((n, 3)); vert_se = np.zeros_like(vert_p)
+    lid_p = np.zeros(3); lid_se = np.zeros(3)
+    lid = surface.lid
     tot = np.zeros((7, 3)); tot_se = np.zeros((7, 3))
     frac = np.zeros((5, 3)); frac_se = np.zeros((5, 3))
     events = boundary = rays = 0
@@ -325,8 +341,12 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         scale = n_photons / emitted if emitted else 1.0
         # photon weights were P/n_photons: each group's tallies are normalised by its own count (a time budget
         # stops each group's emission on its own)
-        fp, fse = batch_stats(walk.face * scale)
-        vp, vse = batch_stats(walk.face_vert * scale)
+        # on the mesh's faces and vertices, batch by batch (the walk surface's lids and parts of split faces)
+        face_t = walk.face if surface.identity else surface.mesh_face_tally(walk.face)
+        vert_t = walk.face_vert if surface.identity else surface.mesh_vertex_tally(walk.face_vert)
+        fp, fse = batch_stats(face_t * scale)
+        vp, vse = batch_stats(vert_t * scale)
+        lp, lse = batch_stats(walk.face[:, lid].sum(axis=1) * scale)
         tt, tse = batch_stats(walk.tot * scale)
         inc = walk.tot[:, 5]
         ratios = walk.tot[:, :5] / np.where(inc > 0, inc, np.nan)[:, None]          # (B, 5) per batch
@@ -338,15 +358,21 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         if keep_beam_exits and walk.exits["face"]:
             group_exits = {k: np.concatenate(v) for k, v in walk.exits.items()}
             group_exits["weight"] = group_exits["weight"] * scale
+            # on the mesh's faces (exits through a lid are on none: left out of the beam's tallies)
+            group_exits["face"], group_exits["bary"] = surface.mesh_bary(group_exits["face"], group_exits["bary"])
+            on = group_exits["face"] >= 0
+            if not np.all(on):
+                group_exits = {k: v[on] for k, v in group_exits.items()}
         for c in chans:
             face_p[:, c], face_se[:, c], vert_p[:, c], vert_se[:, c] = fp, fse, vp, vse
+            lid_p[c], lid_se[c] = lp, lse
             tot[:, c], tot_se[:, c], frac[:, c], frac_se[:, c] = tt, tse, fr, fse_tot
             if group_exits is not None:
                 exits[c] = group_exits   # channels of one group share the (read-only) arrays
         events += walk.events
         boundary += walk.boundary
     seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
-    va = mesh.vertex_areas
+    va = mesh.vertex_areas if surface.identity else surface.vertex_areas()   # the boundary's area around each
     with np.errstate(divide="ignore", invalid="ignore"):
         radiance = np.where(va[:, None] > 0, vert_p / va[:, None], 0.0)
         radiance_se = np.where(va[:, None] > 0, vert_se / va[:, None], 0.0)
@@ -359,8 +385,11 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     b = emitter.parts[next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), -1)] \
         if any(isinstance(lt, BeamLight) for lt in emitter.lights) else None
     if b is not None:
-        beam_entry = (int(b[1]), np.asarray(b[2]))
-        if beam_distances:
+        f_mesh, b_mesh = surface.mesh_bary(np.array([int(b[1])]), np.asarray(b[2]))
+        beam_entry = (int(f_mesh[0]), b_mesh[0]) if f_mesh[0] >= 0 else None   # None: the beam enters a lid
+        if beam_entry is not None and surface.identity:
+            beam_entry = (int(b[1]), np.asarray(b[2]))
+        if beam_entry is not None and beam_distances:
             beam_distance = GeodesicNeighbourhoods(V, F).distances_from(face=beam_entry[0], bary=beam_entry[1])
     check_exitance(radiance, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
     return MCResult(material=material, face_power=face_p, face_power_stderr=face_se, vertex_power=vert_p,
@@ -370,5 +399,5 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
                     boundary_events=boundary, seconds=seconds, n_batches=n_batches, boundary_tests=rays,
                     cpu_seconds=cpu_seconds,
                     beam_exits=exits if keep_beam_exits else [], beam_entry=beam_entry,
-                    beam_distance=beam_distance)
+                    beam_distance=beam_distance, surface=surface, lid_power=lid_p, lid_power_stderr=lid_se)
 
