@@ -3,40 +3,46 @@ surface).
 
 The default bake finds the object's inside with the generalised winding number w (docs/physics.md §15,
 :mod:`meshshade.volume.inside`): the medium is {w > 1/2}, so an open scan, overlapping parts, duplicated faces
-and fins all have one, and a hole is closed by the smooth level surface w = 1/2. The random walk
+and fins all have one, and a hole is closed by the level surface w = 1/2. The random walk
 (:mod:`meshshade.montecarlo.engine`) asks Embree for the next face along a photon's path and treats it as the
-surface. :func:`walk_surface` gives it a surface on which that is true (docs/physics.md §10, eq. (69a)-(69c)):
+surface. :func:`walk_surface` gives it a surface on which that is true (docs/physics.md §10, eqs. (127)-(129)):
 
-1. **Classify the faces** (:func:`face_sides`): w is evaluated a small distance (``SIDE_OFFSET`` of the face's
-   longest edge) in front of and behind each face's centroid. Where the two values lie on different sides of 1/2
-   the face is a boundary: kept with the medium behind it (turned round where the medium is in front). Where they
-   lie on the same side (a face inside the medium: the inner faces of overlapping parts, a part inside another;
-   or outside it: a fin standing out) the face is *transparent*, index-matched on both sides, and is left out of
-   the walk's Embree scene, so a photon passes through it without a ray, a Fresnel draw or a tally. Faces with
-   the same three corners are one sheet (:func:`coincident_faces`): one of them carries the sheet's
-   classification, the others are left out (a duplicated face changes nothing; a face and its reversed copy,
-   whose winding cancels, are no surface). A transparent face next to a boundary face whose corners' probes
-   find a boundary (it straddles the seam where two overlapping parts cross) is kept, so that the seam is closed
-   (up to one face of surface inside the medium) rather than open.
-2. **Close the holes** (:func:`rim_loops`, :func:`lid_rings`, :func:`project_to_level`): the rims (edges of the
-   boundary faces without a partner the other way round) are traced into loops; each loop is spanned by a disc of
-   rings (the rim scaled towards its centroid, as many rings as the rim's radius holds rim edges; a fan where the
-   rim is not star-shaped about its centroid) whose inner points are moved along the rim's mean normal onto the
-   level surface w = 1/2 (the crossing nearest the rim's plane, by bisection). The lid shares the rim's vertex
-   positions exactly, so Embree's watertight traversal cannot slip between lid and mesh; and any disc spanning
-   the rim closes the medium (a path from w > 1/2 to w < 1/2 must cross the closed surface mesh + lid), so even a
-   folded fan leaks nothing. A loop whose centre finds no level crossing, or finds it on another sheet (closer
-   than ``LID_CLEARANCE`` of its radius to a face: the seam of overlapping parts), is left open.
+1. **Classify the faces** (:func:`face_sides`, :func:`probe_sides`, eq. (127)): w is evaluated a small distance
+   (``SIDE_OFFSET`` of the face's longest edge, at least ``SIDE_FLOOR`` of the mesh's half-diagonal) in front of
+   and behind each face's centroid. Where the two values lie on different sides of 1/2 the face is a boundary:
+   kept with the medium behind it (turned round where the medium is in front). Where they lie on the same side (a
+   face inside the medium: the inner faces of overlapping parts; or outside it: a fin standing out) the face is
+   *transparent*, index-matched on both sides, and is left out of the walk's Embree scene, so a photon passes
+   through it without a ray, a Fresnel draw or a tally. Faces with the same three corners are one sheet
+   (:func:`coincident_faces`): one of them carries the sheet's class, the others are left out (a duplicated face
+   changes nothing; a face and its reversed copy, whose winding cancels, are no surface).
+2. **Follow the seams** (:func:`split_seams`): where overlapping parts cross, faces next to a face of another class
+   are probed near their corners too and, where the probes disagree, split in four, recursively (``SEAM_LEVELS``),
+   so the walk surface follows the seam to 1/32 of an edge; a part still straddling at the last level is kept, so
+   the seam is closed rather than open.
+3. **Close the holes** (:func:`rim_loops`, :func:`lid_rings`, :func:`project_to_level`, eq. (128)): the rims
+   (edges of the walk surface without a partner the other way round, with an edge of the mesh's own open boundary)
+   are traced into loops; each loop is spanned by a disc of rings (the rim scaled towards its centroid, as many
+   rings as the rim's radius holds rim edges; a fan where the rim is not star-shaped about its centroid) whose
+   inner points are moved along the rim's mean normal onto the level surface w = 1/2 (the crossing nearest the
+   rim's plane, by bisection). The lid shares the rim's vertex positions bit for bit, so Embree's watertight
+   traversal cannot slip between lid and mesh; and any disc spanning the rim closes the medium (a path from
+   w > 1/2 to w < 1/2 must cross the closed surface mesh + lid), so even a folded fan leaks nothing. A loop whose
+   centre finds no level crossing, or finds it on another sheet (closer than ``LID_CLEARANCE`` of its radius to a
+   face), is left open. The level surface depends on the rim alone (the solid angle of an open surface depends
+   only on its boundary curve): across a planar rim it is the flat disc.
 
 The lid faces are boundary faces with Fresnel, as a face is (the bake's lattice ends there with its Robin
 condition): light shining into a hole enters through the lid, and a photon leaving through a lid leaves the
 object (it is in the totals, diffuse or transmitted as for any face, but on no mesh vertex: the lid has its own
-copies of the rim's vertices, after the mesh's ``n`` vertices).
+copies of the rim's vertices, after the mesh's ``n`` vertices). The parts of split faces have their own corners
+too; what they tally goes back to the face's vertices by the corners' barycentrics (``WalkSurface.vertex_map``,
+eq. (129)).
 
 A closed, consistently oriented mesh without overlapping parts gives every face the class "boundary" and no rim:
-the walk surface is then the mesh's own arrays (``identity``), and a run is bitwise what it was before this
-module existed. Pure array work over the winding numbers of :class:`meshshade.volume.inside.SurfaceVolume`
-(libigl's fast winding number); no I/O.
+the walk surface is then the mesh's own arrays (``identity``), and a run is bitwise what it was before this module
+existed. Pure array work over the winding numbers of :class:`meshshade.volume.inside.SurfaceVolume` (libigl's fast
+winding number); no I/O.
 """
 from __future__ import annotations
 
@@ -48,8 +54,9 @@ from scipy import sparse
 
 from meshshade.volume.inside import SurfaceVolume
 
-__all__ = ["WalkSurface", "walk_surface", "face_sides", "coincident_faces", "rim_edges", "rim_loops", "lid_rings",
-           "project_to_level", "SIDE_OFFSET", "LID_CLEARANCE", "BOUNDARY", "REVERSED", "TRANSPARENT"]
+__all__ = ["WalkSurface", "walk_surface", "face_sides", "probe_sides", "coincident_faces", "welded_ids", "split_seams",
+           "quarter", "rim_edges", "rim_loops", "lid_rings", "project_to_level", "SIDE_OFFSET", "SIDE_FLOOR",
+           "SEAM_LEVELS", "LID_CLEARANCE", "BOUNDARY", "REVERSED", "TRANSPARENT"]
 
 #: the two winding-number probes of a face sit SIDE_OFFSET of its longest edge, and at least SIDE_FLOOR of the
 #: mesh's half-diagonal, in front of and behind its centroid: far below a wall's thickness (a 0.2 mm slab of 20 mm
@@ -74,7 +81,7 @@ BOUNDARY, REVERSED, TRANSPARENT = np.int8(1), np.int8(-1), np.int8(0)
 def face_sides(w_front, w_back) -> np.ndarray:
     """(m,) int8 class of each face from the winding numbers just in front of it (``w_front``, the side its normal
     points to) and just behind it (``w_back``): BOUNDARY (1) when only the back is in the medium {w > 1/2},
-    REVERSED (-1) when only the front is, TRANSPARENT (0) when both or neither are (eq. (69a))."""
+    REVERSED (-1) when only the front is, TRANSPARENT (0) when both or neither are (eq. (127))."""
     inside_front = np.asarray(w_front) > 0.5
     inside_back = np.asarray(w_back) > 0.5
     return np.where(inside_back & ~inside_front, BOUNDARY,
@@ -109,10 +116,9 @@ def coincident_faces(faces) -> tuple[np.ndarray, np.ndarray]:
     return rep, net
 
 
-#: where the probes of a face sit before they move off it: its centroid, and 0.98 of the way from it towards each
-#: corner and each edge's midpoint (barycentric rows); the first alone classifies a face, all seven find a seam
-PROBE_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3]] + [list(0.02 / 3 + 0.98 * np.eye(3)[j]) for j in range(3)]
-                        + [list(0.02 / 3 + 0.49 * (np.eye(3)[j] + np.eye(3)[(j + 1) % 3])) for j in range(3)])
+#: where the probes of a face sit before they move off it (barycentric rows): its centroid, and 0.98 of the way
+#: from it towards each corner; the first alone classifies a face, all four find a seam that separates corners
+PROBE_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3]] + [list(0.02 / 3 + 0.98 * np.eye(3)[j]) for j in range(3)])
 
 
 def _probes(tri, offset, at=0):
@@ -160,9 +166,9 @@ def quarter(bary) -> np.ndarray:
 
 def split_seams(volume: SurfaceVolume, tri, net, floor, levels: int = None):
     """The parts of triangles ``tri`` (k, 3, 3) on the medium's boundary, where a seam of overlapping parts may
-    cross them (eq. (69a) on sub-triangles).
+    cross them (eq. (127) on sub-triangles).
 
-    Each triangle is probed at its seven :data:`PROBE_POINTS`; where they all agree it keeps that class, otherwise
+    Each triangle is probed at its four :data:`PROBE_POINTS`; where they all agree it keeps that class, otherwise
     it is split in four (:func:`quarter`) and its children are probed, down to ``levels`` (``SEAM_LEVELS``) splits.
     A sub-triangle still straddling at the last level is kept as a boundary (wound as its boundary probes say), so
     the seam is closed, with at most a sub-triangle of surface left inside the medium. Returns (parent (s,) int64
@@ -315,7 +321,7 @@ def lid_rings(P) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]
 
 
 def project_to_level(volume: SurfaceVolume, points, directions, reach) -> tuple[np.ndarray, np.ndarray]:
-    """Move ``points`` (p, 3) along unit ``directions`` (p, 3) onto the level surface w = 1/2 (eq. (69b)).
+    """Move ``points`` (p, 3) along unit ``directions`` (p, 3) onto the level surface w = 1/2 (eq. (128)).
 
     On each line x + t d, |t| <= reach (p,), the crossing from w > 1/2 (t below) to w <= 1/2 (t above) nearest
     t = 0 is bracketed on 2 ``LID_STEPS`` intervals and bisected ``LID_BISECTIONS`` times. Returns (t (p,), found
@@ -365,7 +371,7 @@ class WalkSurface:
         belongs to the mesh's vertices (a split face's corner: its barycentrics in its face; a lid's vertex: nowhere)
     n_mesh_vertices, n_mesh_faces : int; holes : lids built; open_loops : rims of the mesh's holes left open;
         transparent : mesh faces left out (index-matched); reversed : faces turned round; split_faces : faces
-        split along a seam
+        split along a seam; open_edges : the mesh's edges that one face alone uses
     identity : the walk surface is the mesh itself (every face a boundary with the medium behind, no lid)
     """
 
@@ -385,6 +391,7 @@ class WalkSurface:
     transparent: int = 0
     reversed: int = 0
     split_faces: int = 0
+    open_edges: int = 0
     identity: bool = False
 
     @classmethod
@@ -430,8 +437,8 @@ class WalkSurface:
         return out
 
     def vertex_areas(self) -> np.ndarray:
-        """(n,) mm^2: a third of the area of each walk face around each mesh vertex (split faces' parts by their
-        corners' barycentrics; lids and transparent faces are around none: the exitance of a vertex is the power
+        """(n,) mm^2: a third of the area of each walk face around each mesh vertex (eq. (129); split faces' parts by
+        their corners' barycentrics; lids and transparent faces are around none: the exitance of a vertex is the power
         through the boundary around it over its area)."""
         w = np.repeat(self.areas / 3.0, 3)
         per = np.bincount(self.faces.reshape(-1), weights=w, minlength=self.vertices.shape[0])
@@ -469,7 +476,8 @@ class WalkSurface:
         if self.open_loops:
             parts.append(f"{self.open_loops} rim(s) of holes left open (no level surface across them away from the "
                          "mesh: photons reaching them walk on outside, and exitance there is too low)")
-        return "Monte Carlo: the walk's medium is the bake's inside {w > 1/2}: " + "; ".join(parts)
+        where = f"the mesh is open ({self.open_edges} boundary edges): " if self.open_edges else ""
+        return f"Monte Carlo: {where}the walk's medium is the bake's inside {{w > 1/2}}: " + "; ".join(parts)
 
 
 def walk_surface(mesh) -> WalkSurface:
@@ -515,7 +523,7 @@ def walk_surface(mesh) -> WalkSurface:
     turn = s_side[parts][first] == REVERSED
     Fs[turn] = Fs[turn][:, [0, 2, 1]]
     loops, _ = rim_loops(_rims(np.concatenate([ids[Fk], ids[Fs]]), n, slivers), n)
-    holes = _holes(loops, Fw[good], n)
+    holes, open_edges = _holes(loops, Fw[good], n)
     lidV, lidF, n_holes, n_unfilled = _lids(V, centre, [lp for lp, h in zip(loops, holes) if h], volume,
                                             n + pV.shape[0])
     verts = np.concatenate([V, pV, lidV])
@@ -536,7 +544,8 @@ def walk_surface(mesh) -> WalkSurface:
                        np.concatenate([flip, np.zeros(m_p + m_l, dtype=bool)]), n, m, split=split, split_bary=pB,
                        vertex_map=vertex_map, holes=n_holes, open_loops=n_unfilled,
                        transparent=int(m - np.count_nonzero(~good) - keep.size - split_whole.size),
-                       reversed=int(np.count_nonzero(flip)), split_faces=int(split_whole.size))
+                       reversed=int(np.count_nonzero(flip)), split_faces=int(split_whole.size),
+                       open_edges=open_edges)
 
 
 def _edge_keys(F, n):
@@ -555,19 +564,18 @@ def _rims(F, n, slivers):
     return rims
 
 
-def _holes(loops, F_good, n) -> list[bool]:
+def _holes(loops, F_good, n) -> tuple[list[bool], int]:
     """Which rim loops are the mesh's holes: those with an edge that only one face of the mesh uses (a loop opened
-    only by leaving out transparent faces, as along a seam, is none)."""
-    if not loops:
-        return []
+    only by leaving out transparent faces, as along a seam, is none); and the number of such edges."""
     a, b = F_good.reshape(-1), np.roll(F_good, -1, axis=1).reshape(-1)
-    keys, counts = np.unique(np.minimum(a, b) * np.int64(n) + np.maximum(a, b), return_counts=True)
+    keep = a != b
+    keys, counts = np.unique(np.minimum(a, b)[keep] * np.int64(n) + np.maximum(a, b)[keep], return_counts=True)
     open_keys = keys[counts == 1]
     out = []
     for lp in loops:            # a loop over rims, not vertices
         a, b = lp, np.roll(lp, -1)
         out.append(bool(np.isin(np.minimum(a, b) * np.int64(n) + np.maximum(a, b), open_keys).any()))
-    return out
+    return out, int(open_keys.size)
 
 
 def _seam_candidates(Fw, probe, side, n) -> np.ndarray:

@@ -1,4 +1,8 @@
-"""Monte Carlo reference: a volumetric random walk inside the closed mesh that the diffusion models shade.
+"""Monte Carlo reference: a volumetric random walk inside the mesh that the diffusion models shade.
+
+The medium is the bake's inside, {w > 1/2} of the mesh's generalised winding number: the walk runs on its boundary
+(:mod:`meshshade.montecarlo.boundary`: holes closed by lids on the level surface w = 1/2, faces with the medium on
+both sides or neither left out, seams of overlapping parts followed), which for a closed mesh is the mesh itself.
 
 Physics (MCML conventions, Wang, Jacques & Zheng 1995, *Comput. Methods Programs Biomed.* 47:131):
 
@@ -372,7 +376,7 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         events += walk.events
         boundary += walk.boundary
     seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
-    va = mesh.vertex_areas if surface.identity else surface.vertex_areas()   # the boundary's area around each
+    va = mesh.vertex_areas if surface.identity else surface.vertex_areas()   # the boundary's, eq. (129)
     with np.errstate(divide="ignore", invalid="ignore"):
         radiance = np.where(va[:, None] > 0, vert_p / va[:, None], 0.0)
         radiance_se = np.where(va[:, None] > 0, vert_se / va[:, None], 0.0)
