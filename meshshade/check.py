@@ -49,7 +49,7 @@ import numpy as np
 from meshshade.geometry.curvature import principal_curvatures
 from meshshade.kernels.curvature import VALIDITY_TOL, curvature_ratios, curvature_validity
 from meshshade.materials import CHANNELS, Material
-from meshshade.transport import cutoff_radii
+from meshshade.surface import cutoff_radii
 from meshshade.volume.inside import SurfaceVolume
 from meshshade.volume.resolution import volume_resolution
 from meshshade.volume.surface import split_long_edges

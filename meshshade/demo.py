@@ -32,7 +32,7 @@ from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.output import compare, render, report
-from meshshade.transport.models import DEFAULT_MODEL
+from meshshade.names import DEFAULT_MODEL
 
 
 def figure1_radiance(material: Material, *, R0_mm=10.0, width=384, spp=4, seed=0, half_width_mm=None):

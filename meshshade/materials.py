@@ -8,13 +8,14 @@ from __future__ import annotations
 import difflib
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from meshshade.errors import DiffusionValidityWarning, MaterialError
 from meshshade.kernels.dipole import dipole_total_reflectance
-from meshshade.kernels.optics import ETA_FIT_ACCURATE, ETA_MAX, check_eta, diffusion_params
+from meshshade.kernels.optics import ETA_FIT_ACCURATE, ETA_MAX, check_eta
+from meshshade.medium import Medium, medium_of
 from meshshade.material_presets import JENSEN_2001_PRESETS, NARASIMHAN_2006_LEFT_OUT, PRESETS  # noqa: F401 (re-exported)
 
 CHANNELS = ("r", "g", "b")
@@ -67,6 +68,12 @@ class Material:
         Henyey-Greenstein anisotropy in (-1, 1); only Monte Carlo uses it (diffusion sees sigma_s' alone).
     name : str
         Label for reports.
+
+    Attributes
+    ----------
+    medium : Medium
+        Every per-channel constant the transports, kernels and the Monte Carlo read (:mod:`meshshade.medium`),
+        computed once, here.
     """
 
     sigma_s_prime: np.ndarray
@@ -74,6 +81,7 @@ class Material:
     eta: float = 1.3
     g: float = 0.0
     name: str = "custom"
+    medium: Medium = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         s = _rgb("sigma_s_prime", self.sigma_s_prime)
@@ -97,6 +105,7 @@ class Material:
         object.__setattr__(self, "sigma_a", a)
         object.__setattr__(self, "eta", eta)
         object.__setattr__(self, "g", g)
+        object.__setattr__(self, "medium", medium_of(s, a, eta, g))
         if eta > ETA_FIT_ACCURATE:
             warnings.warn(
                 f"material {self.name!r}: eta = {eta:g} is above {ETA_FIT_ACCURATE:g}, where the F_dr fit's "
@@ -149,21 +158,17 @@ class Material:
     # --- derived quantities (docs/physics.md §2.1), per channel, in mm or 1/mm --------------------------------
     @property
     def sigma_t_prime(self) -> np.ndarray:
-        """Reduced extinction sigma_t' = sigma_s' + sigma_a [1/mm]."""
-        return self.sigma_s_prime + self.sigma_a
+        """Reduced extinction sigma_t' = sigma_s' + sigma_a [1/mm] (read-only, the medium's)."""
+        return self.medium.sigma_t_prime
 
     @property
     def albedo_prime(self) -> np.ndarray:
-        """Reduced albedo alpha' = sigma_s'/sigma_t'."""
-        return self.sigma_s_prime / self.sigma_t_prime
-
-    @property
-    def _opt(self):
-        return diffusion_params(self.albedo_prime, self.eta)
+        """Reduced albedo alpha' = sigma_s'/sigma_t' (read-only, the medium's)."""
+        return self.medium.albedo_prime
 
     @property
     def D(self) -> np.ndarray:
-        """Diffusion coefficient 1/(3 sigma_t') [mm]."""
+        """Jensen's diffusion coefficient 1/(3 sigma_t') [mm] (d'Eon's, the volume's: ``medium.D``)."""
         return 1.0 / (3.0 * self.sigma_t_prime)
 
     @property
@@ -179,16 +184,16 @@ class Material:
     @property
     def F_dr(self) -> float:
         """Diffuse Fresnel reflectance (Groenhuis fit)."""
-        return float(self._opt.F_dr[0])
+        return float(self.medium.jensen.F_dr[0])
 
     @property
     def A(self) -> float:
-        """Boundary mismatch (1 + F_dr)/(1 - F_dr)."""
-        return float(self._opt.A[0])
+        """Jensen's boundary mismatch (1 + F_dr)/(1 - F_dr) (d'Eon's: ``medium.A``)."""
+        return float(self.medium.jensen.A[0])
 
     @property
     def z_b(self) -> np.ndarray:
-        """Extrapolation distance 2 A D [mm]."""
+        """Jensen's extrapolation distance 2 A D [mm] (d'Eon's: ``medium.z_b``)."""
         return 2.0 * self.A * self.D
 
     @property

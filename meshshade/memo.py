@@ -2,7 +2,7 @@
 
 A sweep runs many bakes on one mesh: over lights, over materials, over models. What depends only on the mesh (the
 loaded mesh, its principal curvatures, the Embree scene) or on the mesh, material and model (the hierarchical
-transport's near-field matrix and far-field trees, :class:`~meshshade.transport.hierarchical.SurfaceTransport`)
+transport's near-field matrix and far-field trees, :class:`~meshshade.surface.hierarchical.SurfaceTransport`)
 is the same from one job to the next. Inside :func:`reuse` (the batch runner wraps every job in it),
 :func:`cached` keeps such values in a small process-wide least-recently-used store; outside it, :func:`cached`
 just builds the value, so a single command or API call behaves exactly as without this module.

@@ -8,9 +8,9 @@ presets, data with their names, are in :mod:`meshshade.material_presets`.
 """
 
 #: the kernels ``auto`` chooses between per entry sample: the names of plan codes 0-3
-#: (:class:`meshshade.transport.models.Kernel` 0-3)
+#: (:class:`meshshade.surface.models.Kernel` 0-3)
 KERNEL_NAMES = ("dipole", "curved", "exact-sphere", "fitted")
-#: every model :func:`meshshade.transport.baking.bake` accepts (described in :mod:`meshshade.transport.models`)
+#: every model :func:`meshshade.transport.baking.bake` accepts (described in :mod:`meshshade.surface.models`)
 MODELS = KERNEL_NAMES + ("auto", "volume")
 #: the default model of the bake, the CLI, batches, the Blender add-on and compare's first model
 DEFAULT_MODEL = "volume"

@@ -20,12 +20,17 @@ consecutive blocks of sources instead, each of about :data:`BLOCK_SECONDS` of wo
 Where blocks end never changes a result: every source is computed on its own. The interrupt handling itself is
 :mod:`meshshade.progress`'s (:func:`~meshshade.progress.kernel_interrupts`,
 :func:`~meshshade.progress.polled_interrupts`).
+
+Short sweeps called many times in a row (the volume's multigrid: a few milliseconds each, hundreds per solve) take
+:func:`parallel_for` instead: equal blocks on a pool of threads kept for the process (no threads started per call,
+no pacing), the calling thread working on the first block.
 """
 from __future__ import annotations
 
 import math
 import os
 import sys
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
@@ -33,7 +38,8 @@ import numpy as np
 
 from meshshade.progress import kernel_interrupts, polled_interrupts
 
-__all__ = ["BLOCK_SECONDS", "POLL_SECONDS", "Pacer", "default_threads", "pace_rate", "run_in_blocks", "run_paced"]
+__all__ = ["BLOCK_SECONDS", "POLL_SECONDS", "Pacer", "default_threads", "pace_rate", "parallel_for", "run_in_blocks",
+           "run_paced"]
 
 #: seconds of work per kernel call: Python acts on Ctrl-C (and SIGTERM, SIGHUP) only between calls, never inside
 #: a compiled loop, so this bounds how long an interrupt waits (see :func:`run_paced`)
@@ -148,7 +154,7 @@ def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, s
         out = run(a, b)
         return out, time.perf_counter() - t
 
-    ex = ThreadPoolExecutor(max_workers=n_threads)
+    ex = _shared_pool(n_threads)      # the process's pool: no threads started or joined per call
     pending: dict = {}
     # signals are polled between the executor's calls, never raised inside them (progress.polled_interrupts)
     with polled_interrupts() as poll:
@@ -175,7 +181,7 @@ def run_paced(run, pacer: Pacer, k: int, *, n_threads: int = 1, progress=None, s
         finally:  # on an interrupt or error: queued blocks are dropped, running ones finish (or stop early)
             for f in pending:
                 f.cancel()
-            ex.shutdown(wait=True)
+            wait(pending)
     return [results[a] for a in sorted(results)]
 
 
@@ -196,3 +202,40 @@ def run_in_blocks(run, k: int, *, n_threads: int | None = None, block: int | Non
     block = max(1, int(block))
     pacer = Pacer(np.ones(k), seconds=np.inf, min_block=block, max_block=block)
     return run_paced(run, pacer, k, n_threads=n_threads, progress=progress)
+
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _shared_pool(workers: int) -> ThreadPoolExecutor:
+    """The process's pool of at least ``workers`` threads (made, or remade larger, on demand)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL._max_workers < workers:
+            old, _POOL = _POOL, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="meshshade")
+            if old is not None:
+                old.shutdown(wait=False)
+        return _POOL
+
+
+def parallel_for(run, k: int, *, n_threads: int | None = None, min_block: int = 2048) -> None:
+    """``run(a, b)`` over ``n_threads`` equal consecutive blocks ``a:b`` of ``k`` items (default
+    :func:`default_threads`), at least ``min_block`` items each: the calling thread runs the first block while the
+    process's pool runs the others, and the call returns when all are done. For compiled kernels that release the
+    interpreter (``nogil=True``), each item computed on its own (so where blocks end never changes a result), short
+    and called many times (no threads are started per call). A Ctrl-C acts when the call returns."""
+    n = default_threads() if n_threads is None else max(1, int(n_threads))
+    n = min(n, max(1, k // max(1, int(min_block))))
+    if n <= 1:
+        if k > 0:
+            run(0, k)
+        return
+    edges = [round(i * k / n) for i in range(n + 1)]
+    pool = _shared_pool(n - 1)
+    futures = [pool.submit(run, edges[i], edges[i + 1]) for i in range(1, n)]
+    try:
+        run(edges[0], edges[1])
+    finally:
+        for f in futures:
+            f.result()

@@ -57,8 +57,8 @@ from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import CHANNELS, Material
 from meshshade.montecarlo.shapes import shape_mc_profile
 from meshshade.names import PROFILE_MC_PHOTONS as MC_PHOTONS, PROFILE_SHAPES as SHAPES  # the CLI's too
-from meshshade.transport.baking import RTOL_RANGE
-from meshshade.transport.source_factors import check_source_model, source_model_keyword
+from meshshade.surface.options import RTOL_RANGE
+from meshshade.surface.source_factors import check_source_model, source_model_keyword
 
 MODELS = ("dipole", "exact", "curved", "fitted", "mc")
 #: the shapes with an exact Monte Carlo (meshshade.montecarlo.shapes)

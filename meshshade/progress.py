@@ -25,6 +25,8 @@ tenths of a second (:func:`meshshade.pacing.run_paced`). A signal that arrives w
 a compiled loop runs in the main thread is acted upon when numba converts the loop's results, which numba
 reports as a ``SystemError``; :func:`kernel_interrupts` (around such calls) and :func:`interrupt_in` (for a
 command-line front end) recover the KeyboardInterrupt.
+
+:class:`Stopwatch` times a run's stages (a bake's ``timings``).
 """
 from __future__ import annotations
 
@@ -38,8 +40,8 @@ import warnings
 
 from tqdm import tqdm
 
-__all__ = ["Progress", "DEFAULT_INTERVAL", "INTERVAL_ENV", "format_duration", "interrupt_in", "kernel_interrupts",
-           "polled_interrupts"]
+__all__ = ["Progress", "Stopwatch", "DEFAULT_INTERVAL", "INTERVAL_ENV", "format_duration", "interrupt_in",
+           "kernel_interrupts", "polled_interrupts"]
 
 #: seconds between two progress lines when stderr is not a terminal
 DEFAULT_INTERVAL = 30.0
@@ -298,3 +300,22 @@ def polled_interrupts():
             signal.signal(s, handler)
     if noted:
         deliver(noted[0])
+
+
+class Stopwatch:
+    """Wall time per stage: :meth:`lap` charges the time since the previous lap to a stage (seconds, summed)."""
+
+    def __init__(self):
+        self.timings: dict = {}
+        self._t0 = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        t = time.perf_counter()
+        self.timings[name] = self.timings.get(name, 0.0) + t - self._t0
+        self._t0 = t
+
+    def charge(self, timings: dict) -> None:
+        """Add stage times measured elsewhere (``{stage: seconds}``) and restart the lap there."""
+        for name, seconds in timings.items():
+            self.timings[name] = self.timings.get(name, 0.0) + seconds
+        self._t0 = time.perf_counter()

@@ -109,18 +109,12 @@ COMPILERS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stencil", "gen
 PUBLIC_OPTIONS = "a public entry point whose options are keyword-only (each named at every call, none positional)"
 #: (module path, function qualname) -> why it may take more than MAX_PARAMS parameters
 PARAMS_ALLOWED = {
-    ("meshshade/transport/baking.py", "bake"): PUBLIC_OPTIONS,
-    ("meshshade/transport/baking.py", "check_bake_options"): PUBLIC_OPTIONS + "; the options of bake, checked",
-    ("meshshade/output/compare.py", "run_comparison"): PUBLIC_OPTIONS,
-    ("meshshade/montecarlo/simulation.py", "simulate"): PUBLIC_OPTIONS,
-    ("meshshade/transport/hierarchical.py", "SurfaceTransport.build"): PUBLIC_OPTIONS,
     **{(path, f"{cls}.query"): ("the geodesic query: the sources' columns (positions, faces, barycentrics, vertex, "
                                 "normals, radius) and keyword-only frame options (d1, d2, k1, k2, progress...), "
                                 "named at every call")
        for path, cls in (("meshshade/geometry/geodesics/neighbourhoods.py", "GeodesicNeighbourhoods"),
                          ("meshshade/geometry/geodesics/arc.py", "ArcGeodesicNeighbourhoods"))},
 }
-
 
 @dataclass(frozen=True)
 class Violation:

@@ -26,7 +26,8 @@ from meshshade.kernels.dipole import dipole_profile, dipole_total_reflectance
 from meshshade.kernels.sphere import sphere_chord_dipole_profile, sphere_series_profile, sphere_total_reflectance
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
-from meshshade.transport import bake, cutoff_radii, describe_scale
+from meshshade.surface import cutoff_radii
+from meshshade.transport import BakeOptions, bake, describe_scale
 
 RHO = np.array([0.0, 1e-12, 1e-6, 1e-3, 0.1, 0.5, 1.0, 3.0, 10.0, 100.0, 1e4])
 THETA = np.array([0.0, 1e-12, 1e-6, 1e-3, 0.1, 0.5, 1.0, np.pi / 2, 2.5, np.pi - 1e-9, np.pi])
@@ -190,7 +191,7 @@ def sphere10_fine():
 def sphere10_reference(sphere10_fine):
     """Beam at a face centroid, the generic case the others are compared with."""
     c = sphere10_fine.vertices[sphere10_fine.faces[100]].mean(axis=0)
-    return bake(sphere10_fine, SKIN, [_beam_at(c, c)], model="curved")
+    return bake(sphere10_fine, SKIN, [_beam_at(c, c)], BakeOptions(model="curved"))
 
 
 def _same_total(res, ref, mesh):
@@ -208,7 +209,7 @@ def test_beam_at_a_vertex(sphere10_fine, sphere10_reference):
     mesh = sphere10_fine
     v = int(np.argmax(mesh.vertices[:, 2]))
     p = mesh.vertices[v]
-    res = bake(mesh, SKIN, [_beam_at(p, p)], model="curved")
+    res = bake(mesh, SKIN, [_beam_at(p, p)], BakeOptions(model="curved"))
     M = _check_result(res, mesh)
     assert M[v].min() > 0 and np.all(M[v] == M.max(axis=0))  # the peak sits at the entry vertex
     _same_total(res, sphere10_reference, mesh)
@@ -218,7 +219,7 @@ def test_beam_on_an_edge(sphere10_fine, sphere10_reference):
     mesh = sphere10_fine
     a, b = mesh.faces[0, 0], mesh.faces[0, 1]
     p = 0.5 * (mesh.vertices[a] + mesh.vertices[b])
-    res = bake(mesh, SKIN, [_beam_at(p, p)], model="curved")
+    res = bake(mesh, SKIN, [_beam_at(p, p)], BakeOptions(model="curved"))
     M = _check_result(res, mesh)
     assert min(M[a].min(), M[b].min()) > 0
     _same_total(res, sphere10_reference, mesh)
@@ -249,8 +250,8 @@ def test_beam_on_a_sliver_triangle():
         warnings.simplefilter("ignore", MeshDefectWarning)  # open plate
         mesh = Mesh.from_arrays(V, F)
     mat = SKIN  # mean edge 0.5 mm < z_r: resolved
-    on_sliver = bake(mesh, mat, [BeamLight((x_sliver, 0.25, 10.0), (0, 0, -1))], model="curved")
-    beside = bake(mesh, mat, [BeamLight((x_sliver + 0.5, 0.25, 10.0), (0, 0, -1))], model="curved")
+    on_sliver = bake(mesh, mat, [BeamLight((x_sliver, 0.25, 10.0), (0, 0, -1))], BakeOptions(model="curved"))
+    beside = bake(mesh, mat, [BeamLight((x_sliver + 0.5, 0.25, 10.0), (0, 0, -1))], BakeOptions(model="curved"))
     M = _check_result(on_sliver, mesh)
     _check_result(beside, mesh)
     # the sliver changes nothing physical: the same total to within the shift of 0.5 mm on a finite plate
@@ -282,7 +283,7 @@ def test_beam_at_grazing_incidence(plate, cos_incidence):
     c = cos_incidence
     d = np.array([np.sqrt(1 - c * c), 0.0, -c])
     origin = np.array([0.3, 0.2, 0.0]) - 5.0 * d / np.abs(d).max()  # aimed at (0.3, 0.2, 0)
-    res = bake(plate, SKIN, [BeamLight(tuple(origin), tuple(d))], model="curved")
+    res = bake(plate, SKIN, [BeamLight(tuple(origin), tuple(d))], BakeOptions(model="curved"))
     _check_result(res, plate)
     want = float(fresnel_transmittance_entry(c, SKIN.eta))
     assert res.stats["entering_power"] == pytest.approx(want, rel=1e-6)
@@ -295,7 +296,7 @@ def test_beam_in_the_tangent_plane_is_clean(plate):
     from meshshade.errors import LightError
 
     try:
-        res = bake(plate, SKIN, [BeamLight((-30.0, 0.2, 0.0), (1.0, 0.0, 0.0))], model="dipole")
+        res = bake(plate, SKIN, [BeamLight((-30.0, 0.2, 0.0), (1.0, 0.0, 0.0))], BakeOptions(model="dipole"))
     except LightError as exc:
         assert "misses" in str(exc) or "back" in str(exc)
         return
@@ -309,7 +310,7 @@ def test_tiny_and_huge_meshes(diameter_mm, model):
     mesh = _sphere_mesh(diameter_mm / 2, 3)
     r = diameter_mm / 2
     res = bake(mesh, SKIN, [BeamLight((0.0, 0.0, 4 * r), (0, 0, -1)), DirectionalLight((0.3, -0.5, -1))],
-               model=model)
+               BakeOptions(model=model))
     _check_result(res, mesh)
     assert "transport mean free paths" in describe_scale(mesh, SKIN)
 
@@ -329,16 +330,16 @@ def test_tiny_mesh_reports_unresolved_scale():
 
 def test_sigma_a_tiny_and_albedo_tiny_bake(sphere10):
     light = [BeamLight((0.0, 0.0, 40.0), (0, 0, -1))]
-    _check_result(bake(sphere10, Material(1.0, 1e-9), light, model="curved"), sphere10)
+    _check_result(bake(sphere10, Material(1.0, 1e-9), light, BakeOptions(model="curved")), sphere10)
     with pytest.warns(DiffusionValidityWarning):
         mat = Material(1e-3, 10.0)
-    _check_result(bake(sphere10, mat, light, model="curved"), sphere10)
+    _check_result(bake(sphere10, mat, light, BakeOptions(model="curved")), sphere10)
 
 
 @pytest.mark.parametrize("eta", [1.0, 2.5])
 def test_eta_extremes_bake(sphere10, eta):
     mat = Material([0.74, 0.88, 1.01], [0.032, 0.17, 0.48], eta=eta)
-    res = bake(sphere10, mat, [BeamLight((0.0, 0.0, 40.0), (0, 0, -1))], model="curved")
+    res = bake(sphere10, mat, [BeamLight((0.0, 0.0, 40.0), (0, 0, -1))], BakeOptions(model="curved"))
     _check_result(res, sphere10)
     if eta == 1.0:
         assert res.stats["entering_power"] == pytest.approx(1.0)  # no Fresnel loss at a matched boundary
@@ -350,7 +351,7 @@ def test_concave_and_saddle_surfaces_bake():
 
     V, F = torus(10.0, 3.0, 48, 24)
     mesh = Mesh.from_arrays(V, F)
-    res = bake(mesh, SKIN, [BeamLight((0.0, 8.0, 40.0), (0, 0, -1))], model="curved")  # saddle region
+    res = bake(mesh, SKIN, [BeamLight((0.0, 8.0, 40.0), (0, 0, -1))], BakeOptions(model="curved"))  # saddle region
     _check_result(res, mesh)
     assert res.k2.min() < 0 < res.k1.max()
 

@@ -17,6 +17,8 @@ from meshshade.light import DirectionalLight  # noqa: E402
 from meshshade.montecarlo import simulate  # noqa: E402
 from meshshade.preview import mesh_preview, preview_colours  # noqa: E402
 from meshshade.transport import bake  # noqa: E402
+from meshshade.montecarlo import MCOptions
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 MESH = Mesh(*icosphere(10.0, 2))
 SUN = [DirectionalLight((0.0, 0.0, -1.0), 1.0)]
@@ -24,14 +26,15 @@ SUN = [DirectionalLight((0.0, 0.0, -1.0), 1.0)]
 
 @pytest.fixture(scope="module")
 def baked():
-    return bake(MESH, Material.preset("skin1"), SUN, model="dipole", transport="direct")
+    return bake(MESH, Material.preset("skin1"), SUN, BakeOptions(
+        model="dipole", surface=SurfaceOptions(transport="direct")))
 
 
 def test_reprs_say_what_a_result_is(baked):
     text = repr(baked)
     assert text.startswith("<BakeResult dipole, skin1: 162 vertices") and "direct transport" in text
     assert "\n" not in text and len(text) < 200
-    mc = simulate(MESH, Material.preset("skin1"), SUN, photons=2000, seed=1)
+    mc = simulate(MESH, Material.preset("skin1"), SUN, MCOptions(photons=2000, seed=1))
     text = repr(mc)
     assert text.startswith("<MCResult skin1: 2000 photons") and "diffuse reflectance" in text and len(text) < 200
 

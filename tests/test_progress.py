@@ -32,6 +32,8 @@ from meshshade.montecarlo.simulation import simulate
 from meshshade.pacing import BLOCK_SECONDS, Pacer, default_threads, run_in_blocks, run_paced
 from meshshade.progress import Progress, format_duration, interrupt_in, kernel_interrupts
 from meshshade.transport.baking import bake
+from meshshade.montecarlo import MCOptions
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 LINE = re.compile(r"^meshshade: bake: \d+ % \(\d+/\d+ sources\), \d+:\d\d elapsed, ~\d+:\d\d left$")
 
@@ -304,9 +306,10 @@ def test_bake_reports_its_sources_in_lines_when_stderr_is_not_a_terminal(small_s
     monkeypatch.setenv(P.INTERVAL_ENV, "0")  # a line at every update
     mat, light = material_from_options("skin1"), [parse_light_spec("directional:0,0,-1")]
     for transport, unit in (("direct", "sources"), ("hierarchical", "receivers")):
-        quiet = bake(small_sphere, mat, light, model="dipole", progress=False, transport=transport)
+        quiet = bake(small_sphere, mat, light, BakeOptions(model="dipole", surface=SurfaceOptions(transport=transport)))
         assert capsys.readouterr().err == ""
-        res = bake(small_sphere, mat, light, model="dipole", progress="render", transport=transport)
+        res = bake(small_sphere, mat, light, BakeOptions(
+            model="dipole", progress="render", surface=SurfaceOptions(transport=transport)))
         lines = capsys.readouterr().err.splitlines()
         k = len(res.samples) if transport == "direct" else small_sphere.n_vertices
         assert lines and all(line.startswith("meshshade: render: ") for line in lines), lines
@@ -317,8 +320,8 @@ def test_bake_reports_its_sources_in_lines_when_stderr_is_not_a_terminal(small_s
 def test_mc_reports_photons_in_lines(small_sphere, capsys, monkeypatch):
     monkeypatch.setenv(P.INTERVAL_ENV, "0")
     mat = material_from_options("skin1")
-    simulate(small_sphere, mat, [parse_light_spec("directional:0,0,-1")], photons=2000, progress=True,
-             beam_distances=False)
+    simulate(small_sphere, mat, [parse_light_spec("directional:0,0,-1")], MCOptions(
+        photons=2000, beam_distances=False), progress=True)
     lines = capsys.readouterr().err.splitlines()
     assert lines and all(line.startswith("meshshade: mc: ") and "photons" in line for line in lines), lines
 

@@ -22,13 +22,12 @@ The ``volume`` model always takes the beam source model and has no series, cutof
 """
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass, field
 
 from meshshade.bench.scenes import SCENES, Scene
 from meshshade.errors import ParameterError
-from meshshade.transport import MODELS, bake
-from meshshade.transport.source_factors import check_source_model, source_model_keyword
+from meshshade.transport import MODELS, SurfaceOptions
+from meshshade.surface.source_factors import check_source_model, source_model_keyword
 
 KNOBS = ("default", "rtol", "cutoff_tol", "resolution", "geodesic", "render", "photons", "source_model")
 #: models for which bake's rtol (series tolerance) changes nothing
@@ -36,9 +35,10 @@ NO_SERIES = ("dipole", "curved", "fitted")
 
 
 def bake_defaults() -> dict:
-    """``rtol``, ``cutoff_tol`` and ``geodesic`` defaults of :func:`meshshade.transport.baking.bake` (kept in sync)."""
-    p = inspect.signature(bake).parameters
-    return {k: p[k].default for k in ("rtol", "cutoff_tol", "geodesic")}
+    """``rtol``, ``cutoff_tol`` and ``geodesic`` defaults of the surface models' options
+    (:class:`~meshshade.surface.options.SurfaceOptions`, kept in sync)."""
+    s = SurfaceOptions()
+    return {k: getattr(s, k) for k in ("rtol", "cutoff_tol", "geodesic")}
 
 
 @dataclass(frozen=True)

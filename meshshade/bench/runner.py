@@ -34,10 +34,10 @@ from meshshade.errors import MeshshadeError
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.light import BeamLight, DirectionalLight
-from meshshade.montecarlo import simulate
+from meshshade.montecarlo import MCOptions, simulate
 from meshshade.output.render import Camera, PixelGather, render_radiance
 from meshshade.raycast import make_scene
-from meshshade.transport import bake
+from meshshade.transport import BakeOptions, SurfaceOptions, bake
 
 #: columns of the rows (and of accuracy_vs_time.csv)
 COLUMNS = ("scene", "model", "knob", "value", "error_max", "error_mean", "error_energy", "time_s", "ref_kind",
@@ -60,11 +60,12 @@ def _warm_up(models, log):
     for m in models:
         for light in (beam, DirectionalLight((0, 0, -1))):
             for geo in ("exact", "arc"):
-                res = _failsafe(lambda: bake(mesh, MATERIAL, [light], model=m, geodesic=geo), log, f"warm-up {m}")
+                options = BakeOptions(model=m, surface=SurfaceOptions(geodesic=geo))
+                res = _failsafe(lambda: bake(mesh, MATERIAL, [light], options), log, f"warm-up {m}")
         if res is not None:
             cam = Camera("orthographic", (0, 0, 20), (0, 0, 0), ortho_height=4.0)
             render_radiance(mesh, res.radiance, cam, 8, 8, spp=1, eta=MATERIAL.eta, exitance_at=PixelGather(mesh, res))
-    simulate(mesh, MATERIAL, [beam], photons=2000, seed=0, keep_beam_exits=False, beam_distances=False)
+    simulate(mesh, MATERIAL, [beam], MCOptions(photons=2000, seed=0, keep_beam_exits=False, beam_distances=False))
     _failsafe(lambda: sphere_beam_exitance(np.array([0.1]), R_mm=5.0, material=MATERIAL), log, "warm-up reference")
     return time.perf_counter() - t
 
@@ -138,8 +139,9 @@ class _Runner:
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            res = simulate(mesh, MATERIAL, [light], photons=int(photons), seed=int(seed), keep_beam_exits=False,
-                           beam_distances=False, client=client)
+            res = simulate(mesh, MATERIAL, [light], MCOptions(photons=int(photons), seed=int(seed),
+                                                              keep_beam_exits=False, beam_distances=False),
+                           client=client)
         return res, time.perf_counter() - t
 
     def run(self, r: Run) -> dict | None:
@@ -155,10 +157,11 @@ class _Runner:
         else:
             kw = {k: st[k] for k in ("rtol", "cutoff_tol", "geodesic")}
             kw["source_model"] = st.get("source_model", "point")
+            options = BakeOptions(model=r.model, surface=SurfaceOptions(**kw))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 t = time.perf_counter()
-                res = _failsafe(lambda: bake(mesh, MATERIAL, [light], model=r.model, **kw), self.log,
+                res = _failsafe(lambda: bake(mesh, MATERIAL, [light], options), self.log,
                                 f"{sc.name} {r.model} {r.knob}={r.value}")
                 dt = time.perf_counter() - t
             if res is None:

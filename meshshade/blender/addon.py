@@ -29,7 +29,7 @@ from meshshade import io
 from meshshade.errors import MeshshadeError
 from meshshade.materials import PRESETS
 from meshshade.output.tonemap import tonemap_linear
-from meshshade.transport.models import DEFAULT_MODEL, MODELS
+from meshshade.names import DEFAULT_MODEL, MODELS
 
 #: the float colour attribute holding the linear exitance (W/mm², per vertex, alpha 1)
 RADIANCE_ATTRIBUTE = "meshshade_radiance"

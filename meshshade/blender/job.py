@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from meshshade import io
-from meshshade.transport.models import DEFAULT_MODEL
+from meshshade.names import DEFAULT_MODEL
 from meshshade.errors import MeshshadeError
 from meshshade.light.sources import AreaLight, BeamLight, DirectionalLight, EnvironmentLight, PointLight
 

@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import sys
 
-from meshshade.cli.options import lights_from_args, mesh_and_material
+from meshshade.cli.options import bake_options_from_args, lights_from_args, mesh_and_material
 from meshshade.asset_cache import AssetCache
 from meshshade.errors import ParameterError
 from meshshade.io import check_output_path, read_uv_map
 from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, texture_outputs, write_bake, write_texture
 from meshshade.output.texture import bake_texture, check_texture_options
-from meshshade.transport import bake, describe_result
-from meshshade.transport.baking import check_bake_options, mesh_note
+from meshshade.transport import bake, describe_result, mesh_note
 
 
 def _refine(text):
@@ -43,24 +42,20 @@ def run_bake(args) -> int:
         size, padding, refine = check_texture_options(args.texture_size, args.padding, _refine(args.texture_refine))
         for path in texture_outputs(args.texture, atlas=False).values():
             check_output_path(path, outs, suffixes=(path.suffix,), option="--texture")
-    check_bake_options(args.model, args.cutoff_tol, args.curvature_radius, args.geodesic, args.far_field,
-                       transport=args.transport, source_model=args.source_model)
+    options = bake_options_from_args(args, progress=not args.quiet)
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
-    options = dict(model=args.model, cutoff_tol=args.cutoff_tol, curvature_radius_mm=args.curvature_radius,
-                   progress=not args.quiet, geodesic=args.geodesic, far_field=args.far_field,
-                   transport=args.transport, source_model=args.source_model)
     texture = None
     if args.texture:
         uv = read_uv_map(args.mesh, mesh)
         if uv is None:   # an automatic atlas, written beside the texture
             check_output_path(texture_outputs(args.texture, atlas=True)["obj"], outs, suffixes=(".obj",),
                               option="--texture (its automatic UV atlas)")
-        texture = bake_texture(mesh, material, lights, uv=uv, size=size, padding=padding, refine=refine,
-                               atlas_cache=AssetCache("uv-atlas"), **options)
+        texture = bake_texture(mesh, material, lights, options, uv=uv, size=size, padding=padding, refine=refine,
+                               atlas_cache=AssetCache("uv-atlas"))
         result = texture.vertex_result()
     else:
-        result = bake(mesh, material, lights, **options)
+        result = bake(mesh, material, lights, options)
     written = []
     if texture is not None:
         written += write_texture(texture, mesh, args.texture, lights=lights)

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import json
 
-from meshshade.cli.options import image_scene_from_args
+from meshshade.cli.options import image_scene_from_args, surface_options_from_args
 from meshshade.io import output_dir
-from meshshade.output.compare import check_floor, check_models, run_comparison, save_comparison
-from meshshade.output.render import check_image_size
+from meshshade.montecarlo import MCOptions
+from meshshade.output.compare import CompareOptions, check_models, run_comparison, save_comparison
 from meshshade.output.tonemap import check_tonemap_options
 
 
@@ -19,16 +19,15 @@ def run_compare(args) -> int:
     sm = tuple(x.strip() for x in args.source_model.split(",") if x.strip()) if args.source_model else (None,)
     source_model = sm[0] if len(sm) == 1 else sm
     models = check_models(tuple(m.strip() for m in args.models.split(",") if m.strip()), source_model=source_model)
-    check_floor(args.floor)
-    check_image_size(args.width, args.height, args.spp)
+    options = CompareOptions(width=args.width, height=args.height, spp=args.spp, per_pixel=args.per_pixel,
+                             floor=args.floor, source_model=source_model)
+    surface = surface_options_from_args(args)   # each side takes its own model and source model
+    mc = MCOptions(photons=args.photons)
     check_tonemap_options(args.tonemap, args.bias)
     scene = image_scene_from_args(args)
     out = output_dir(args.out)
-    cmp = run_comparison(scene.mesh, scene.material, scene.lights, models, camera=scene.camera, width=args.width,
-                         height=args.height, spp=args.spp, per_pixel=args.per_pixel, cutoff_tol=args.cutoff_tol,
-                         floor=args.floor, mc_photons=args.photons, geodesic=args.geodesic,
-                         far_field=args.far_field, transport=args.transport,
-                         progress=False if args.quiet else "compare", source_model=source_model)
+    cmp = run_comparison(scene.mesh, scene.material, scene.lights, models, options, surface=surface, mc=mc,
+                         camera=scene.camera, progress=False if args.quiet else "compare")
     for p in save_comparison(cmp, out, models=cmp["labels"], metadata=scene.metadata, operator=args.tonemap,
                              bias=args.bias, background=scene.background):
         if not args.quiet:

@@ -12,8 +12,7 @@ from meshshade.batch.dask_cluster import check_cluster_options, open_client
 from meshshade.cli.options import lights_from_args, mesh_and_material
 from meshshade.errors import MeshshadeError
 from meshshade.io import check_output_path
-from meshshade.montecarlo import describe_mc, simulate
-from meshshade.montecarlo.simulation import check_mc_options
+from meshshade.montecarlo import MCOptions, describe_mc, simulate
 from meshshade.output.mc_file import write_mc
 
 
@@ -23,7 +22,7 @@ def run_mc(args) -> int:
     for i, (o, option, suffix) in enumerate(outs):
         check_output_path(o, [args.mesh, *(x for x, _, _ in outs[:i])], suffixes=(suffix,), option=option)
     photons = args.photons if args.photons is not None else (None if args.time_budget else 100_000)
-    check_mc_options(photons, seed=args.seed, time_budget=args.time_budget, pool=args.pool)
+    options = MCOptions(photons=photons, seed=args.seed, time_budget=args.time_budget, pool=args.pool)
     split = args.scheduler is not None or args.workers is not None
     check_cluster_options(args.scheduler, args.workers)
     if split and args.time_budget is not None:
@@ -33,8 +32,7 @@ def run_mc(args) -> int:
     mesh, material = mesh_and_material(args)
     with contextlib.ExitStack() as stack:
         client = stack.enter_context(open_client(args.scheduler, args.workers, quiet=args.quiet)) if split else None
-        result = simulate(mesh, material, lights, photons=photons, seed=args.seed, time_budget=args.time_budget,
-                          pool=args.pool, progress=not args.quiet, client=client)
+        result = simulate(mesh, material, lights, options, progress=not args.quiet, client=client)
     write_mc(result, mesh, args.out, npz=args.npz, summary=args.summary)
     if not args.quiet:
         print(describe_mc(result))

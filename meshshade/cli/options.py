@@ -1,4 +1,4 @@
-"""What the shared options mean, once a command runs: material, mesh and units, lights, images.
+"""What the shared options mean, once a command runs: material, mesh and units, lights, the bake's options, images.
 
 Each ``*_from_args`` function turns the parsed options into the objects of the Python API (their parsers are
 in :mod:`meshshade.cli.arguments.common`, which imports nothing heavy). Directories and files are created
@@ -17,7 +17,7 @@ from meshshade.io import load_mesh
 from meshshade.light import AreaLight, EnvironmentLight, parse_light_spec
 from meshshade.materials import Material, material_from_options
 from meshshade.output.render import Camera, parse_camera
-from meshshade.transport import describe_scale
+from meshshade.transport import BakeOptions, SurfaceOptions, describe_scale
 from meshshade.units import mm_per_unit
 
 
@@ -88,6 +88,23 @@ def with_light_error(light, error):
     except LightError as exc:
         raise LightError(f"--light-error: {exc}".replace("environment error", "the error")
                          .replace("area light error", "the error")) from None
+
+
+# --- the bake's options (bake, render, compare) ---------------------------------------------------------------
+def surface_options_from_args(args, source_model: str | None = None) -> SurfaceOptions:
+    """The surface models' :class:`~meshshade.surface.options.SurfaceOptions` of ``--cutoff-tol``,
+    ``--curvature-radius``, ``--geodesic``, ``--far-field``, ``--transport`` and ``source_model``, checked as they
+    are made (one line naming the option)."""
+    return SurfaceOptions(source_model=source_model, geodesic=args.geodesic, cutoff_tol=args.cutoff_tol,
+                          curvature_radius_mm=getattr(args, "curvature_radius", None), transport=args.transport,
+                          far_field=args.far_field)
+
+
+def bake_options_from_args(args, *, progress: bool | str = False) -> BakeOptions:
+    """The :class:`~meshshade.transport.options.BakeOptions` of ``--model``, ``--source-model`` and the surface
+    models' options (:func:`surface_options_from_args`), checked as they are made, before any work."""
+    return BakeOptions(model=args.model, surface=surface_options_from_args(args, args.source_model),
+                       progress=progress)
 
 
 # --- images (render, compare) ------------------------------------------------------------------------

@@ -14,16 +14,16 @@ import os
 import warnings
 from pathlib import Path
 
-from meshshade.cli.options import background_from_args, image_scene_from_args, material_given
+from meshshade.cli.options import (background_from_args, bake_options_from_args, image_scene_from_args,
+                                   material_given)
 from meshshade.errors import MaterialError, MeshshadeError, MeshValidationError, OutputError
 from meshshade.io import check_output_path, read_baked_ply, write_exr, write_png
-from meshshade.transport.models import DEFAULT_MODEL
 from meshshade.kernels.optics import check_eta
+from meshshade.names import DEFAULT_MODEL
 from meshshade.output.render import (PixelGather, check_image_size, display_rgba, image_rgba, parse_camera,
                                      render_radiance)
 from meshshade.output.tonemap import check_tonemap_options
 from meshshade.transport import bake, describe_result
-from meshshade.transport.baking import check_bake_options
 from meshshade.units import mm_per_unit
 
 
@@ -53,13 +53,10 @@ def run_render(args) -> int:
     baked = read_baked_ply(args.mesh, units=args.units)  # None unless the input is a bake's PLY
     if baked is not None:
         return _render_baked(args, baked, exr, png)
-    check_bake_options(args.model, args.cutoff_tol, None, args.geodesic, args.far_field, transport=args.transport,
-                       source_model=args.source_model)
+    options = bake_options_from_args(args, progress=False if args.quiet else "render")
     scene = image_scene_from_args(args)
     mesh, material = scene.mesh, scene.material
-    res = bake(mesh, material, scene.lights, model=args.model, cutoff_tol=args.cutoff_tol, geodesic=args.geodesic,
-               far_field=args.far_field, transport=args.transport, progress=False if args.quiet else "render",
-               source_model=args.source_model)
+    res = bake(mesh, material, scene.lights, options)
     gather = PixelGather(mesh, res) if args.per_pixel else None
     rgb, alpha = render_radiance(mesh, res.radiance, scene.camera, args.width, args.height, args.spp,
                                  eta=material.eta, exitance_at=gather)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshshade.geometry.mesh import face_normals
+from meshshade.geometry.sorting import counting_order, pair_table
 from meshshade.geometry.topology import vertex_components
 
 __all__ = ["is_convex"]
@@ -36,24 +37,29 @@ def is_convex(vertices, faces) -> bool:
     m, n = F.shape[0], np.int64(V.shape[0])
     if m < 4 or (3 * m) % 2:
         return False
+    if F.min() < 0 or F.max() >= n:
+        return False
+    # a quick necessary test first: a convex body lies behind every face's plane; the planes of a few faces
+    # (fixed choice) already show most meshes are not convex, without the O(faces) work below
+    scale = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    for f in np.linspace(0, m - 1, min(m, 16)).astype(np.int64):
+        nrm = np.cross(V[F[f, 1]] - V[F[f, 0]], V[F[f, 2]] - V[F[f, 0]])
+        ln = float(np.linalg.norm(nrm))
+        if ln > 0.0 and float(np.max((V - V[F[f, 0]]) @ (nrm / ln))) > 1e-9 * scale:
+            return False
     a = F.reshape(-1)
     b = np.roll(F, -1, axis=1).reshape(-1)
-    # (1) sort the directed edges by their undirected key: each key must appear exactly twice, once each way
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    first, second = order[0::2], order[1::2]
-    if not (np.all(key[first] == key[second]) and np.all(key[second[:-1]] != key[first[1:]])):
+    # (1) each undirected edge used exactly twice, once each way
+    _, edge, count = pair_table(np.minimum(a, b), np.maximum(a, b), int(n))
+    if np.any(count != 2):
         return False
+    order = counting_order(edge, count.size)
+    first, second = order[0::2], order[1::2]
     if not (np.all(a[first] == b[second]) and np.all(b[first] == a[second])):
         return False
     twin = np.empty_like(order)
     twin[first], twin[second] = second, first                                  # index of the reverse edge
-    used_mask = np.bincount(a, minlength=V.shape[0]) > 0
-    n_components, _ = vertex_components(V.shape[0], F)
-    if n_components != 1:                                                      # (2)
-        return False
-    if int(used_mask.sum()) - (3 * m) // 2 + m != 2:                           # (3)
-        return False
+    # (4) first: the cheapest test that a non-convex mesh fails
     tri = V[F]
     cross = face_normals(V, F, unit=False)
     length = np.linalg.norm(cross, axis=1, keepdims=True)
@@ -61,9 +67,14 @@ def is_convex(vertices, faces) -> bool:
         return False
     unit = cross / length
     opposite = F[twin // 3, (twin % 3 + 2) % 3]
-    scale = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     height = np.einsum("ij,ij->i", np.repeat(unit, 3, axis=0), V[opposite] - V[a])
     if np.any(height > 1e-9 * scale):                                          # (4)
+        return False
+    used_mask = np.bincount(a, minlength=V.shape[0]) > 0
+    n_components, _ = vertex_components(V.shape[0], F)
+    if n_components != 1:                                                      # (2)
+        return False
+    if int(used_mask.sum()) - (3 * m) // 2 + m != 2:                           # (3)
         return False
     angle_sum = np.zeros(V.shape[0])
     for k in range(3):

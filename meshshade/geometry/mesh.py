@@ -24,10 +24,12 @@ transport) leaves them out.
 """
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 
+import numba
 import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
@@ -35,6 +37,7 @@ from scipy.sparse import csgraph
 from meshshade.errors import MeshValidationError
 from meshshade.units import mm_per_unit as _mm_per_unit
 from meshshade.geometry import topology
+from meshshade.geometry.sorting import counting_order, pair_table
 
 __all__ = ["Mesh", "MeshReport", "MeshDefectWarning", "validate_mesh", "face_geometry", "face_normals",
            "nonmanifold_vertices", "DEGENERATE_REL_TOL"]
@@ -110,16 +113,29 @@ def face_geometry(vertices, faces):
     cross : (m, 3) float64, ``(v1 - v0) x (v2 - v0)``; its norm is twice the face area
     degenerate : (m,) bool, ``|cross| <= DEGENERATE_REL_TOL * longest_edge**2`` (includes repeated indices)
     """
-    V = np.asarray(vertices, np.float64)
-    F = np.asarray(faces, np.int64)
-    v0, v1, v2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    e0, e1, e2 = v1 - v0, v2 - v1, v0 - v2
-    cross = np.cross(e0, -e2)
-    longest2 = np.maximum(np.maximum(np.einsum("ij,ij->i", e0, e0), np.einsum("ij,ij->i", e1, e1)),
-                          np.einsum("ij,ij->i", e2, e2))
-    degenerate = np.linalg.norm(cross, axis=1) <= DEGENERATE_REL_TOL * longest2
-    degenerate |= (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    V = np.ascontiguousarray(vertices, np.float64)
+    F = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    cross = np.empty((F.shape[0], 3))
+    degenerate = np.empty(F.shape[0], dtype=bool)
+    _face_geometry(V, F, DEGENERATE_REL_TOL, cross, degenerate)
     return cross, degenerate
+
+
+@numba.njit(cache=True, nogil=True)
+def _face_geometry(V, F, tol, cross, degenerate):
+    """One pass over the faces (:func:`face_geometry`; no temporaries: a 4.5M-face mesh in tens of ms)."""
+    for f in range(F.shape[0]):
+        i, j, k = F[f, 0], F[f, 1], F[f, 2]
+        ax, ay, az = V[j, 0] - V[i, 0], V[j, 1] - V[i, 1], V[j, 2] - V[i, 2]          # e0 = v1 - v0
+        bx, by, bz = V[k, 0] - V[j, 0], V[k, 1] - V[j, 1], V[k, 2] - V[j, 2]          # e1 = v2 - v1
+        cx, cy, cz = V[i, 0] - V[k, 0], V[i, 1] - V[k, 1], V[i, 2] - V[k, 2]          # e2 = v0 - v2
+        # e0 x (-e2) = (v1 - v0) x (v2 - v0)
+        nx = ay * (-cz) - az * (-cy)
+        ny = az * (-cx) - ax * (-cz)
+        nz = ax * (-cy) - ay * (-cx)
+        cross[f, 0], cross[f, 1], cross[f, 2] = nx, ny, nz
+        longest2 = max(ax * ax + ay * ay + az * az, bx * bx + by * by + bz * bz, cx * cx + cy * cy + cz * cz)
+        degenerate[f] = (math.sqrt(nx * nx + ny * ny + nz * nz) <= tol * longest2) or i == j or j == k or i == k
 
 
 def _unit_rows(vectors: np.ndarray) -> np.ndarray:
@@ -206,15 +222,44 @@ def nonmanifold_vertices(n_vertices: int, faces, topo=None) -> np.ndarray:
     end = start - start % 3 + (start % 3 + 1) % 3
     fwd = topo.halfedge_forward.reshape(-1)
     low, high = np.where(fwd, start, end), np.where(fwd, end, start)  # the corners at the edge's lower/higher vertex
-    order = np.argsort(he_edge, kind="stable")
-    first = np.r_[True, he_edge[order][1:] != he_edge[order][:-1]]
-    head = order[np.maximum.accumulate(np.where(first, np.arange(order.size), 0))]  # each edge's first half-edge
-    rows, cols = np.r_[low[order], high[order]], np.r_[low[head], high[head]]
-    graph = sparse.coo_matrix((np.ones(rows.size, np.int8), (rows, cols)), shape=(corners, corners))
-    _, fan = csgraph.connected_components(graph, directed=False)
-    key = np.sort(Ft.reshape(-1) * np.int64(corners) + fan)
-    distinct = key[np.r_[True, key[1:] != key[:-1]]] // corners
-    return np.bincount(distinct, minlength=n_vertices) > 1
+    order = counting_order(he_edge, topo.edges.shape[0])
+    # corners linked through an edge (the corners at its lower vertex of all its half-edges, and at its higher
+    # vertex) are in one fan: union-find over the corners, then the distinct fans at each vertex
+    fans = _fans_per_vertex(Ft.reshape(-1), he_edge[order], low[order], high[order], n_vertices)
+    return fans > 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _fans_per_vertex(corner_vertex, edge, low, high, n_vertices):
+    """(n,) the number of fans at each vertex: corners joined when half-edges of one edge (consecutive in
+    ``edge``) meet at the same end; a union-find with path halving."""
+    k = corner_vertex.size
+    parent = np.arange(k)
+    for t in range(1, edge.size):
+        if edge[t] != edge[t - 1]:
+            continue
+        # join this half-edge's corners with those of the edge's previous half-edge (transitively: all of them)
+        for a, b in ((low[t], low[t - 1]), (high[t], high[t - 1])):
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            while parent[b] != b:
+                parent[b] = parent[parent[b]]
+                b = parent[b]
+            if a != b:
+                if a < b:
+                    parent[b] = a
+                else:
+                    parent[a] = b
+    # a fan per root; count distinct roots at each vertex
+    count = np.zeros(n_vertices, np.int64)
+    for c in range(k):
+        r = c
+        while parent[r] != r:
+            r = parent[r]
+        if r == c:
+            count[corner_vertex[c]] += 1
+    return count
 
 
 def validate_mesh(vertices, faces, *, emit_warnings: bool = True) -> MeshReport:
@@ -409,9 +454,8 @@ class Mesh:
     def mean_edge_length(self) -> float:
         """Mean length (mm) of the unique edges of the non-degenerate faces."""
         F = self.nondegenerate_faces
-        e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-        key = np.unique(e[:, 0] * np.int64(self.n_vertices) + e[:, 1])
-        e = np.stack([key // self.n_vertices, key % self.n_vertices], axis=1)
+        a, b = F.reshape(-1), np.roll(F, -1, axis=1).reshape(-1)
+        e, _, _ = pair_table(np.minimum(a, b), np.maximum(a, b), self.n_vertices)
         return float(np.linalg.norm(self.vertices[e[:, 0]] - self.vertices[e[:, 1]], axis=1).mean())
 
     @cached_property

@@ -24,6 +24,8 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
+from meshshade.geometry.sorting import counting_order, pair_table, sorted_unique
+
 __all__ = ["EdgeTopology", "edge_topology", "vertex_adjacency", "vertex_components", "consistent_winding",
            "orient_outward", "winding_number", "signed_volumes"]
 
@@ -66,10 +68,8 @@ def edge_topology(faces) -> EdgeTopology:
     a = Ft.reshape(-1)
     b = np.roll(Ft, -1, axis=1).reshape(-1)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    base = np.int64(F.max() + 1) if F.size else np.int64(1)
-    keys, inverse, counts = np.unique(lo * base + hi, return_inverse=True, return_counts=True)  # 1-D: fast
-    edges = np.stack([keys // base, keys % base], axis=1)
-    return EdgeTopology(edges=edges.astype(np.int64), face_count=counts.astype(np.int64),
+    edges, inverse, counts = pair_table(lo, hi, int(F.max()) + 1 if F.size else 1)
+    return EdgeTopology(edges=edges, face_count=counts,
                         halfedge_edge=inverse.reshape(-1, 3).astype(np.int64),
                         halfedge_forward=(a < b).reshape(-1, 3), topo_faces=topo)
 
@@ -95,12 +95,10 @@ def vertex_adjacency(n_vertices: int, faces) -> tuple[np.ndarray, np.ndarray]:
     b = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
     keep = a != b
     a, b = a[keep], b[keep]
-    base = np.int64(n_vertices)
-    keys = np.unique(np.concatenate([a * base + b, b * base + a]))  # 1-D keys: sorted by row, then column
-    rows = keys // base
+    pairs, _, _ = pair_table(np.concatenate([a, b]), np.concatenate([b, a]), int(n_vertices))  # by row, column
     indptr = np.zeros(n_vertices + 1, dtype=np.int64)
-    indptr[1:] = np.cumsum(np.bincount(rows, minlength=n_vertices))
-    return indptr, keys % base
+    indptr[1:] = np.cumsum(np.bincount(pairs[:, 0], minlength=n_vertices))
+    return indptr, pairs[:, 1]
 
 
 def vertex_components(n_vertices: int, faces) -> tuple[int, np.ndarray]:
@@ -133,15 +131,17 @@ def _manifold_pairs(topo: EdgeTopology):
     he_fwd = topo.halfedge_forward.reshape(-1)
     manifold = topo.face_count[he_edge] == 2
     he_edge, he_face, he_fwd = he_edge[manifold], he_face[manifold], he_fwd[manifold]
-    order = np.argsort(he_edge, kind="stable")
+    order = counting_order(he_edge, topo.edges.shape[0])
     he_face, he_fwd = he_face[order], he_fwd[order]
     fa, fb = he_face[0::2], he_face[1::2]
     same = he_fwd[0::2] == he_fwd[1::2]  # both faces walk the edge the same way: inconsistent winding
     keep = fa != fb  # a face using the same edge twice (possible only with repeated geometry) is ignored
     fa, fb, same = fa[keep], fb[keep], same[keep]
     # two faces sharing several edges (a doubled triangle) are one adjacency: keep the first pair
-    base = np.int64(max(fa.max(initial=0), fb.max(initial=0)) + 1)
-    _, first = np.unique(np.minimum(fa, fb) * base + np.maximum(fa, fb), return_index=True)
+    n_f = int(max(fa.max(initial=0), fb.max(initial=0)) + 1)
+    _, inverse, _ = pair_table(np.minimum(fa, fb), np.maximum(fa, fb), n_f)
+    first = np.full(inverse.max(initial=-1) + 1, fa.size, dtype=np.int64)
+    np.minimum.at(first, inverse, np.arange(fa.size))
     first = np.sort(first)
     return fa[first], fb[first], same[first]
 
@@ -282,8 +282,8 @@ def orient_outward(vertices, faces, topo: EdgeTopology | None = None, *, rel_vol
     fa, fb, _ = _manifold_pairs(topo)
     n_patch, patch = _patch_labels(n_topo, fa, fb)
     # closed patch: each (patch, edge) pair is used exactly twice
-    pe = patch[:, None] * np.int64(topo.edges.shape[0] + 1) + topo.halfedge_edge
-    _, pe_inv, pe_cnt = np.unique(pe.reshape(-1), return_inverse=True, return_counts=True)
+    _, pe_inv, pe_cnt = pair_table(topo.halfedge_edge.reshape(-1), np.repeat(patch, 3),
+                                   max(int(topo.edges.shape[0]), n_patch) + 1)
     bad = np.zeros(n_patch, bool)
     bad[np.repeat(patch, 3)[pe_cnt[pe_inv] != 2]] = True
     closed = ~bad
@@ -292,7 +292,7 @@ def orient_outward(vertices, faces, topo: EdgeTopology | None = None, *, rel_vol
         return F, flipped, 0, 0
     Ft = F[topo.topo_faces]
     vol = signed_volumes(V, Ft, patch, n_patch)
-    used = V[np.unique(Ft)]
+    used = V[sorted_unique(Ft)]
     scale = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
     solid = closed & (np.abs(vol) > rel_volume_tol * scale**3)
     target = np.ones(n_patch)

@@ -34,14 +34,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.kernels.optics import check_material, diffusion_params
 
-__all__ = ["DipoleVariant", "dipole_variant", "fresnel_moments", "point_source_reflectance", "point_source_ring",
-           "point_source_total", "beam_diffusion_profile", "beam_diffusion_ring", "beam_diffusion_total", "VARIANTS"]
+__all__ = ["DipoleConstants", "dipole_constants", "DipoleVariant", "dipole_variant", "fresnel_moments",
+           "point_source_reflectance", "point_source_ring", "point_source_total", "beam_diffusion_profile", "beam_diffusion_ring", "beam_diffusion_total", "VARIANTS"]
 
 VARIANTS = ("jensen", "better")
 
@@ -52,10 +53,58 @@ _R_U, _R_W = np.polynomial.legendre.leggauss(32)
 _R_U, _R_W = 0.5 * (_R_U + 1.0), 0.5 * _R_W
 
 
+class DipoleConstants(NamedTuple):
+    """The constants of a point source's dipole (a variant of :data:`VARIANTS`), optical units (sigma_t' = 1),
+    broadcast arrays: diffusion coefficient ``D``, ``mu`` = sigma_tr / sigma_t' = sqrt((1 - alpha') / D),
+    extrapolation distance ``z_b`` = 2 A D, boundary mismatch ``A``, and the weights ``c_phi``, ``c_E`` of fluence
+    and flux in the exitance."""
+
+    D: np.ndarray
+    mu: np.ndarray
+    z_b: np.ndarray
+    A: np.ndarray
+    c_phi: np.ndarray
+    c_E: np.ndarray
+
+
+def dipole_constants(albedo_prime, eta, variant: str = "better") -> DipoleConstants:
+    """:class:`DipoleConstants` of ``variant`` for reduced albedo ``albedo_prime`` in [0, 1] and index ``eta``
+    (array_like, broadcast; not validated: :func:`~meshshade.kernels.optics.check_material` first).
+
+    ``"jensen"``: D = 1/3, A from the diffuse Fresnel fit (:func:`~meshshade.kernels.optics.diffusion_params`),
+    C_phi = 0, C_E = 1. ``"better"`` (d'Eon 2012): D = (2 - alpha') / 3, A = (1 + 3 C2) / (1 - 2 C1),
+    C_phi = (1 - 2 C1) / 4, C_E = (1 - 3 C2) / 2 with the Fresnel moments C1, C2 (:func:`fresnel_moments`, per
+    distinct eta); docs/physics.md eqs. (73)-(75)."""
+    if variant not in VARIANTS:
+        raise ValueError(f"dipole variant must be one of {VARIANTS}, got {variant!r}")
+    a = np.asarray(albedo_prime, dtype=np.float64)
+    e = np.asarray(eta, dtype=np.float64)
+    if variant == "jensen":
+        p = diffusion_params(a, e)
+        one = np.ones(p.mu.shape)
+        return DipoleConstants(p.D, p.mu, p.z_b, p.A, 0.0 * one, one)
+    if e.ndim == 0:
+        c1, c2 = (np.float64(x) for x in fresnel_moments(float(e)))
+    else:   # one pair of moments per distinct index
+        values, inverse = np.unique(e, return_inverse=True)
+        moments = np.array([fresnel_moments(float(x)) for x in values])
+        c1, c2 = moments[inverse, 0].reshape(e.shape), moments[inverse, 1].reshape(e.shape)
+    D = (2.0 - a) / 3.0
+    A = (1.0 + 3.0 * c2) / (1.0 - 2.0 * c1)
+    mu = np.sqrt(np.maximum(0.0, 1.0 - a) / D)
+    shape = np.broadcast(a, e).shape
+    full = lambda x: np.broadcast_to(x, shape).astype(np.float64)  # noqa: E731
+    return DipoleConstants(full(D), full(mu), full(2.0 * A * D), full(A), full((1.0 - 2.0 * c1) / 4.0),
+                           full((1.0 - 3.0 * c2) / 2.0))
+
+
 @dataclass(frozen=True)
 class DipoleVariant:
-    """A point source's dipole, optical units: diffusion coefficient ``D``, ``mu`` = sigma_tr / sigma_t',
-    extrapolation distance ``z_b`` = 2 A D, and the weights ``c_phi``, ``c_E`` of fluence and flux."""
+    """A point source's dipole of one medium channel, optical units: the numbers of :class:`DipoleConstants`
+    (diffusion coefficient ``D``, ``mu`` = sigma_tr / sigma_t', extrapolation distance ``z_b`` = 2 A D, the
+    weights ``c_phi``, ``c_E`` of fluence and flux), with the exitance of a unit point source at depth t
+    (:meth:`reflectance`), its ring averages (:meth:`ring`) and its total (:meth:`total`) as methods. Made by
+    :func:`dipole_variant` from a medium's numbers, or read from a :class:`meshshade.medium.Medium`."""
 
     name: str
     albedo_prime: float
@@ -64,6 +113,33 @@ class DipoleVariant:
     z_b: float
     c_phi: float
     c_E: float
+
+    def reflectance(self, r_opt, depth_opt):
+        """R_t(r) = C_phi phi_t(r) + C_E E_t(r) of a unit isotropic point source at depth t (arrays broadcast)."""
+        r = np.asarray(r_opt, dtype=np.float64)
+        t = np.asarray(depth_opt, dtype=np.float64)
+        d = np.sqrt(r * r + t * t)
+        e = np.exp(-self.mu * d)
+        real = (self.c_phi * e / (4.0 * math.pi * self.D * d)
+                + self.c_E * t * (1.0 + self.mu * d) * e / (4.0 * math.pi * d ** 3))
+        return (real + _image_terms(r, t, self))[()]
+
+    def ring(self, lo, hi, depth_opt):
+        """Average of :meth:`reflectance` over the ring lo <= r < hi, in closed form (arrays; depth > 0)."""
+        lo, hi, t = np.broadcast_arrays(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64),
+                                        np.asarray(depth_opt, dtype=np.float64))
+        zv = t + 2.0 * self.z_b
+        real = _ring_integral(np.hypot(lo, t), np.hypot(hi, t), t, self, 1.0)
+        image = _ring_integral(np.hypot(lo, zv), np.hypot(hi, zv), zv, self, -1.0)
+        return ((real + image) / (math.pi * (hi * hi - lo * lo)))[()]
+
+    def total(self, depth_opt):
+        """int R_t 2 pi r dr: C_E (e^{-mu t} + e^{-mu (t + 2 z_b)}) / 2
+        + C_phi (e^{-mu t} - e^{-mu (t + 2 z_b)}) / (2 D mu)."""
+        t = np.asarray(depth_opt, dtype=np.float64)
+        e_r, e_v = np.exp(-self.mu * t), np.exp(-self.mu * (t + 2.0 * self.z_b))
+        phi = (e_r - e_v) / (2.0 * self.D * self.mu) if self.mu > 0 else 2.0 * self.z_b / (2.0 * self.D) + 0.0 * t
+        return (self.c_E * 0.5 * (e_r + e_v) + self.c_phi * phi)[()]
 
 
 @lru_cache(maxsize=256)
@@ -84,8 +160,8 @@ def fresnel_moments(eta: float) -> tuple[float, float]:
 
 
 def dipole_variant(albedo_prime: float, eta: float, variant: str = "better") -> DipoleVariant:
-    """The :class:`DipoleVariant` ``variant`` ("jensen" or "better") of a material (computed once per distinct
-    albedo, index and variant: the record is frozen, and the kernels ask for it hundreds of times per bake)."""
+    """The :class:`DipoleVariant` ``variant`` ("jensen" or "better") of a medium channel (computed once per
+    distinct albedo, index and variant; a material's are made once with it, :class:`meshshade.medium.Medium`)."""
     if variant not in VARIANTS:
         raise ValueError(f"dipole variant must be one of {VARIANTS}, got {variant!r}")
     return _dipole_variant(float(albedo_prime), float(eta), variant)
@@ -94,28 +170,16 @@ def dipole_variant(albedo_prime: float, eta: float, variant: str = "better") -> 
 @lru_cache(maxsize=1024)
 def _dipole_variant(a: float, eta: float, variant: str) -> DipoleVariant:
     """:func:`dipole_variant` of checked arguments (``variant`` one of VARIANTS)."""
-    if variant == "jensen":
-        p = diffusion_params(a, eta)
-        return DipoleVariant("jensen", a, 1.0 / 3.0, float(p.mu), float(p.z_b), 0.0, 1.0)
-    c1, c2 = fresnel_moments(float(eta))
-    D = (2.0 - a) / 3.0
-    A = (1.0 + 3.0 * c2) / (1.0 - 2.0 * c1)
-    return DipoleVariant("better", a, D, math.sqrt(max(0.0, 1.0 - a) / D), 2.0 * A * D,
-                         (1.0 - 2.0 * c1) / 4.0, (1.0 - 3.0 * c2) / 2.0)
+    k = dipole_constants(a, eta, variant)
+    return DipoleVariant(variant, a, float(k.D), float(k.mu), float(k.z_b), float(k.c_phi), float(k.c_E))
 
 
 def point_source_reflectance(r_opt, depth_opt, *, albedo_prime, eta, variant="better"):
     """R_t(r) = C_phi phi_t(r) + C_E E_t(r) of a unit isotropic point source at depth t (optical units, arrays
-    broadcast). With ``variant="jensen"`` and t = 1, alpha' R_t is the planar dipole
-    (:func:`meshshade.kernels.dipole.dipole_profile`)."""
+    broadcast): :meth:`DipoleVariant.reflectance`. With ``variant="jensen"`` and t = 1, alpha' R_t is the planar
+    dipole (:func:`meshshade.kernels.dipole.dipole_profile`)."""
     check_material(albedo_prime, eta)
-    v = dipole_variant(albedo_prime, eta, variant)
-    r = np.asarray(r_opt, dtype=np.float64)
-    t = np.asarray(depth_opt, dtype=np.float64)
-    d = np.sqrt(r * r + t * t)
-    e = np.exp(-v.mu * d)
-    real = v.c_phi * e / (4.0 * math.pi * v.D * d) + v.c_E * t * (1.0 + v.mu * d) * e / (4.0 * math.pi * d ** 3)
-    return (real + _image_terms(r, t, v))[()]
+    return dipole_variant(albedo_prime, eta, variant).reflectance(r_opt, depth_opt)
 
 
 def _ring_integral(d0, d1, z, v: DipoleVariant, sign: float):
@@ -131,26 +195,15 @@ def _ring_integral(d0, d1, z, v: DipoleVariant, sign: float):
 
 def point_source_ring(lo, hi, depth_opt, *, albedo_prime, eta, variant="better"):
     """Average of :func:`point_source_reflectance` over the ring lo <= r < hi, in closed form (arrays broadcast;
-    depth > 0)."""
+    depth > 0): :meth:`DipoleVariant.ring`."""
     check_material(albedo_prime, eta)
-    v = dipole_variant(albedo_prime, eta, variant)
-    lo, hi, t = np.broadcast_arrays(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64),
-                                    np.asarray(depth_opt, dtype=np.float64))
-    zv = t + 2.0 * v.z_b
-    real = _ring_integral(np.hypot(lo, t), np.hypot(hi, t), t, v, 1.0)
-    image = _ring_integral(np.hypot(lo, zv), np.hypot(hi, zv), zv, v, -1.0)
-    return ((real + image) / (math.pi * (hi * hi - lo * lo)))[()]
+    return dipole_variant(albedo_prime, eta, variant).ring(lo, hi, depth_opt)
 
 
 def point_source_total(depth_opt, *, albedo_prime, eta, variant="better"):
-    """int R_t 2 pi r dr of a unit point source at depth t: C_E (e^{-mu t} + e^{-mu (t + 2 z_b)}) / 2
-    + C_phi (e^{-mu t} - e^{-mu (t + 2 z_b)}) / (2 D mu)."""
+    """int R_t 2 pi r dr of a unit point source at depth t (:meth:`DipoleVariant.total`)."""
     check_material(albedo_prime, eta)
-    v = dipole_variant(albedo_prime, eta, variant)
-    t = np.asarray(depth_opt, dtype=np.float64)
-    e_r, e_v = np.exp(-v.mu * t), np.exp(-v.mu * (t + 2.0 * v.z_b))
-    phi = (e_r - e_v) / (2.0 * v.D * v.mu) if v.mu > 0 else 2.0 * v.z_b / (2.0 * v.D) + 0.0 * t
-    return (v.c_E * 0.5 * (e_r + e_v) + v.c_phi * phi)[()]
+    return dipole_variant(albedo_prime, eta, variant).total(depth_opt)
 
 
 def _image_terms(r, t, v: DipoleVariant):

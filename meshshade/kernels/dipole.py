@@ -2,7 +2,7 @@
 
 :func:`dipole_diffuse_reflectance` is the one implementation of the closed form ``R_d(r)``: a compiled scalar
 function that the numpy :func:`dipole_profile` (through a compiled ufunc), the curvature kernel's profile loop
-and the far-field sum (meshshade.transport.farfield_loops) all call. numba's on-disk cache (cache=True) checks
+and the far-field sum (meshshade.surface.farfield_loops) all call. numba's on-disk cache (cache=True) checks
 only the file of the function it caches, so alone it would keep those callers in other files on the old code
 after an edit here; meshshade keys the whole cache on a hash of all its sources (meshshade.compiled_cache), and
 every caller is compiled again.

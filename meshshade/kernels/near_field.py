@@ -20,21 +20,21 @@ media within 3.4 % of Monte Carlo) and poorer at eta >= 2 and at low albedo with
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from meshshade.kernels import incidence_table
 from meshshade.kernels import near_field_table as table
-from meshshade.kernels.beam_diffusion import (dipole_variant, point_source_reflectance, point_source_ring,
-                                              point_source_total)
+from meshshade.kernels.beam_diffusion import DipoleVariant, dipole_variant
 from meshshade.kernels.cylinder import cylinder_point_source_exitance
 from meshshade.kernels.optics import check_material
 from meshshade.kernels.sphere import sphere_point_source_exitance
 from meshshade.kernels.single_scattering import (real_coefficients, single_scattering_profile,
                                                  single_scattering_ring, single_scattering_total)
 
-__all__ = ["near_field_sources", "near_field_profile", "near_field_ring", "near_field_total", "incidence_gain",
-           "near_field_sphere_profile", "near_field_cylinder_profile", "FIT_DOMAIN"]
+__all__ = ["NearFieldModel", "near_field_model", "near_field_sources", "incidence_ratios", "near_field_profile",
+           "near_field_ring", "near_field_total", "incidence_gain", "near_field_sphere_profile", "near_field_cylinder_profile", "FIT_DOMAIN"]
 
 #: (alpha', eta, g) ranges of the fitted grid
 FIT_DOMAIN = {"albedo_prime": (1.0 - 10.0 ** float(table.X_NODES[-1]), 1.0 - 10.0 ** float(table.X_NODES[0])),
@@ -75,34 +75,87 @@ def near_field_sources(albedo_prime: float, eta: float, g: float = 0.0) -> tuple
     return table.DEPTHS.copy(), w, clamped
 
 
+def incidence_ratios(albedo_prime: float, eta: float, g: float = 0.0) -> np.ndarray:
+    """(n,): RHO of :mod:`meshshade.kernels.incidence_table` at the medium, one per tabulated incidence angle
+    (``incidence_table.ANGLES``): the fraction of eq. (81)'s growth in total reflectance that exact transport
+    shows (interpolated trilinearly in (log10(1 - alpha'), eta, g), clamped to the grid)."""
+    return _trilinear(incidence_table, incidence_table.RHO, albedo_prime, eta, g)[0]
+
+
+@dataclass(frozen=True, eq=False)
+class NearFieldModel:
+    """The near-field model of one medium channel (eq. (76)), optical units: the medium's ``albedo_prime``,
+    ``eta`` and ``g``, its d'Eon dipole ``dipole`` (:class:`~meshshade.kernels.beam_diffusion.DipoleVariant`), the
+    beam's fitted sources ``depths`` and ``strengths`` (K,) (``clamped``: outside :data:`FIT_DOMAIN`, the nearest
+    node's) and the incidence table's ratios ``rho`` (:func:`incidence_ratios`). The numbers are made once
+    (:func:`near_field_model`, or read from a :class:`meshshade.medium.Medium`); its methods are the model's
+    profile, ring averages, total and incidence gain, pure functions of arrays."""
+
+    albedo_prime: float
+    eta: float
+    g: float
+    dipole: DipoleVariant
+    depths: np.ndarray
+    strengths: np.ndarray
+    clamped: bool
+    rho: np.ndarray
+
+    def profile(self, r_opt, cos_t=1.0):
+        """R_near(r) per unit entering power (:func:`near_field_profile`); inf at r = 0."""
+        r = np.asarray(r_opt, dtype=np.float64)
+        ms = sum(wk * self.dipole.reflectance(r, cos_t * t) for t, wk in zip(self.depths, self.strengths) if wk > 0)
+        return single_scattering_profile(r, albedo_prime=self.albedo_prime, eta=self.eta, g=self.g,
+                                         cos_t=cos_t) + ms
+
+    def ring(self, lo, hi, cos_t=1.0):
+        """Average of R_near over the ring lo <= r < hi (:func:`near_field_ring`)."""
+        ms = sum(wk * self.dipole.ring(lo, hi, cos_t * t) for t, wk in zip(self.depths, self.strengths) if wk > 0)
+        return single_scattering_ring(lo, hi, albedo_prime=self.albedo_prime, eta=self.eta, g=self.g,
+                                      cos_t=cos_t) + ms
+
+    def total(self, cos_t=1.0) -> float:
+        """int R_near 2 pi r dr per unit entering power (:func:`near_field_total`)."""
+        ms = float(sum(wk * self.dipole.total(cos_t * t) for t, wk in zip(self.depths, self.strengths)))
+        return single_scattering_total(albedo_prime=self.albedo_prime, eta=self.eta, g=self.g, cos_t=cos_t) + ms
+
+    def incidence_gain(self, cos_t=1.0) -> float:
+        """T(theta) / T(0) of light entering at refracted angle theta_t (:func:`incidence_gain`, eq. (86))."""
+        cos_t = float(cos_t)
+        if cos_t >= 1.0:
+            return 1.0
+        w81 = self.total(cos_t) / self.total()
+        sin_i = min(1.0, float(self.eta) * math.sqrt(max(0.0, 1.0 - cos_t * cos_t)))
+        theta_i = math.degrees(math.asin(sin_i))
+        r = float(np.interp(theta_i, incidence_table.ANGLES, self.rho))
+        return 1.0 + r * (w81 - 1.0)
+
+
+def near_field_model(albedo_prime: float, eta: float, g: float = 0.0) -> NearFieldModel:
+    """The :class:`NearFieldModel` of a medium (validated: MaterialError outside albedo' in [0, 1], eta in
+    [1, 2.5], g in (-1, 1))."""
+    depths, w, clamped = near_field_sources(albedo_prime, eta, g)
+    return NearFieldModel(float(albedo_prime), float(eta), float(g), dipole_variant(albedo_prime, eta, "better"),
+                          depths, w, clamped, incidence_ratios(albedo_prime, eta, g))
+
+
 def near_field_profile(r_opt, *, albedo_prime, eta, g=0.0, cos_t=1.0):
     """R_near(r) per unit entering power, optical units (times sigma_t'^2 for mm^-2); inf at r = 0.
 
     ``cos_t`` < 1 (oblique incidence, docs/physics.md eq. (81)): the light travels inside at acos(cos_t) from the
     normal; the beam's sources keep their distances t_k along it, so they lie at depths cos_t t_k, and single
     scattering follows the same depth density. Azimuthally averaged about the entry point (the sources' lateral
-    offset t_k sin_t is left out)."""
-    depths, w, _ = near_field_sources(albedo_prime, eta, g)
-    r = np.asarray(r_opt, dtype=np.float64)
-    ms = sum(wk * point_source_reflectance(r, cos_t * t, albedo_prime=albedo_prime, eta=eta)
-             for t, wk in zip(depths, w) if wk > 0)
-    return single_scattering_profile(r, albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) + ms
+    offset t_k sin_t is left out). :meth:`NearFieldModel.profile` of :func:`near_field_model`."""
+    return near_field_model(albedo_prime, eta, g).profile(r_opt, cos_t)
 
 
 def near_field_ring(lo, hi, *, albedo_prime, eta, g=0.0, cos_t=1.0):
     """Average of R_near over the ring lo <= r < hi (optical units, arrays; ``cos_t`` as :func:`near_field_profile`)."""
-    depths, w, _ = near_field_sources(albedo_prime, eta, g)
-    ms = sum(wk * point_source_ring(lo, hi, cos_t * t, albedo_prime=albedo_prime, eta=eta)
-             for t, wk in zip(depths, w) if wk > 0)
-    return single_scattering_ring(lo, hi, albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) + ms
+    return near_field_model(albedo_prime, eta, g).ring(lo, hi, cos_t)
 
 
 def near_field_total(*, albedo_prime, eta, g=0.0, cos_t=1.0) -> float:
     """int R_near 2 pi r dr (per unit entering power; ``cos_t`` as :func:`near_field_profile`)."""
-    depths, w, _ = near_field_sources(albedo_prime, eta, g)
-    ms = float(sum(wk * point_source_total(cos_t * t, albedo_prime=albedo_prime, eta=eta)
-                   for t, wk in zip(depths, w)))
-    return single_scattering_total(albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) + ms
+    return near_field_model(albedo_prime, eta, g).total(cos_t)
 
 
 def incidence_gain(*, albedo_prime, eta, g=0.0, cos_t=1.0) -> float:
@@ -113,20 +166,10 @@ def incidence_gain(*, albedo_prime, eta, g=0.0, cos_t=1.0) -> float:
     ``tools/tables/make_incidence_table.py``), interpolated trilinearly in (log10(1 - alpha'), eta, g) and linearly in
     the incidence angle outside, sin(theta_i) = eta sin(theta_t) (below the first tabulated angle its value, where
     the gain itself is small; beyond the last, the last)."""
-    cos_t = float(cos_t)
-    if cos_t >= 1.0:
-        return 1.0
-    w81 = near_field_total(albedo_prime=albedo_prime, eta=eta, g=g, cos_t=cos_t) / near_field_total(
-        albedo_prime=albedo_prime, eta=eta, g=g)
-    rho, _ = _trilinear(incidence_table, incidence_table.RHO, albedo_prime, eta, g)
-    sin_i = min(1.0, float(eta) * math.sqrt(max(0.0, 1.0 - cos_t * cos_t)))
-    theta_i = math.degrees(math.asin(sin_i))
-    r = float(np.interp(theta_i, incidence_table.ANGLES, rho))
-    return 1.0 + r * (w81 - 1.0)
+    return near_field_model(albedo_prime, eta, g).incidence_gain(cos_t)
 
 
-def _variant_kw(albedo_prime, eta):
-    v = dipole_variant(albedo_prime, eta, "better")
+def _variant_kw(v: DipoleVariant) -> dict:
     return {"mu": v.mu, "D": v.D, "z_b": v.z_b, "c_phi": v.c_phi, "c_E": v.c_E}
 
 
@@ -140,8 +183,8 @@ def near_field_sphere_profile(theta, *, R0_opt, albedo_prime, eta, g=0.0, rtol=1
     t_k >= 2 R0, has left it and is dropped), and the half-space's single scattering at the chord
     2 R0 sin(theta/2). theta in [0, pi]; inf at theta = 0 (the single scattering's r^-1 peak)."""
     R0 = float(R0_opt)
-    depths, w, _ = near_field_sources(albedo_prime, eta, g)
-    kw = _variant_kw(albedo_prime, eta)
+    model = near_field_model(albedo_prime, eta, g)
+    depths, w, kw = model.depths, model.strengths, _variant_kw(model.dipole)
     th = np.asarray(theta, dtype=np.float64)
     ms = sum(wk * sphere_point_source_exitance(th, R0_opt=R0, depth_opt=t, rtol=rtol, **kw)
              for t, wk in zip(depths, w) if wk > 0)
@@ -155,8 +198,8 @@ def near_field_cylinder_profile(theta, z, *, R0_opt, albedo_prime, eta, g=0.0, r
     (:func:`meshshade.kernels.cylinder.cylinder_point_source_exitance`), plus the half-space's single scattering
     at the chord. theta (around the axis) and z (along it) broadcast."""
     R0 = float(R0_opt)
-    depths, w, _ = near_field_sources(albedo_prime, eta, g)
-    kw = _variant_kw(albedo_prime, eta)
+    model = near_field_model(albedo_prime, eta, g)
+    depths, w, kw = model.depths, model.strengths, _variant_kw(model.dipole)
     th, zz = np.broadcast_arrays(np.asarray(theta, dtype=np.float64), np.asarray(z, dtype=np.float64))
     ms = sum(wk * cylinder_point_source_exitance(th, zz, R0_opt=R0, depth_opt=t, rtol=rtol, **kw)
              for t, wk in zip(depths, w) if wk > 0)

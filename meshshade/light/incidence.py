@@ -52,7 +52,6 @@ from meshshade.light.sky_loops import (AREA_ROWS, ENVIRONMENT_ROWS, MOMENTS, SUP
                                        row_moments, shadow_rows)
 from meshshade.light.sources import AreaLight, EnvironmentLight
 from meshshade.pacing import run_in_blocks
-from meshshade.raycast.embree_direct import DirectEmbreeScene
 
 __all__ = ["Incidence", "light_incidence", "choose_directions", "incidence_part", "aggregate_samples",
            "tangent_frames", "SupportingPlanes",
@@ -193,12 +192,8 @@ class _Rays:
 
     def __init__(self, scene, planes):
         self.scene, self.planes = scene, planes
-        self.direct = None
-        if getattr(scene, "backend", None) == "embree":
-            try:
-                self.direct = DirectEmbreeScene(scene.vertices, scene.faces, scene.center)
-            except (RuntimeError, OSError):      # no Embree 4 library beside embreex: batched embreex calls
-                self.direct = None
+        # the scene's own direct binding (built once per scene), None without the Embree 4 library: embreex
+        self.direct = getattr(scene, "direct", None) if getattr(scene, "backend", None) == "embree" else None
         self.cast = self.skipped = 0
 
     def occluded(self, sure, origins, w, tmax) -> np.ndarray:

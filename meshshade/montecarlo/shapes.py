@@ -302,8 +302,8 @@ def shape_mc_profiles(material: Material, distances_mm, *, shape: str = "plane",
     lost = 0
     done: dict = {}
     for ch in range(3):
-        sigma_s = float(material.sigma_s_prime[ch]) / (1.0 - g)
-        sigma_a = float(material.sigma_a[ch])
+        sigma_s = float(material.medium.sigma_s[ch])
+        sigma_a = float(material.medium.sigma_a[ch])
         key = (sigma_s, sigma_a)
         if key in done:
             src = done[key]

@@ -49,7 +49,7 @@ import math
 import os
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -65,9 +65,12 @@ from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
 
-__all__ = ["DEFAULT_BATCHES", "TOTAL_KEYS", "MCResult", "batch_stats", "check_mc_options", "simulate"]
+__all__ = ["DEFAULT_BATCHES", "TOTAL_KEYS", "MCOptions", "MCResult", "batch_stats", "check_mc_options", "simulate",
+           "mc_options_from_keywords"]
 
 DEFAULT_BATCHES = 16
+#: MCOptions.inside: the medium {w > 1/2} of the winding number (the bake's), or every face a boundary
+INSIDE_CHOICES = ("winding", "faces")
 TOTAL_KEYS = ("specular_reflectance", "diffuse_reflectance", "transmittance", "absorbed")
 
 
@@ -223,20 +226,11 @@ def check_mc_options(photons=100_000, *, seed=0, time_budget=None, n_batches=DEF
     return photons, seed, time_budget, n_batches, pool
 
 
-def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000, seed: int = 0,
-             time_budget: float | None = None, n_batches: int = DEFAULT_BATCHES, pool: int | None = None,
-             keep_beam_exits: bool = True, beam_distances: bool = True, fast_interior: bool = True,
-             engine: str = "auto", progress: bool | str = False, client=None,
-             surface: WalkSurface | None = None) -> MCResult:
-    """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
+@dataclass(frozen=True)
+class MCOptions:
+    """How :func:`simulate` walks; a frozen record, checked where it is made (:func:`check_mc_options`: a one-line
+    MeshshadeError naming the option, its value and what is allowed).
 
-    Parameters
-    ----------
-    mesh : Mesh (vertices in mm). The medium is the bake's inside {w > 1/2} of its generalised winding number
-        (:mod:`meshshade.montecarlo.boundary`): holes are closed by lids on the level surface w = 1/2, faces with
-        the medium on both sides or neither are passed through; a closed mesh is walked as it is
-    material : Material (uses sigma_s', sigma_a, eta and g)
-    lights : light or sequence of BeamLight / DirectionalLight / PointLight
     photons : photons per channel group (with ``time_budget``: an upper bound, None = unbounded)
     seed : int >= 0, makes the run reproducible: with the pooled engine photon ``i`` of channel group ``k`` draws
         every random number from a stream keyed by (seed, k, i), so the result is bitwise identical for any
@@ -249,14 +243,85 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         wavefront, ``fast_interior=False``, finishes all photons in flight)
     n_batches : batches for the standard errors (>= 2)
     pool : photon slots advanced together (default 2**18 for the pooled engine, 2**16 for the baseline)
-    beam_distances : compute per-vertex geodesic distances from the first beam's entry point
-    fast_interior : True: the pooled engine (numba interior walks inside a conservative safe-distance grid,
-        one batched Embree query per round, :mod:`meshshade.montecarlo.engine`); False: the plain numpy
-        wavefront with an Embree query every step (the baseline: same distribution, different random streams)
     engine : pooled engine's Embree calls: "fused" (rtcIntersect1 from the numba threads, inside the walk,
         :mod:`meshshade.raycast.embree_direct`), "batched" (one embreex call per round) or "auto" (fused when the
         Embree library can be bound, else batched). Both give the same photon paths up to float32 ties. "direct":
         the former spelling of "fused" (deprecated: a DeprecationWarning).
+    fast_interior : True: the pooled engine (numba interior walks inside a conservative safe-distance grid,
+        one batched Embree query per round, :mod:`meshshade.montecarlo.engine`); False: the plain numpy
+        wavefront with an Embree query every step (the baseline: same distribution, different random streams)
+    keep_beam_exits : keep the exit points of a beam's photons (``MCResult.beam_exits``)
+    beam_distances : compute per-vertex geodesic distances from the first beam's entry point
+    inside : where the medium is. "winding" (default): the bake's inside {w > 1/2} of the mesh's generalised
+        winding number (:func:`meshshade.montecarlo.boundary.walk_surface`: holes closed by lids on w = 1/2 with
+        Fresnel as at a face, faces with the medium on both sides or neither passed through; a closed mesh is
+        walked as it is). "faces": every face a boundary with the medium behind it, no lid
+        (:meth:`WalkSurface.of_faces <meshshade.montecarlo.boundary.WalkSurface.of_faces>`: the walk before issue
+        47, in which a photon walks out through a hole; kept to measure against)
+    """
+
+    photons: int | None = 100_000
+    seed: int = 0
+    time_budget: float | None = None
+    n_batches: int = DEFAULT_BATCHES
+    pool: int | None = None
+    engine: str = "auto"
+    fast_interior: bool = True
+    keep_beam_exits: bool = True
+    beam_distances: bool = True
+    inside: str = "winding"
+
+    def __post_init__(self):
+        engine = check_engine(self.engine, stacklevel=4)
+        photons, seed, time_budget, n_batches, pool = check_mc_options(
+            self.photons, seed=self.seed, time_budget=self.time_budget, n_batches=self.n_batches, pool=self.pool,
+            engine=engine)
+        for name, value in (("photons", photons), ("seed", seed), ("time_budget", time_budget),
+                            ("n_batches", n_batches), ("pool", pool), ("engine", engine)):
+            object.__setattr__(self, name, value)
+        for name in ("fast_interior", "keep_beam_exits", "beam_distances"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise MeshshadeError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if self.inside not in INSIDE_CHOICES:
+            raise MeshshadeError(f"inside must be one of {', '.join(map(repr, INSIDE_CHOICES))}, got {self.inside!r}")
+
+
+#: fields of MCOptions that never were keywords of simulate (not accepted as deprecated ones)
+NEW_FIELDS = ("inside",)
+
+
+def mc_options_from_keywords(options: MCOptions | None, keywords: dict, where: str = "simulate",
+                             stacklevel: int = 3) -> MCOptions:
+    """``options`` (default ones for None) with the former keyword arguments ``keywords`` of ``where`` (the fields
+    of :class:`MCOptions`) applied, with a DeprecationWarning attributed ``stacklevel`` frames up; an unknown
+    keyword is a TypeError, as Python's own."""
+    options = MCOptions() if options is None else options
+    if not isinstance(options, MCOptions):
+        raise MeshshadeError(f"{where}: options must be MCOptions or None, got {type(options).__name__}")
+    if not keywords:
+        return options
+    unknown = sorted(set(keywords) - (set(MCOptions.__dataclass_fields__) - set(NEW_FIELDS)))
+    if unknown:
+        raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}")
+    warnings.warn(f"{where}({', '.join(f'{k}=' for k in keywords)}...) is deprecated; pass "
+                  "options=MCOptions(...) (meshshade.montecarlo)", DeprecationWarning, stacklevel=stacklevel)
+    return replace(options, **keywords)
+
+
+def simulate(mesh, material: Material, lights, options: MCOptions | None = None, *, progress: bool | str = False,
+             client=None, **deprecated) -> MCResult:
+    """Monte Carlo random walk inside ``mesh`` lit by ``lights``; see the module docstring.
+
+    Parameters
+    ----------
+    mesh : Mesh (vertices in mm). The medium is the bake's inside {w > 1/2} of its generalised winding number
+        (:mod:`meshshade.montecarlo.boundary`; ``MCOptions.inside``): holes are closed by lids on the level surface
+        w = 1/2, faces with the medium on both sides or neither are passed through; a closed mesh is walked as it is
+    material : Material (its medium's sigma_s, sigma_a, and eta, g)
+    lights : light or sequence of BeamLight / DirectionalLight / PointLight
+    options : MCOptions or None (the defaults: 1e5 photons per channel group, seed 0): photons, seed, time
+        budget, batches, pool, engine (:class:`MCOptions`). Its former keyword arguments (``photons=``,
+        ``seed=``...) are accepted with a DeprecationWarning.
     progress : False, True or the task named in the progress lines (default "mc"): photons emitted, as a bar on
         a terminal and as periodic lines otherwise (:class:`meshshade.progress.Progress`)
     client : a :class:`distributed.Client`: split the photons across its workers in tasks of whole entry chunks
@@ -264,9 +329,6 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
         tallies are added in a fixed order, so the result is bitwise the same for any number of workers, and
         the same as without a client up to the order of the sums (~1e-15). Needs a photon count (no
         ``time_budget``) and the pooled engine. ``seconds`` is then the wall time of the split run.
-    surface : the :class:`~meshshade.montecarlo.boundary.WalkSurface` to walk in; default
-        :func:`~meshshade.montecarlo.boundary.walk_surface` of ``mesh``. ``WalkSurface.of_faces(mesh)`` walks the
-        mesh's faces alone, every face a boundary (the walk before issue 47, to measure against).
 
     Returns
     -------
@@ -282,13 +344,16 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     LightError
         No light, a beam that misses, no light reaching the mesh (as the bake: :class:`Emitter`).
     """
+    options = mc_options_from_keywords(options, deprecated, "simulate", stacklevel=3)
     if not isinstance(material, Material):
         raise MaterialError(f"Monte Carlo needs a Material, got {type(material).__name__}")
     groups = channel_groups(material)
-    engine = check_engine(engine)
-    photons, seed, time_budget, n_batches, pool = check_mc_options(
-        photons, seed=seed, time_budget=time_budget, n_batches=n_batches, pool=pool, engine=engine,
+    o = options
+    photons, seed, time_budget, n_batches, pool = check_mc_options(   # the run's estimate needs the groups
+        o.photons, seed=o.seed, time_budget=o.time_budget, n_batches=o.n_batches, pool=o.pool, engine=o.engine,
         groups=len(groups))
+    engine, fast_interior, keep_beam_exits, beam_distances = o.engine, o.fast_interior, o.keep_beam_exits, \
+        o.beam_distances
     if client is not None:
         if time_budget is not None:
             raise MeshshadeError("a time budget cannot be split across Dask workers (the split needs a photon "
@@ -302,7 +367,8 @@ def simulate(mesh, material: Material, lights, *, photons: int | None = 100_000,
     bar = Progress(progress if isinstance(progress, str) else "mc",
                    None if photons is None else n_photons * len(groups), "photons", enabled=bool(progress))
     try:
-        surface = walk_surface(mesh) if surface is None else surface
+        # the medium's boundary (MCOptions.inside): the bake's inside {w > 1/2}, or the faces alone
+        surface = walk_surface(mesh) if o.inside == "winding" else WalkSurface.of_faces(mesh)
         if client is not None:
             # the lights are checked here, before any task (a beam that misses is one line, as in one process)
             emitter = make_emitter(mesh, surface, lights, material.eta, make_scene(surface.vertices, surface.faces))

@@ -12,7 +12,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.light import BeamLight
 from meshshade.materials import Material
-from meshshade.montecarlo.simulation import MCResult, batch_stats, simulate
+from meshshade.montecarlo.simulation import MCOptions, MCResult, batch_stats, simulate
 
 __all__ = ["radial_exitance", "mc_profile", "beam_radial_power", "summary_dict", "describe_mc"]
 
@@ -56,7 +56,7 @@ def mc_profile(material: Material, distances_mm, *, shape, photons: int = 200_00
     rot = np.array([[1, 0, 0], [0, np.cos(ang), -np.sin(ang)], [0, np.sin(ang), np.cos(ang)]])
     mesh = Mesh.from_arrays(V @ rot.T, F)
     beam = BeamLight((0.0, 0.0, 2.0 * R + 1.0), (0.0, 0.0, -1.0), 1.0)
-    res = simulate(mesh, material, [beam], photons=photons, seed=seed, beam_distances=False)
+    res = simulate(mesh, material, [beam], MCOptions(photons=photons, seed=seed, beam_distances=False))
     h = np.maximum(0.1 * s, 0.05 / float(np.min(material.sigma_t_prime)))
     area = lambda a, b: 2.0 * np.pi * R * R * (np.cos(a / R) - np.cos(min(b / R, np.pi)))  # noqa: E731
     out = np.zeros((3, s.size))

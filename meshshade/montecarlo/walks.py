@@ -47,11 +47,12 @@ def check_engine(engine, stacklevel: int = 3) -> str:
 
 
 def channel_groups(material: Material) -> list[tuple[tuple[float, float], list[int]]]:
-    """``[((sigma_s, sigma_a), [channels]), ...]``: one walk per distinct pair, in channel order."""
-    sigma_s = material.sigma_s_prime / (1.0 - material.g)
+    """``[((sigma_s, sigma_a), [channels]), ...]``: one walk per distinct pair of the material's medium (the real
+    scattering coefficient sigma_s = sigma_s' / (1 - g) and the absorption, 1/mm), in channel order."""
+    m = material.medium
     groups: dict = {}
     for c in range(3):
-        groups.setdefault((float(sigma_s[c]), float(material.sigma_a[c])), []).append(c)
+        groups.setdefault((float(m.sigma_s[c]), float(m.sigma_a[c])), []).append(c)
     return list(groups.items())
 
 
@@ -112,7 +113,7 @@ def prepare_walks(mesh, material: Material, lights, *, engine: str = "auto", fas
     scene = make_scene(V, F)
     grid = direct = None
     if fast_interior:
-        sigma_t_max = float(np.max(material.sigma_s_prime / (1.0 - material.g) + material.sigma_a))
+        sigma_t_max = float(np.max(material.medium.sigma_s + material.medium.sigma_a))
         use_planes = sigma_t_max > 0 and half_space_certificates
         grid = SafeDistanceGrid(V, F, mean_free_path=1.0 / sigma_t_max if use_planes else None)
         if engine != "batched" and getattr(scene, "backend", "") == "embree":

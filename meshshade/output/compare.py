@@ -7,6 +7,8 @@ above ``floor`` times B's maximum (default 1e-3): far below the peak the ratio i
 from __future__ import annotations
 
 import math
+import warnings
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -18,13 +20,17 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.light.sources import light_list
 from meshshade.materials import Material
 from meshshade.montecarlo import simulate
-from meshshade.montecarlo.simulation import check_mc_options
+from meshshade.montecarlo.simulation import MCOptions, check_mc_options
+from meshshade.names import DEFAULT_MODEL, MODELS
 from meshshade.output import render
 from meshshade.output.tonemap import luminance
 from meshshade.raycast import make_scene
-from meshshade.transport.baking import bake, check_bake_options
-from meshshade.transport.models import DEFAULT_MODEL, MODELS
-from meshshade.transport.source_factors import SOURCE_MODELS, check_source_model, source_model_keyword
+from meshshade.surface.options import KEYWORDS as SURFACE_KEYWORDS
+from meshshade.surface.options import SurfaceOptions, options_from_keywords
+from meshshade.surface.source_factors import SOURCE_MODELS, check_source_model
+from meshshade.transport.baking import bake
+from meshshade.transport.options import BakeOptions
+from meshshade.volume.options import VolumeOptions
 
 #: relative radiance floor (fraction of B's maximum luminance) below which ratios are not counted
 DEFAULT_FLOOR = 1e-3
@@ -155,73 +161,140 @@ def heatmap_figure(rel, *, names=("A", "B"), limit=None, title=None):
     return fig
 
 
-def run_comparison(mesh, material, lights, models=(DEFAULT_MODEL, "dipole"), *, camera=None, width=256, height=256,
-                   spp=4, per_pixel=False, cutoff_tol=1e-4, floor: float = DEFAULT_FLOOR, mc_photons=100_000,
-                   seed: int = 0, geodesic: str = "exact", far_field: str | None = None, transport: str = "auto",
-                   progress: bool | str = False, source_model=None, volume_cache=None, near_field=None) -> dict:
+@dataclass(frozen=True)
+class CompareOptions:
+    """What :func:`run_comparison` renders and how it compares; checked where it is made (one line naming the
+    option).
+
+    width, height, spp : the images' size and samples per pixel (:func:`~meshshade.output.render.check_image_size`)
+    per_pixel : gather each pixel's exitance from the bake's entry points (:class:`~meshshade.output.render.PixelGather`)
+    floor : in (0, 1), ratios only where B's luminance is above this fraction of its maximum (:func:`check_floor`)
+    source_model : "point" or "beam" for both models, one per model (A, B), or None for each model's default
+    """
+
+    width: int = 256
+    height: int = 256
+    spp: int = 4
+    per_pixel: bool = False
+    floor: float = DEFAULT_FLOOR
+    source_model: str | tuple | None = None
+
+    def __post_init__(self):
+        width, height, spp = render.check_image_size(self.width, self.height, self.spp)
+        for name, value in (("width", width), ("height", height), ("spp", spp), ("floor", check_floor(self.floor))):
+            object.__setattr__(self, name, value)
+        source_model_pair(self.source_model)
+        if not isinstance(self.source_model, (str, type(None))):
+            object.__setattr__(self, "source_model", tuple(self.source_model))
+
+
+#: run_comparison's former keyword arguments: those of CompareOptions, of the bakes' options, of the Monte Carlo's
+_IMAGE_KEYWORDS = ("width", "height", "spp", "per_pixel", "floor", "source_model", "near_field")
+_MC_KEYWORDS = {"mc_photons": "photons", "seed": "seed"}
+
+
+def run_comparison(mesh, material, lights, models=(DEFAULT_MODEL, "dipole"), options: CompareOptions | None = None,
+                   *, surface: SurfaceOptions | None = None, volume: VolumeOptions | None = None,
+                   mc: MCOptions | None = None, camera=None, progress: bool | str = False, **deprecated) -> dict:
     """Bake and render ``models`` (two) with the same camera and lights; returns images, bakes and statistics.
 
-    ``mc`` (Monte Carlo, ``mc_photons`` photons, seeded) may be one of the models: its per-vertex exitance is
-    rendered by interpolation. Returns ``{"camera", "bakes": [BakeResult, BakeResult],
-    "images": [(rgb, alpha), (rgb, alpha)],
-    "split": (rgb, alpha), "rel": (H, W) signed relative difference, "stats": dict}`` (arrays only, no files).
+    ``options`` (:class:`CompareOptions`): the images, the floor, the source model per side. Each side bakes
+    with its model (:class:`~meshshade.transport.options.BakeOptions`) and the surface models' options ``surface``
+    (:class:`~meshshade.surface.options.SurfaceOptions`, its source model the side's) or the volume's ``volume``
+    (:class:`~meshshade.volume.options.VolumeOptions`). ``mc`` (Monte Carlo, seeded: :class:`~meshshade.montecarlo.simulation.MCOptions`, 1e5 photons by
+    default) may be one of the models: its per-vertex exitance is rendered by interpolation. Returns ``{"camera",
+    "bakes": [BakeResult, BakeResult], "images": [(rgb, alpha), (rgb, alpha)], "split": (rgb, alpha), "rel": (H, W)
+    signed relative difference, "stats": dict}`` (arrays only, no files); ``labels`` in the result name the sides
+    (``curved+beam``).
 
-    Every argument is checked before any work (MeshshadeError, one line): ``models`` two different names among
-    ``COMPARE_MODELS``; ``floor`` in (0, 1); the bake options as :func:`~meshshade.transport.baking.bake`
-    (``cutoff_tol``, ``geodesic``, ``far_field``, ``transport``); ``width``, ``height``, ``spp`` as
-    :func:`~meshshade.output.render.check_image_size`; with ``mc``, ``mc_photons`` and ``seed`` as
-    :func:`~meshshade.montecarlo.simulation.check_mc_options`; ``camera`` a Camera or None; the lights.
+    Everything is checked before any work (MeshshadeError, one line): ``models`` two different names among
+    ``COMPARE_MODELS``; each side's bake options (a volume side refuses the surface models' far field or
+    transport); with ``mc``, the photons the run can finish; ``camera`` a Camera or None; the lights.
     ``progress`` (False, True or a task name, default "compare") is passed to each bake and Monte Carlo run.
-    ``source_model``: "point" or "beam" for both models, or one per model, or None for each model's default
-    (:func:`~meshshade.transport.baking.bake`); ``near_field``: its former name (deprecated);
-    ``labels`` in the result name the sides (``curved+beam``). ``volume_cache``: as
-    :func:`~meshshade.transport.baking.bake`'s.
+    The former keyword arguments (``width=``, ``floor=``, ``source_model=``, ``cutoff_tol=``, ``geodesic=``,
+    ``far_field=``, ``transport=``, ``mc_photons=``, ``seed=``...) are accepted with a DeprecationWarning.
     """
-    source_model = source_model_keyword(source_model, near_field)
-    models = check_models(models, source_model)
-    sources = source_model_pair(source_model, models)
+    options, surface, volume, mc = _comparison_options(options, surface, volume, mc, deprecated)
+    models = check_models(models, options.source_model)
+    sources = source_model_pair(options.source_model, models)
     labels = compare_labels(models, sources)
-    floor = check_floor(floor)
     if not isinstance(mesh, Mesh):
         raise ParameterError(f"run_comparison needs a meshshade Mesh (mm), got {type(mesh).__name__}")
     if not isinstance(material, Material):
         raise MaterialError(f"run_comparison needs a Material, got {type(material).__name__}")
     lights = light_list(lights)
-    for m in models:
-        if m != "mc":
-            check_bake_options(m, cutoff_tol, None, geodesic, far_field, transport=transport)
-    if "mc" in models:
+    task = (progress if isinstance(progress, str) else "compare") if progress else False
+    sides = [None if m == "mc" else BakeOptions(model=m, volume=volume, surface=replace(surface, source_model=sm),
+                                                progress=task) for m, sm in zip(models, sources)]
+    if "mc" in models:   # the run must finish: the estimate counts the material's channel groups
         groups = len(set(zip(material.sigma_s_prime.tolist(), material.sigma_a.tolist())))
-        mc_photons, seed = check_mc_options(mc_photons, seed=seed, groups=groups)[:2]
-    width, height, spp = render.check_image_size(width, height, spp)
+        check_mc_options(mc.photons, seed=mc.seed, time_budget=mc.time_budget, groups=groups)
     if camera is not None and not isinstance(camera, render.Camera):
         raise ParameterError(f"camera must be a Camera or None, got {type(camera).__name__}")
     camera = camera or render.auto_camera(mesh)
     scene = make_scene(mesh.vertices, mesh.faces)
-    task = (progress if isinstance(progress, str) else "compare") if progress else False
     bakes, images = [], []
-    for m, sm in zip(models, sources):
+    for m, side in zip(models, sides):
         if m == "mc":  # Monte Carlo reference: per-vertex exitance (per-pixel gathering does not apply)
-            mc = simulate(mesh, material, lights, photons=mc_photons, seed=seed, progress=task)
-            res, ex = SimpleNamespace(radiance=mc.radiance, timings={"mc": mc.seconds}), None
+            result = simulate(mesh, material, lights, mc, progress=task)
+            res, ex = SimpleNamespace(radiance=result.radiance, timings={"mc": result.seconds}), None
         else:
-            res = bake(mesh, material, lights, model=m, cutoff_tol=cutoff_tol, geodesic=geodesic, far_field=far_field,
-                       transport=transport, progress=task, source_model=sm, volume_cache=volume_cache)
-            ex = render.PixelGather(mesh, res) if per_pixel else None
-        images.append(render.render_radiance(mesh, res.radiance, camera, width, height, spp, eta=material.eta,
-                                             exitance_at=ex, scene=scene))
+            res = bake(mesh, material, lights, side)
+            ex = render.PixelGather(mesh, res) if options.per_pixel else None
+        images.append(render.render_radiance(mesh, res.radiance, camera, options.width, options.height, options.spp,
+                                             eta=material.eta, exitance_at=ex, scene=scene))
         bakes.append(res)
     (ra, aa), (rb, _) = images
     cov = aa > 0
-    stats = compare_stats(bakes[0].radiance, bakes[1].radiance, pixel_a=ra, pixel_b=rb, pixel_mask=cov,
-                          vertex_areas=mesh.vertex_areas, names=labels, floor=floor)
+    # against the Monte Carlo, a bake's vertices are compared as it tallies them: averaged over their patches
+    vertex = [b.patch_averaged() if "mc" in models and hasattr(b, "patch_averaged") else b.radiance for b in bakes]
+    stats = compare_stats(vertex[0], vertex[1], pixel_a=ra, pixel_b=rb, pixel_mask=cov,
+                          vertex_areas=mesh.vertex_areas, names=labels, floor=options.floor)
     stats["camera"] = camera.describe()
     stats["timings_s"] = {m: b.timings for m, b in zip(labels, bakes)}
     for m, b in zip(labels, bakes):  # what --model auto chose (counts per decision)
         if getattr(b, "plan", None) is not None:
             stats[f"{m}_decisions"] = b.plan.counts()
     return {"camera": camera, "labels": labels, "bakes": bakes, "images": images, "split": (split_image(ra, rb), aa),
-            "rel": relative_difference(ra, rb, floor=floor, mask=cov), "stats": stats}
+            "rel": relative_difference(ra, rb, floor=options.floor, mask=cov), "stats": stats}
+
+
+def _comparison_options(options, surface, volume, mc, deprecated: dict):
+    """``(CompareOptions, SurfaceOptions, VolumeOptions, MCOptions)`` of a call of :func:`run_comparison`, its
+    former keyword arguments applied with one DeprecationWarning."""
+    options = CompareOptions() if options is None else options
+    surface = SurfaceOptions() if surface is None else surface
+    volume = VolumeOptions() if volume is None else volume
+    mc = MCOptions() if mc is None else mc
+    for name, value, kind in (("options", options, CompareOptions), ("surface", surface, SurfaceOptions),
+                              ("volume", volume, VolumeOptions), ("mc", mc, MCOptions)):
+        if not isinstance(value, kind):
+            raise ParameterError(f"run_comparison: {name} must be {kind.__name__} or None, got "
+                                 f"{type(value).__name__}")
+    if not deprecated:
+        return options, surface, volume, mc
+    kw = dict(deprecated)
+    warnings.warn(f"run_comparison({', '.join(f'{k}=' for k in kw)}...) is deprecated; pass options="
+                  "CompareOptions(...), surface=SurfaceOptions(...), mc=MCOptions(...)", DeprecationWarning,
+                  stacklevel=3)
+    image = {k: kw.pop(k) for k in _IMAGE_KEYWORDS if k in kw}
+    if "near_field" in image:
+        near = image.pop("near_field")
+        if near is not None:
+            if image.get("source_model") not in (None, near):
+                raise ParameterError(f"source_model={image['source_model']!r} and the deprecated near_field={near!r} "
+                                     "disagree; give source_model only")
+            image["source_model"] = near
+    mc_kw = {_MC_KEYWORDS[k]: kw.pop(k) for k in list(kw) if k in _MC_KEYWORDS}
+    kw.pop("volume_cache", None)
+    with warnings.catch_warnings():   # one warning: this call's
+        warnings.simplefilter("ignore", DeprecationWarning)
+        unknown = sorted(set(kw) - set(SURFACE_KEYWORDS))
+        if unknown:
+            raise TypeError(f"run_comparison() got an unexpected keyword argument {unknown[0]!r}")
+        surface = options_from_keywords(surface, {k: v for k, v in kw.items() if not (k == "far_field" and v is None)},
+                                        "run_comparison")
+        return replace(options, **image), surface, volume, replace(mc, **mc_kw) if mc_kw else mc
 
 
 def save_comparison(cmp: dict, out_dir, *, models, metadata: dict, operator="drago", bias=0.85,

@@ -36,10 +36,10 @@ from meshshade.errors import MeshshadeError
 from meshshade.kernels.fresnel import fresnel_transmittance_entry, refract_in
 from meshshade.output.tonemap import srgb_encode, tonemap_linear
 from meshshade.raycast import make_scene
-from meshshade.transport.gather import gather
-from meshshade.transport.source_factors import drift_angles, near_field_factors, refracted_drift
-from meshshade.transport.pair_kernel import PairKernel, source_frames
-from meshshade.transport.patch_average import source_patch_radius
+from meshshade.surface.gather import gather
+from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.pair_kernel import PairKernel, source_frames
+from meshshade.surface.patch_average import source_patch_radius
 
 
 # ------------------------------------------------------------------------------------------------ camera
@@ -250,7 +250,8 @@ class PixelGather:
     With the volume model (``result.volume``) ``M_near`` is its correction (docs/physics.md eq. (103)) of the point
     entries, with the mean patch radius of its sampling surface as the receiver's, and the rest of the solution is
     interpolated P1 on the sampling surface (``result.sample_exitance``: the mesh split where it is coarser than
-    the volume resolves, :class:`meshshade.volume.surface.SamplingSurface`), not on the input's triangles.
+    the volume resolves, :class:`meshshade.volume.surface.SamplingSurface`), not on the input's triangles; the
+    bake's vertices are that solution at their points, so here too a pixel at a vertex equals the bake.
 
     Only *point* entry samples (beams, inside triangles) are gathered per pixel: vertex samples (directional and
     point lights) stand for their vertex's patch, their exitance is smooth on the scale of an edge, and the

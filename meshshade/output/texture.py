@@ -6,9 +6,10 @@ evaluated there, not interpolated from the mesh's vertex values:
 
 1. **The volume model (the default)** samples the surface on its own where the mesh is coarser than the material
    resolves (:class:`meshshade.volume.surface.SamplingSurface`: long edges split on the facets) and solves there;
-   a texel takes that solution P1 within the split triangle holding it (``BakeResult.sample_exitance``), not the
-   input's vertex averages (eq. (104)). The mesh itself is not refined, so a texture costs the vertex bake plus
-   the texels' lookups.
+   a texel takes that solution P1 within the split triangle holding it (``BakeResult.sample_exitance``). The
+   vertex bake reads the same solution at the vertices (vertices of the split surface too): texels and vertices
+   are one field, read at points. The mesh itself is not refined, so a texture costs the vertex bake plus the
+   texels' lookups.
    **The surface models** are refined instead to what the material resolves: where the mesh's mean edge is longer
    than REFINE_SPACING x half the volume's surface spacing, each triangle is split into n^2 on its own facet
    (same polyhedron, normals of the original interpolated; :mod:`meshshade.geometry.refine`; within
@@ -22,7 +23,8 @@ evaluated there, not interpolated from the mesh's vertex values:
 3. **Padding**: texels outside every UV triangle, up to ``padding`` texels away, take the nearest covered texel's
    value (:func:`meshshade.geometry.uv.dilate`), so filtering and mipmaps do not bleed the background in.
 
-Where neither the mesh nor the sampling surface is split, a texel at a vertex equals the vertex bake exactly.
+A texel at a vertex equals the vertex bake (``TextureBake.vertex_radiance``, the same solve read at the same point):
+tools/benchmarks/bench_texel_vertex.py looks the texture up at a UV sphere's vertices.
 """
 from __future__ import annotations
 
@@ -42,7 +44,9 @@ from meshshade.geometry.uv import automatic_atlas, check_uv, dilate, rasterise_u
 from meshshade.names import DEFAULT_MODEL
 from meshshade.output.render import PixelGather
 from meshshade.output.tonemap import to_uint8, tonemap_linear
-from meshshade.transport.baking import BakeResult, bake
+from meshshade.transport.baking import bake
+from meshshade.transport.options import BakeOptions, bake_options_from_keywords
+from meshshade.transport.result import BakeResult
 from meshshade.volume.resolution import volume_resolution
 
 __all__ = ["TextureBake", "bake_texture", "texture_refinement", "refinement_budget", "REFINE_SPACING", "MAX_REFINE",
@@ -165,13 +169,14 @@ def texture_atlas(mesh, size: int, padding: int, cache=None) -> tuple[np.ndarray
     return uv, {**stats, "uv_atlas_cached": False}
 
 
-def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: int = 16, refine=None,
-                 atlas_cache=None, **bake_options) -> TextureBake:
+def bake_texture(mesh, material, lights, options: BakeOptions | None = None, *, uv=None, size: int = 2048,
+                 padding: int = 16, refine=None, atlas_cache=None, **deprecated) -> TextureBake:
     """Bake ``mesh`` (mm) into a ``size`` x ``size`` texture of its UV map ``uv`` ((m, 3, 2) per-corner, or None
     for an automatic atlas by xatlas, kept in ``atlas_cache`` when given: :func:`texture_atlas`); module docstring
     for what each texel holds. ``refine``: segments per edge of the surface the transport runs on (None:
-    :func:`texture_refinement`); ``bake_options`` go to :func:`meshshade.transport.baking.bake` (model,
-    progress, ...)."""
+    :func:`texture_refinement`); ``options``: the bake's (:class:`~meshshade.transport.options.BakeOptions`; its
+    former keyword arguments are accepted with a DeprecationWarning)."""
+    options = bake_options_from_keywords(options, deprecated, "bake_texture")
     size, padding, refine = check_texture_options(size, padding, refine)
     timings, stats = {}, {}
     t0 = time.perf_counter()
@@ -188,7 +193,7 @@ def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: 
     texel, face, bary, rstats = rasterise_uv(uv, size, size)
     stats.update(rstats)
     timings["texture rasterise"] = time.perf_counter() - t0
-    n = texture_refinement(mesh, material, bake_options.get("model", DEFAULT_MODEL)) if refine is None else refine
+    n = texture_refinement(mesh, material, options.model) if refine is None else refine
     if refine is None and n > refinement_budget(mesh):
         wanted, n = n, refinement_budget(mesh)
         stats["texture_refine_wanted"] = wanted
@@ -200,7 +205,7 @@ def bake_texture(mesh, material, lights, *, uv=None, size: int = 2048, padding: 
     t0 = time.perf_counter()
     surface = refined_mesh(mesh, n)
     timings["texture refine"] = time.perf_counter() - t0
-    result = bake(surface, material, lights, **bake_options)
+    result = bake(surface, material, lights, options)
     t0 = time.perf_counter()
     sub_face, sub_bary = refined_location(face, bary, n)
     points = np.einsum("ij,ijk->ik", sub_bary, surface.vertices[surface.faces[sub_face]])

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshshade.pacing import run_in_blocks
+from meshshade.raycast.embree_direct import DirectEmbreeScene, occlusion_rows
 from meshshade.raycast.scene import _SceneBase
 
 __all__ = ["EmbreeScene"]
@@ -31,6 +33,11 @@ class EmbreeScene(_SceneBase):
       *exactly* at a vertex can still slip through (a known Embree limitation, RenderKit/embree issues 174 and
       188; about 0.1-0.2 % of such rays in the tests, none through edges): use ``first_hit(..., exact=True)``
       for the few rays whose answer must be exact (beams).
+
+    Occlusion (shadow rays, the many rays of a bake) goes through Embree called from the worker threads
+    (:attr:`direct`, :class:`~meshshade.raycast.embree_direct.DirectEmbreeScene`: embreex's ``run`` holds the
+    interpreter, so it uses one core) where the library beside embreex loads, else through embreex. Each of the two
+    is built when first needed, so a bake that only casts shadow rays builds one.
     """
 
     backend = "embree"
@@ -39,14 +46,35 @@ class EmbreeScene(_SceneBase):
         super().__init__(vertices, faces)
         try:
             # lazy: loading embreex loads the Embree library, which a NumpyScene-only user never needs
-            from embreex import rtcore_scene
-            from embreex.mesh_construction import TriangleMesh
+            import embreex  # noqa: F401
         except ImportError as exc:  # pragma: no cover - embreex is a required dependency
             raise ImportError("meshshade needs embreex for EmbreeScene; use NumpyScene or install embreex") from exc
-        self._scene = rtcore_scene.EmbreeScene(robust=True)
-        local = np.ascontiguousarray(self.vertices - self.center, dtype=np.float32)
-        self._mesh = TriangleMesh(self._scene, local, np.ascontiguousarray(self.faces, dtype=np.int32))
+        self._embreex = None
+        self._direct = False          # not tried yet
         self._radius = 0.5 * self.scale
+
+    @property
+    def _scene(self):
+        """embreex's scene (built at the first call that needs it)."""
+        if self._embreex is None:
+            from embreex import rtcore_scene
+            from embreex.mesh_construction import TriangleMesh
+
+            self._embreex = rtcore_scene.EmbreeScene(robust=True)
+            local = np.ascontiguousarray(self.vertices - self.center, dtype=np.float32)
+            self._mesh = TriangleMesh(self._embreex, local, np.ascontiguousarray(self.faces, dtype=np.int32))
+        return self._embreex
+
+    @property
+    def direct(self):
+        """The scene as a :class:`~meshshade.raycast.embree_direct.DirectEmbreeScene` (Embree from the worker
+        threads), built at the first call; None where the Embree 4 library beside embreex does not load."""
+        if self._direct is False:
+            try:
+                self._direct = DirectEmbreeScene(self.vertices, self.faces, self.center)
+            except (RuntimeError, OSError):
+                self._direct = None
+        return self._direct
 
     def _local_rays(self, o, d):
         """Float64 origins advanced to just before the bounding sphere, relative to the centre.
@@ -86,9 +114,15 @@ class EmbreeScene(_SceneBase):
         live = tfar > 0.0
         if np.any(live):
             dists = np.ascontiguousarray(np.minimum(tfar[live], _FLOAT32_TFAR_MAX), dtype=np.float32)
-            ids = self._scene.run(np.ascontiguousarray(o32[live]), np.ascontiguousarray(d32[live]),
-                                  dists=dists, query="OCCLUDED")
+            o_live, d_live = np.ascontiguousarray(o32[live]), np.ascontiguousarray(d32[live])
+            direct = self.direct
+            if direct is not None:
+                hit = np.zeros(o_live.shape[0], dtype=np.bool_)
+                run_in_blocks(lambda a, b: occlusion_rows(direct.intersect, direct.handle, o_live, d_live, dists,
+                                                          hit, a, b), o_live.shape[0], min_block=8192)
+            else:
+                hit = self._scene.run(o_live, d_live, dists=dists, query="OCCLUDED") >= 0
             sub = np.zeros(keep.sum(), dtype=bool)
-            sub[live] = ids >= 0
+            sub[live] = hit
             result[keep] = sub
         return result

@@ -26,7 +26,7 @@ import os
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["TFAR_MARGIN_REL", "DirectEmbreeScene", "rayhit_buffer", "trace"]
+__all__ = ["TFAR_MARGIN_REL", "DirectEmbreeScene", "rayhit_buffer", "trace", "occlusion_rows"]
 
 #: tfar margin of a boundary test, relative to the scene's scale (bbox diagonal): ``tfar = free path + margin``
 TFAR_MARGIN_REL = 1e-5
@@ -156,3 +156,13 @@ def _cast(intersect, scene, o32, d32):
         out[j] = trace(intersect, scene, rh, rhi, o32[j, 0], o32[j, 1], o32[j, 2], d32[j, 0], d32[j, 1],
                         d32[j, 2], np.float32(1e37))
     return out
+
+
+@njit(nogil=True, **_NUMBA_OPTS)
+def occlusion_rows(intersect, scene, o32, d32, tfar, out, a, b):
+    """out[j] = whether the float32 ray j (relative to the scene's centre) meets the mesh within tfar[j], for rays
+    a .. b - 1, from this thread (blocks of rays run on the worker threads)."""
+    rh, rhi = rayhit_buffer()
+    for j in range(a, b):
+        out[j] = trace(intersect, scene, rh, rhi, o32[j, 0], o32[j, 1], o32[j, 2], d32[j, 0], d32[j, 1], d32[j, 2],
+                       tfar[j]) >= 0

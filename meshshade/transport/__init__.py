@@ -1,20 +1,17 @@
-"""Transport: integrate a diffusion kernel over geodesic neighbourhoods of the light's entry samples.
+"""Transport: the one place that chooses how light travels inside the object, the volume (:mod:`meshshade.volume`,
+the default) or a surface model (:mod:`meshshade.surface`), and the record every choice answers with.
 
-Modules: :mod:`~meshshade.transport.baking` (``bake``, ``BakeResult``: the stages in order),
-:mod:`~meshshade.transport.models` (``MODELS``, the model names), :mod:`~meshshade.transport.pair_kernel` (the
-kernel of each model for (source, vertex) pairs), :mod:`~meshshade.transport.gather` (cutoff radii, the chunked
-pair iteration and the sum per vertex), :mod:`~meshshade.transport.zones` (how each sample's pairs are found),
-:mod:`~meshshade.transport.auto` (which kernel and geodesics each sample needs),
-:mod:`~meshshade.transport.sample_groups` (far-zone geodesics shared between samples),
-:mod:`~meshshade.transport.farfield` with :mod:`~meshshade.transport.farfield_loops` (the far tail of flat
-surroundings by a bounded Taylor expansion). The bake's files are written by
-:func:`meshshade.output.bake_file.write_bake` (tone-mapped colours are an output concern).
+Modules: :mod:`~meshshade.transport.baking` (:func:`bake`: the choice and its run),
+:mod:`~meshshade.transport.options` (:class:`BakeOptions`: the model, the volume's and the surface models' options
+records) and :mod:`~meshshade.transport.result` (:class:`BakeResult` and the one-line descriptions). The bake's
+files are written by :func:`meshshade.output.bake_file.write_bake`.
 """
-from meshshade.transport.auto import AutoPlan
-from meshshade.transport.baking import BakeResult, bake, describe_result, describe_scale
-from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.models import MODELS
-from meshshade.transport.pair_kernel import PairKernel, SourceFrames, source_frames
+from meshshade.names import MODELS
+from meshshade.surface.options import AutoTolerances, SurfaceOptions
+from meshshade.transport.baking import bake
+from meshshade.transport.options import BakeOptions
+from meshshade.transport.result import BakeResult, describe_result, describe_scale, mesh_note
+from meshshade.volume.options import VolumeOptions
 
-__all__ = ["bake", "BakeResult", "MODELS", "describe_result", "describe_scale", "cutoff_radii",
-           "PairKernel", "SourceFrames", "source_frames", "AutoPlan"]
+__all__ = ["bake", "BakeOptions", "VolumeOptions", "SurfaceOptions", "AutoTolerances", "BakeResult", "MODELS",
+           "describe_result", "describe_scale", "mesh_note"]

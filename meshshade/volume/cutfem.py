@@ -18,8 +18,10 @@ A tetrahedron cut so that only a sliver of it is inside leaves its outside corne
 fraction ``GHOST`` of the full tetrahedron's stiffness and mass on the part outside (the finite cell method's
 fictitious material) keeps them definite without moving the solution (measured: 1e-2 and 1e-3 agree to 1e-4).
 
-Compiled loops (numba): one pass over the cubes writes every entry (row, column, value) into arrays; one sort per
-row sums the duplicates into CSR. No Python loop over cells or nodes.
+Compiled loops (numba) on the worker threads: chunks of cubes write every entry (row, column, value) into each
+cube's own slots; the rows are counted and filled per block of entries (keeping the entries' order within a row),
+the duplicates summed row by row into CSR. No Python loop over cells or nodes, no sort, and the same sums for any
+number of threads.
 """
 from __future__ import annotations
 
@@ -29,6 +31,7 @@ import numba
 import numpy as np
 
 from meshshade.errors import MeshshadeError
+from meshshade.pacing import default_threads, parallel_for
 
 __all__ = ["Assembly", "assemble", "cut_tetrahedron", "GHOST", "constraint_map"]
 
@@ -241,31 +244,109 @@ def cut_tetrahedron(P, s, m, bm, bb):
 
 
 @numba.njit(cache=True, inline="always")
-def _put(i, j, sv, bv, cptr, cidx, cw, rows, cols, s_val, b_val, s_diag, b_diag, q):
-    """Add (sv, bv) at lattice nodes (i, j), i != j, to the free nodes' entries (upper triangle, diagonal apart)."""
+def _put(i, j, sv, bv, cptr, cidx, cw, rows, cols, s_val, b_val, q):
+    """Add (sv, bv) at lattice nodes (i, j), i != j, to the free nodes' entries: triplets (row <= col; a pair
+    landing on one free node adds twice its value on the diagonal)."""
     for qi in range(cptr[i], cptr[i + 1]):
         for qj in range(cptr[j], cptr[j + 1]):
             a, b = cidx[qi], cidx[qj]
             w = cw[qi] * cw[qj]
-            if a == b:
-                s_diag[a] += 2.0 * sv * w
-                b_diag[a] += 2.0 * bv * w
-            else:
-                rows[q] = min(a, b)
-                cols[q] = max(a, b)
-                s_val[q] = sv * w
-                b_val[q] = bv * w
-                q += 1
+            rows[q] = min(a, b)
+            cols[q] = max(a, b)
+            f = 2.0 if a == b else 1.0
+            s_val[q] = f * sv * w
+            b_val[q] = f * bv * w
+            q += 1
     return q
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
+def _put_diagonal(i, sv, bv, mv, cptr, cidx, cw, rows, cols, s_val, b_val, q):
+    """Add (sv, bv) at (i, i) and the mass mv at i to the free nodes' entries (the mass as a triplet of column
+    -1); of the pairs (a, b) and (b, a) of i's expansion one triplet (row <= col) is written."""
+    for qi in range(cptr[i], cptr[i + 1]):
+        a = cidx[qi]
+        rows[q] = a
+        cols[q] = -1
+        s_val[q] = mv * cw[qi]
+        b_val[q] = 0.0
+        q += 1
+        for qj in range(cptr[i], cptr[i + 1]):
+            b = cidx[qj]
+            if a > b:
+                continue
+            w = cw[qi] * cw[qj]
+            rows[q] = a
+            cols[q] = b
+            s_val[q] = sv * w
+            b_val[q] = bv * w
+            q += 1
+    return q
+
+
+@numba.njit(cache=True, inline="always")
+def _gradients(E, G):
+    """G[1:] = the gradients of the barycentrics l_1..l_3 of the tetrahedron with edge vectors E (rows: corner k
+    minus corner 0): the rows of E^-T (adjugate over the determinant); G[0] = -(G[1] + G[2] + G[3])."""
+    a, b, c = E[0, 0], E[0, 1], E[0, 2]
+    d, e, f = E[1, 0], E[1, 1], E[1, 2]
+    g, h, k = E[2, 0], E[2, 1], E[2, 2]
+    A, B, C = e * k - f * h, f * g - d * k, d * h - e * g
+    inv_det = 1.0 / (a * A + b * B + c * C)
+    # (E^-1)[:, r] is the gradient of l_{r+1}
+    G[1, 0], G[1, 1], G[1, 2] = A * inv_det, B * inv_det, C * inv_det
+    G[2, 0], G[2, 1], G[2, 2] = (c * h - b * k) * inv_det, (a * k - c * g) * inv_det, (b * g - a * h) * inv_det
+    G[3, 0], G[3, 1], G[3, 2] = (b * f - c * e) * inv_det, (c * d - a * f) * inv_det, (a * e - b * d) * inv_det
+    for j in range(3):
+        G[0, j] = -(G[1, j] + G[2, j] + G[3, j])
+
+
+@numba.njit(cache=True, inline="always")
+def _diagonal_slots(i, cptr, cidx):
+    """The triplets :func:`_put_diagonal` writes for lattice node i."""
+    n = 0
+    for qi in range(cptr[i], cptr[i + 1]):
+        n += 1
+        for qj in range(cptr[i], cptr[i + 1]):
+            if cidx[qi] <= cidx[qj]:
+                n += 1
+    return n
+
+
+@numba.njit(cache=True, nogil=True)
+def _slots(cell_nodes, depth, cptr, cidx, ref_pairs, kuhn, out, c0, c1):
+    """out[c + 1] = the triplets cube c writes (every tetrahedron of a cut cube counted), cubes c0..c1."""
+    for c in range(c0, c1):
+        cut = False
+        for k in range(8):
+            if depth[cell_nodes[c, k]] <= 0.0:
+                cut = True
+        n = 0
+        if not cut:
+            for r in range(ref_pairs.shape[0]):
+                i, j = cell_nodes[c, ref_pairs[r, 0]], cell_nodes[c, ref_pairs[r, 1]]
+                n += (cptr[i + 1] - cptr[i]) * (cptr[j + 1] - cptr[j])
+            for k in range(8):
+                n += _diagonal_slots(cell_nodes[c, k], cptr, cidx)
+        else:
+            for t in range(6):
+                for a in range(4):
+                    i = cell_nodes[c, kuhn[t, a]]
+                    n += _diagonal_slots(i, cptr, cidx)
+                    for b in range(a + 1, 4):
+                        j = cell_nodes[c, kuhn[t, b]]
+                        n += (cptr[i + 1] - cptr[i]) * (cptr[j + 1] - cptr[j])
+        out[c + 1] = n
+
+
+@numba.njit(cache=True, nogil=True)
 def _entries(nodes, depth, cell_nodes, level, h0, cptr, cidx, cw, ref_pairs, ref_values, ref_diag, m_ref, ghost,
-             rows, cols, s_val, b_val, s_diag, b_diag, m_free, totals):
-    """Every cell's entries in free-node numbering (hanging nodes expanded): the strict upper triangle as
-    (row < col) triplets, the diagonals and the lumped mass into dense arrays; returns the triplets written."""
+             start, rows, cols, s_val, b_val, totals, c0, c1):
+    """The triplets of cubes c0..c1 (whole chunks of CHUNK cubes) in free-node numbering (hanging nodes
+    expanded), each cube's in its slots start[c]..start[c + 1] (unused slots row -1): the upper triangle and
+    diagonal as (row <= col) triplets, the lumped mass as (row, -1); totals[chunk] the inside volume and the cut
+    area."""
     kuhn = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])
-    q = 0
     P = np.zeros((4, 3))
     s = np.zeros(4)
     G = np.zeros((4, 3))
@@ -274,7 +355,9 @@ def _entries(nodes, depth, cell_nodes, level, h0, cptr, cidx, cw, ref_pairs, ref
     mloc = np.zeros(4)
     bm = np.zeros(4)
     gid = np.zeros(4, np.int64)
-    for c in range(cell_nodes.shape[0]):
+    for c in range(c0, c1):
+        ch = c // CHUNK
+        q = start[c]
         h = h0 * (2.0 ** level[c])
         cut = False
         for k in range(8):
@@ -282,186 +365,225 @@ def _entries(nodes, depth, cell_nodes, level, h0, cptr, cidx, cw, ref_pairs, ref
                 cut = True
                 break
         if not cut:
-            totals[0] += h * h * h
+            totals[ch, 0] += h * h * h
             for r in range(ref_pairs.shape[0]):
                 q = _put(cell_nodes[c, ref_pairs[r, 0]], cell_nodes[c, ref_pairs[r, 1]], h * ref_values[r], 0.0,
-                         cptr, cidx, cw, rows, cols, s_val, b_val, s_diag, b_diag, q)
+                         cptr, cidx, cw, rows, cols, s_val, b_val, q)
             for k in range(8):
-                i = cell_nodes[c, k]
-                for qi in range(cptr[i], cptr[i + 1]):
-                    for qj in range(cptr[i], cptr[i + 1]):
-                        a, b = cidx[qi], cidx[qj]
-                        v = h * ref_diag[k] * cw[qi] * cw[qj]
-                        if a == b:
-                            s_diag[a] += v
-                        elif a < b:
-                            rows[q] = a
-                            cols[q] = b
-                            s_val[q] = v
-                            b_val[q] = 0.0
-                            q += 1
-                    m_free[cidx[qi]] += h * h * h * m_ref[k] * cw[qi]
+                q = _put_diagonal(cell_nodes[c, k], h * ref_diag[k], 0.0, h * h * h * m_ref[k], cptr, cidx, cw,
+                                  rows, cols, s_val, b_val, q)
+        else:
+            for t in range(6):
+                for k in range(4):
+                    n = cell_nodes[c, kuhn[t, k]]
+                    gid[k] = n
+                    for d in range(3):
+                        P[k, d] = nodes[n, d]
+                    s[k] = depth[n]
+                for k in range(4):
+                    mloc[k] = 0.0
+                    bm[k] = 0.0
+                    for j in range(4):
+                        be[k, j] = 0.0
+                vin, vfull, area = cut_tetrahedron(P, s, mloc, bm, be)
+                totals[ch, 0] += vin
+                totals[ch, 1] += area
+                if vin <= 0.0 and area <= 0.0:
+                    continue
+                for r in range(3):
+                    for d in range(3):
+                        E[r, d] = P[r + 1, d] - P[0, d]
+                _gradients(E, G)
+                w = vin + ghost * (vfull - vin)
+                for a in range(4):
+                    ma = mloc[a] + ghost * (0.25 * vfull - mloc[a])
+                    sa = w * (G[a, 0] * G[a, 0] + G[a, 1] * G[a, 1] + G[a, 2] * G[a, 2])
+                    q = _put_diagonal(gid[a], sa, be[a, a], ma, cptr, cidx, cw, rows, cols, s_val, b_val, q)
+                    for b in range(a + 1, 4):
+                        sab = w * (G[a, 0] * G[b, 0] + G[a, 1] * G[b, 1] + G[a, 2] * G[b, 2])
+                        q = _put(gid[a], gid[b], sab, be[a, b], cptr, cidx, cw, rows, cols, s_val, b_val, q)
+        for k in range(q, start[c + 1]):
+            rows[k] = -1
+            cols[k] = 0
+
+
+@numba.njit(cache=True, nogil=True)
+def _row_counts(rows, cols, counts, t0, t1):
+    """counts[r] += the entries row r takes from triplets t0..t1 (an off-diagonal triplet counts in both rows)."""
+    for q in range(t0, t1):
+        r, c = rows[q], cols[q]
+        if r < 0 or c < 0:
             continue
-        for t in range(6):
-            for k in range(4):
-                n = cell_nodes[c, kuhn[t, k]]
-                gid[k] = n
-                for d in range(3):
-                    P[k, d] = nodes[n, d]
-                s[k] = depth[n]
-            for k in range(4):
-                mloc[k] = 0.0
-                bm[k] = 0.0
-                for j in range(4):
-                    be[k, j] = 0.0
-            vin, vfull, area = cut_tetrahedron(P, s, mloc, bm, be)
-            totals[0] += vin
-            totals[1] += area
-            if vin <= 0.0 and area <= 0.0:
-                continue
-            for r in range(3):
-                for d in range(3):
-                    E[r, d] = P[r + 1, d] - P[0, d]
-            inv = np.linalg.inv(E)
-            for r in range(3):
-                for d in range(3):
-                    G[r + 1, d] = inv[d, r]
-            for d in range(3):
-                G[0, d] = -(G[1, d] + G[2, d] + G[3, d])
-            w = vin + ghost * (vfull - vin)
-            for a in range(4):
-                i = gid[a]
-                ma = mloc[a] + ghost * (0.25 * vfull - mloc[a])
-                sa = w * (G[a, 0] * G[a, 0] + G[a, 1] * G[a, 1] + G[a, 2] * G[a, 2])
-                for qi in range(cptr[i], cptr[i + 1]):
-                    m_free[cidx[qi]] += ma * cw[qi]
-                    for qj in range(cptr[i], cptr[i + 1]):
-                        x, y = cidx[qi], cidx[qj]
-                        ww = cw[qi] * cw[qj]
-                        if x == y:
-                            s_diag[x] += sa * ww
-                            b_diag[x] += be[a, a] * ww
-                        elif x < y:
-                            rows[q] = x
-                            cols[q] = y
-                            s_val[q] = sa * ww
-                            b_val[q] = be[a, a] * ww
-                            q += 1
-                for b in range(a + 1, 4):
-                    sab = w * (G[a, 0] * G[b, 0] + G[a, 1] * G[b, 1] + G[a, 2] * G[b, 2])
-                    q = _put(i, gid[b], sab, be[a, b], cptr, cidx, cw, rows, cols, s_val, b_val, s_diag, b_diag, q)
-    return q
+        counts[r] += 1
+        if c != r:
+            counts[c] += 1
 
 
-@numba.njit(cache=True)
-def _count(cell_nodes, depth, cptr, n_ref_pairs):
-    """Upper bound of the entries :func:`_entries` writes."""
-    total = 0
-    for c in range(cell_nodes.shape[0]):
-        mult = 1
-        for k in range(8):
-            i = cell_nodes[c, k]
-            mult = max(mult, cptr[i + 1] - cptr[i])
-        cut = False
-        for k in range(8):
-            if depth[cell_nodes[c, k]] <= 0.0:
-                cut = True
-        total += (6 * 16 if cut else n_ref_pairs + 8) * mult * mult
-    return total
-
-
-@numba.njit(cache=True)
-def _to_csr(n, rows, cols, s_val, b_val, s_diag, b_diag):
-    """The symmetric CSR (columns sorted, diagonal included) of the strict upper triangle triplets (duplicates
-    summed) and the dense diagonals."""
-    count = np.zeros(n + 1, np.int64)
-    for q in range(rows.size):
-        count[rows[q] + 1] += 1
-        count[cols[q] + 1] += 1
-    for i in range(n):
-        count[i + 1] += count[i] + 1          # + the diagonal
-    fill = np.empty(n, np.int64)
-    for i in range(n):
-        fill[i] = count[i] + 1
-    other = np.empty(count[n], np.int64)
-    sv = np.empty(count[n])
-    bv = np.empty(count[n])
-    for i in range(n):
-        other[count[i]] = i
-        sv[count[i]] = s_diag[i]
-        bv[count[i]] = b_diag[i]
-    for q in range(rows.size):
-        for a, b in ((rows[q], cols[q]), (cols[q], rows[q])):
-            k = fill[a]
-            other[k] = b
+@numba.njit(cache=True, nogil=True)
+def _scatter(rows, cols, s_val, b_val, pos, other, sv, bv, t0, t1):
+    """Each triplet of t0..t1 into its rows' next places (pos[r], advanced): in triplet order within a row."""
+    for q in range(t0, t1):
+        r, c = rows[q], cols[q]
+        if r < 0 or c < 0:
+            continue
+        k = pos[r]
+        other[k] = c
+        sv[k] = s_val[q]
+        bv[k] = b_val[q]
+        pos[r] = k + 1
+        if c != r:
+            k = pos[c]
+            other[k] = r
             sv[k] = s_val[q]
             bv[k] = b_val[q]
-            fill[a] = k + 1
-    indptr = np.zeros(n + 1, np.int64)
-    indices = np.empty(count[n], np.int64)
-    sd = np.empty(count[n])
-    bd = np.empty(count[n])
-    mark = np.full(n, -1, np.int64)           # the row that last met column c, and where it put it
-    slot = np.empty(n, np.int64)
-    k = 0
-    for i in range(n):
-        start = k
-        for t in range(count[i], count[i + 1]):   # duplicates summed as they come (a row has ~27 columns)
+            pos[c] = k + 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _combine_rows(ptr, other, sv, bv, distinct, r0, r1):
+    """Rows r0..r1 in place: duplicates summed in order, the distinct columns sorted at the row's start;
+    distinct[r] their count."""
+    mark = np.full(ptr.size - 1, -1, np.int64)
+    for i in range(r0, r1):
+        start = ptr[i]
+        k = start
+        for t in range(ptr[i], ptr[i + 1]):
             c = other[t]
-            if mark[c] != i:
-                mark[c] = i
-                slot[c] = k
-                indices[k] = c
+            if mark[c] < start:          # marks of earlier rows lie before this row's start
+                mark[c] = k
+                other[k] = c
+                sv[k] = sv[t]
+                bv[k] = bv[t]
+                k += 1
+            else:
+                sv[mark[c]] += sv[t]
+                bv[mark[c]] += bv[t]
+        for t in range(start + 1, k):             # insertion sort of the row's distinct columns
+            x, xs, xb = other[t], sv[t], bv[t]
+            u = t - 1
+            while u >= start and other[u] > x:
+                other[u + 1], sv[u + 1], bv[u + 1] = other[u], sv[u], bv[u]
+                u -= 1
+            other[u + 1], sv[u + 1], bv[u + 1] = x, xs, xb
+        distinct[i] = k - start
+
+
+@numba.njit(cache=True, nogil=True)
+def _diagonal(ptr, other, sv, distinct, diag, r0, r1):
+    for i in range(r0, r1):
+        diag[i] = 0.0
+        for t in range(ptr[i], ptr[i] + distinct[i]):
+            if other[t] == i:
+                diag[i] = sv[t]
+
+
+@numba.njit(cache=True, nogil=True)
+def _compact(ptr, other, sv, bv, distinct, newid, out_ptr, indices, sd, bd, r0, r1):
+    """The active rows of r0..r1 (newid >= 0) with their active columns, renumbered, at out_ptr[newid[i]]."""
+    for i in range(r0, r1):
+        ni = newid[i]
+        if ni < 0:
+            continue
+        k = out_ptr[ni]
+        for t in range(ptr[i], ptr[i] + distinct[i]):
+            nc = newid[other[t]]
+            if nc >= 0:
+                indices[k] = nc
                 sd[k] = sv[t]
                 bd[k] = bv[t]
                 k += 1
-            else:
-                sd[slot[c]] += sv[t]
-                bd[slot[c]] += bv[t]
-        for t in range(start + 1, k):             # insertion sort of the row's distinct columns
-            x, xs, xb = indices[t], sd[t], bd[t]
-            u = t - 1
-            while u >= start and indices[u] > x:
-                indices[u + 1], sd[u + 1], bd[u + 1] = indices[u], sd[u], bd[u]
-                u -= 1
-            indices[u + 1], sd[u + 1], bd[u + 1] = x, xs, xb
-        indptr[i + 1] = k
-    return indptr, indices[:k], sd[:k], bd[:k]
+
+
+@numba.njit(cache=True, nogil=True)
+def _active_counts(ptr, other, distinct, newid, counts, r0, r1):
+    for i in range(r0, r1):
+        ni = newid[i]
+        if ni < 0:
+            continue
+        n = 0
+        for t in range(ptr[i], ptr[i] + distinct[i]):
+            if newid[other[t]] >= 0:
+                n += 1
+        counts[ni] = n
+
+
+#: cubes per chunk of the assembly (the unit of its partial sums)
+CHUNK = 4096
+
+
+def _block_edges(k: int, n: int):
+    return [round(i * k / n) for i in range(n + 1)]
 
 
 def assemble(lattice, *, ghost: float = GHOST) -> Assembly:
-    """The matrices of eq. (99) on ``lattice`` (:class:`meshshade.volume.lattice.Lattice`)."""
+    """The matrices of eq. (99) on ``lattice`` (:class:`meshshade.volume.lattice.Lattice`): each cube's entries
+    as triplets into its own slots (chunks of cubes on the worker threads), then the symmetric CSR: rows counted
+    and filled per block of triplets (within a row the triplets keep their order, so the sums do not depend on
+    the number of threads), duplicates summed row by row, unknowns without inside dropped."""
     cptr, cidx, cw, n_free = constraint_map(lattice.n_nodes, lattice.hanging, lattice.parents)
-    size = int(_count(lattice.cell_nodes, lattice.depth, cptr, _REF_PAIRS.shape[0]))
+    cell_nodes, depth = lattice.cell_nodes, lattice.depth
+    n_cells = cell_nodes.shape[0]
+    n_chunks = -(-n_cells // CHUNK)
+    start = np.zeros(n_cells + 1, dtype=np.int64)
+    parallel_for(lambda a, b: _slots(cell_nodes, depth, cptr, cidx, _REF_PAIRS, _KUHN, start, a, b), n_cells,
+                 min_block=CHUNK)
+    np.cumsum(start, out=start)
+    size = int(start[-1])
     rows = np.empty(size, np.int32)
     cols = np.empty(size, np.int32)
     s_val = np.empty(size)
     b_val = np.empty(size)
-    s_diag, b_diag, m_free = np.zeros(n_free), np.zeros(n_free), np.zeros(n_free)
-    totals = np.zeros(2)
-    q = _entries(lattice.nodes, lattice.depth, lattice.cell_nodes, lattice.level, float(lattice.grading.h0),
-                 cptr, cidx, cw, _REF_PAIRS, _REF_VALUES, _REF_DIAG, _M_REF, float(ghost), rows, cols, s_val, b_val,
-                 s_diag, b_diag, m_free, totals)
-    indptr, indices, sd, bd = _to_csr(n_free, rows[:q], cols[:q], s_val[:q], b_val[:q], s_diag, b_diag)
-    del rows, cols, s_val, b_val
+    totals = np.zeros((n_chunks, 2))
+    args = (lattice.nodes, depth, cell_nodes, lattice.level, float(lattice.grading.h0), cptr, cidx, cw, _REF_PAIRS,
+            _REF_VALUES, _REF_DIAG, _M_REF, float(ghost), start, rows, cols, s_val, b_val, totals)
+    parallel_for(lambda a, b: _entries(*args, a * CHUNK, min(n_cells, b * CHUNK)), n_chunks, min_block=1)
+    mass = (cols == -1) & (rows >= 0)
+    m_free = np.bincount(rows[mass], weights=s_val[mass], minlength=n_free)
+    # the symmetric CSR: rows counted per block of triplets, filled in triplet order
+    n_blocks = max(1, min(default_threads(), size // 65536))
+    edges = _block_edges(size, n_blocks)
+    counts = np.zeros((n_blocks, n_free), dtype=np.int64)
+    parallel_for(lambda a, b: [_row_counts(rows, cols, counts[t], edges[t], edges[t + 1]) for t in range(a, b)],
+                 n_blocks, n_threads=n_blocks, min_block=1)
+    per_row = counts.sum(axis=0)
+    ptr = np.zeros(n_free + 1, dtype=np.int64)
+    np.cumsum(per_row, out=ptr[1:])
+    pos = np.cumsum(counts, axis=0) - counts + ptr[:-1][None, :]         # where each block's entries of a row go
+    del counts
+    other = np.empty(int(ptr[-1]), dtype=np.int64)
+    sv = np.empty(int(ptr[-1]))
+    bv = np.empty(int(ptr[-1]))
+    parallel_for(lambda a, b: [_scatter(rows, cols, s_val, b_val, pos[t], other, sv, bv, edges[t], edges[t + 1])
+                               for t in range(a, b)], n_blocks, n_threads=n_blocks, min_block=1)
+    del rows, cols, s_val, b_val, pos
+    distinct = np.zeros(n_free, dtype=np.int64)
+    parallel_for(lambda a, b: _combine_rows(ptr, other, sv, bv, distinct, a, b), n_free, min_block=4096)
     # unknowns: free nodes with something inside their support
-    diag = np.zeros(n_free)
-    r = np.repeat(np.arange(n_free), np.diff(indptr))
-    on = indices == r
-    diag[r[on]] = sd[on]
+    diag = np.empty(n_free)
+    parallel_for(lambda a, b: _diagonal(ptr, other, sv, distinct, diag, a, b), n_free, min_block=4096)
     active = (diag > 0.0) | (m_free > 0.0)
     if not active.any():
         raise MeshshadeError("the volume's lattice holds no inside")
+    n = int(active.sum())
     newid = np.full(n_free, -1, dtype=np.int64)
-    newid[active] = np.arange(int(active.sum()))
-    keep = active[r] & active[indices]
-    counts = np.bincount(newid[r[keep]], minlength=int(active.sum()))
-    indptr2 = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    newid[active] = np.arange(n)
+    row_n = np.zeros(n, dtype=np.int64)
+    parallel_for(lambda a, b: _active_counts(ptr, other, distinct, newid, row_n, a, b), n_free, min_block=4096)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(row_n, out=indptr[1:])
+    indices = np.empty(int(indptr[-1]), dtype=np.int64)
+    sd = np.empty(int(indptr[-1]))
+    bd = np.empty(int(indptr[-1]))
+    parallel_for(lambda a, b: _compact(ptr, other, sv, bv, distinct, newid, indptr, indices, sd, bd, a, b), n_free,
+                 min_block=4096)
     # the constraint map in unknown numbering (free nodes that are not active drop out)
     cidx2 = newid[cidx]
     ok = cidx2 >= 0
     row_of = np.repeat(np.arange(lattice.n_nodes), np.diff(cptr))
     cptr2 = np.concatenate([[0], np.cumsum(np.bincount(row_of[ok], minlength=lattice.n_nodes))])
-    free_nodes = np.flatnonzero(np.isin(np.arange(lattice.n_nodes), lattice.hanging, invert=True))[active]
-    return Assembly(indptr2, newid[indices[keep]], sd[keep], bd[keep], m_free[active], free_nodes,
-                    (cptr2.astype(np.int64), cidx2[ok], cw[ok]), float(totals[0]), float(totals[1]))
+    is_hanging = np.zeros(lattice.n_nodes, dtype=bool)
+    is_hanging[lattice.hanging] = True
+    free_nodes = np.flatnonzero(~is_hanging)[active]
+    vol, area = totals.sum(axis=0)
+    return Assembly(indptr, indices, sd, bd, m_free[active], free_nodes,
+                    (cptr2.astype(np.int64), cidx2[ok], cw[ok]), float(vol), float(area))

@@ -5,28 +5,30 @@ surface with holes, overlapping or nested parts, self-intersections, duplicated 
 is a smooth harmonic function that jumps by one across every sheet and is about 1/2 across a hole (Jacobson,
 Kavan and Sorkine-Hornung 2013, "Robust inside-outside segmentation using generalized winding numbers"). The
 volume is {w > 1/2}: the union of overlapping parts, holes closed by the smooth continuation, a duplicated face
-changing nothing. libigl's ``fast_winding_number`` evaluates it (Barill et al. 2018), and its AABB tree the
-distance to the nearest face; :class:`SurfaceVolume` combines them into the signed depth the lattice is built
-from (:mod:`meshshade.volume.lattice`).
+changing nothing. A hierarchy of the triangles (:mod:`meshshade.volume.triangle_tree`) evaluates it (Barill et
+al. 2018's fast winding number) and the distance to the nearest face, in blocks on every core;
+:class:`SurfaceVolume` combines them into the signed depth the lattice is built from
+(:mod:`meshshade.volume.lattice`).
 
-Pure array work over the libigl calls; no I/O.
+Pure array work; no I/O.
 """
 from __future__ import annotations
 
 import math
 
-import igl
 import numpy as np
 from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError
 from meshshade.geometry.topology import vertex_components
+from meshshade.pacing import default_threads
+from meshshade.volume.triangle_tree import TriangleTree
 
 __all__ = ["SurfaceVolume", "WINDING_FAST", "WINDING_EXACT", "WINDING_MARGIN"]
 
-#: accuracy scales of libigl's fast winding number (its Barnes-Hut parameter: 2 is its recommended accuracy); the
-#: quick pass errs by at most 0.18 on the shared meshes' near-surface points, so a value within WINDING_MARGIN of
-#: 1/2 is recomputed at WINDING_EXACT
+#: accuracy scales of the fast winding number (its Barnes-Hut parameter beta, as libigl's: 2 is its recommended
+#: accuracy, within 0.004 of the exact sum on a sphere and the head scan); the quick pass errs by at most 0.2, so a
+#: value within WINDING_MARGIN of 1/2 is recomputed at WINDING_EXACT
 WINDING_FAST, WINDING_EXACT, WINDING_MARGIN = 1.0, 2.0, 0.3
 
 
@@ -47,7 +49,14 @@ class SurfaceVolume:
             raise MeshshadeError("the volume needs a triangle mesh with at least one face")
         self.queries = 0
         self.winding_queries = 0
-        self._bvh = None
+        self._tree = None
+
+    @property
+    def tree(self) -> TriangleTree:
+        """The hierarchy of the triangles (built at the first query)."""
+        if self._tree is None:
+            self._tree = TriangleTree(self.vertices, self.faces)
+        return self._tree
 
     def winding(self, points) -> np.ndarray:
         """(p,) generalised winding number at ``points`` (p, 3) mm: the hierarchy's quick estimate (accuracy
@@ -55,13 +64,10 @@ class SurfaceVolume:
         P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if P.shape[0] == 0:
             return np.zeros(0)
-        if self._bvh is None:
-            self._bvh = igl.FastWindingNumberBVH()
-            self._bvh.init(self.vertices, self.faces, 2)
-        w = self._bvh.winding_number(P, WINDING_FAST)
+        w = self.tree.winding(P, WINDING_FAST)
         unsure = np.flatnonzero(np.abs(w - 0.5) < WINDING_MARGIN)
         if unsure.size:
-            w[unsure] = self._bvh.winding_number(np.ascontiguousarray(P[unsure]), WINDING_EXACT)
+            w[unsure] = self.tree.winding(P[unsure], WINDING_EXACT)
         return w
 
     def buried(self, vertices, normals, offset: float) -> np.ndarray:
@@ -83,9 +89,7 @@ class SurfaceVolume:
         own = np.zeros(used.size)
         for p in range(n_parts):
             mine = np.flatnonzero(label[used] == p)
-            bvh = igl.FastWindingNumberBVH()
-            bvh.init(self.vertices, np.ascontiguousarray(self.faces[face_part == p]), 2)
-            own[mine] = bvh.winding_number(np.ascontiguousarray(q[used[mine]]), WINDING_EXACT)
+            own[mine] = TriangleTree(self.vertices, self.faces[face_part == p]).winding(q[used[mine]], WINDING_EXACT)
         out[used] = (w > 0.5) & ((w - own) > 0.5)
         return out
 
@@ -113,10 +117,8 @@ class SurfaceVolume:
         if exact is None:
             return np.where(inside, float(bound), -float(bound))
         if not exact and self._points is not None:
-            d, _ = self._points.query(P, distance_upper_bound=float(bound) + self._slack)
+            d, _ = self._points.query(P, distance_upper_bound=float(bound) + self._slack, workers=default_threads())
             d = np.clip(d - self._slack, 0.0, bound)
         else:
-            d = igl.signed_distance(P, self.vertices, self.faces, sign_type=igl.SIGNED_DISTANCE_TYPE_UNSIGNED,
-                                    upper_bound=float(bound))[0]
-            d = np.where(np.isfinite(d), np.minimum(d, bound), bound)
+            d = self.tree.distance(P, float(bound))
         return np.where(inside, d, -d)

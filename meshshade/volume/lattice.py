@@ -14,7 +14,12 @@ mean of the edge's ends, a face centre to the mean of the face's lowest and high
 diagonal runs between them), which keeps the space conforming. A 2:1 grading (no cube next to one two levels
 finer) is guaranteed by the bands (:func:`check_bands`).
 
-Pure array work (numpy, and compiled loops for point location); the depth function is the only call-out.
+Sets of lattice points (the corners of many cubes, shared between neighbours) are numbered on a dense grid of
+the finest spacing over the lattice's box (:class:`NodeGrid`): each cube marks its corners, the marks are numbered
+slab by slab in the order of their coordinates, and every look-up is an index, in compiled loops run in blocks on
+the worker threads (:func:`meshshade.pacing.run_in_blocks`). Nothing is sorted.
+
+Pure array work (numpy and compiled loops); the depth function is the only call-out.
 """
 from __future__ import annotations
 
@@ -25,9 +30,11 @@ import numba
 import numpy as np
 
 from meshshade.errors import MeshshadeError, NoVolumeError
+from meshshade.geometry.sorting import sorted_unique
+from meshshade.pacing import default_threads, run_in_blocks
 
-__all__ = ["Grading", "Lattice", "KUHN", "CORNERS", "build_lattice", "coarser_lattice", "check_bands", "locate_points",
-           "MAX_INDEX_CELLS"]
+__all__ = ["Grading", "Lattice", "NodeGrid", "KUHN", "CORNERS", "build_lattice", "coarser_lattice", "check_bands",
+           "locate_points", "MAX_INDEX_CELLS"]
 
 #: Kuhn's six tetrahedra of the unit cube: corner (i, j, k) has index i + 2 j + 4 k; each path 0 -> 7 along the
 #: axes in one order is a tetrahedron
@@ -82,6 +89,132 @@ def _unpack(key):
     return np.stack([(key >> (2 * _BITS)) & m, (key >> _BITS) & m, key & m], axis=-1) - _OFF
 
 
+@numba.njit(cache=True, nogil=True)
+def _mark_corners(grid, glo, ijk, scale, stride, c0, c1):
+    """grid[corner - glo] = 0 at the 8 corners of items c0..c1: item c's cube has side ``scale[c]`` (in grid
+    units) and ijk[c] in units of it; its corners lie ``stride`` sides apart (1: the cube's own corners)."""
+    for c in range(c0, c1):
+        s = scale[c]
+        for k in range(8):
+            x = (ijk[c, 0] + stride * (k & 1)) * s - glo[0]
+            y = (ijk[c, 1] + stride * ((k >> 1) & 1)) * s - glo[1]
+            z = (ijk[c, 2] + stride * ((k >> 2) & 1)) * s - glo[2]
+            grid[x, y, z] = 0
+
+
+@numba.njit(cache=True, nogil=True)
+def _count_slabs(grid, counts, i0, i1):
+    """counts[i] = the marked points of slab i, for slabs i0..i1."""
+    for i in range(i0, i1):
+        n = 0
+        for j in range(grid.shape[1]):
+            for k in range(grid.shape[2]):
+                if grid[i, j, k] >= 0:
+                    n += 1
+        counts[i] = n
+
+
+@numba.njit(cache=True, nogil=True)
+def _number_slabs(grid, start, glo, coords, i0, i1):
+    """Number the marked points of slabs i0..i1 in the order (i, j, k) from start[i]; coords[id] = the point."""
+    for i in range(i0, i1):
+        q = start[i]
+        for j in range(grid.shape[1]):
+            for k in range(grid.shape[2]):
+                if grid[i, j, k] >= 0:
+                    grid[i, j, k] = q
+                    coords[q, 0] = i + glo[0]
+                    coords[q, 1] = j + glo[1]
+                    coords[q, 2] = k + glo[2]
+                    q += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _corner_ids(grid, glo, ijk, scale, stride, out, c0, c1):
+    """out[c, k] = the number of corner k of item c (as :func:`_mark_corners`)."""
+    for c in range(c0, c1):
+        s = scale[c]
+        for k in range(8):
+            x = (ijk[c, 0] + stride * (k & 1)) * s - glo[0]
+            y = (ijk[c, 1] + stride * ((k >> 1) & 1)) * s - glo[1]
+            z = (ijk[c, 2] + stride * ((k >> 2) & 1)) * s - glo[2]
+            out[c, k] = grid[x, y, z]
+
+
+@numba.njit(cache=True, nogil=True)
+def _point_ids(grid, glo, pts, out, p0, p1):
+    """out[p] = the number of the grid point pts[p] (grid units), -1 where it is not numbered or off the grid."""
+    nx, ny, nz = grid.shape
+    for p in range(p0, p1):
+        x, y, z = pts[p, 0] - glo[0], pts[p, 1] - glo[1], pts[p, 2] - glo[2]
+        if 0 <= x < nx and 0 <= y < ny and 0 <= z < nz:
+            out[p] = grid[x, y, z]
+        else:
+            out[p] = -1
+
+
+class NodeGrid:
+    """A dense grid of lattice points over the box ``lo``..``hi`` (inclusive; integer coordinates in units of h0,
+    multiples of ``unit``): :meth:`mark` cubes' corners, :meth:`number` them in the order of their coordinates (x,
+    then y, then z: the order of a sort of packed keys), then :meth:`corners` and :meth:`ids` look numbers up.
+    ``coords`` (n, 3) are the numbered points (units of h0)."""
+
+    def __init__(self, lo, hi, unit: int = 1):
+        self.unit = int(unit)
+        self.lo = np.asarray(lo, dtype=np.int64) // self.unit
+        shape = tuple(int(x) for x in np.asarray(hi, dtype=np.int64) // self.unit - self.lo + 1)
+        if math.prod(shape) > MAX_INDEX_CELLS:
+            raise MeshshadeError(f"the volume's lattice would need {math.prod(shape):.3g} grid points to number; "
+                                 "use a coarser volume resolution")
+        self.grid = np.full(shape, -1, dtype=np.int32)
+        self.coords = None
+
+    def _cubes(self, ijk, scale):
+        ijk = np.ascontiguousarray(ijk, dtype=np.int64).reshape(-1, 3)
+        scale = np.ascontiguousarray(np.broadcast_to(np.asarray(scale, dtype=np.int64) // self.unit,
+                                                     ijk.shape[:1]))
+        return ijk, scale
+
+    def mark(self, ijk, scale, stride: int = 1) -> None:
+        """Mark the corners of the cubes ``ijk`` (c, 3) of side ``scale`` (c,) h0 (``stride``: see
+        :func:`_mark_corners`)."""
+        ijk, scale = self._cubes(ijk, scale)
+        run_in_blocks(lambda a, b: _mark_corners(self.grid, self.lo, ijk, scale, int(stride), a, b), ijk.shape[0],
+                      min_block=4096)
+
+    def number(self) -> int:
+        """Number the marked points; returns how many."""
+        nx = self.grid.shape[0]
+        counts = np.zeros(nx, dtype=np.int64)
+        per = max(1, -(-nx // (4 * default_threads())))
+        run_in_blocks(lambda a, b: _count_slabs(self.grid, counts, a, b), nx, block=per)
+        start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        n = int(counts.sum())
+        if n >= 2 ** 31 - 1:
+            raise MeshshadeError("the volume's lattice has too many nodes; use a coarser volume resolution")
+        coords = np.empty((n, 3), dtype=np.int64)
+        run_in_blocks(lambda a, b: _number_slabs(self.grid, start, self.lo, coords, a, b), nx, block=per)
+        self.coords = coords * self.unit
+        return n
+
+    def corners(self, ijk, scale, stride: int = 1) -> np.ndarray:
+        """(c, 8) numbers of the corners of the cubes (as :meth:`mark`)."""
+        ijk, scale = self._cubes(ijk, scale)
+        out = np.empty((ijk.shape[0], 8), dtype=np.int64)
+        run_in_blocks(lambda a, b: _corner_ids(self.grid, self.lo, ijk, scale, int(stride), out, a, b),
+                      ijk.shape[0], min_block=4096)
+        return out
+
+    def ids(self, pts) -> np.ndarray:
+        """(p,) numbers of the points ``pts`` (p, 3) (units of h0); -1 where not numbered."""
+        pts = np.ascontiguousarray(pts, dtype=np.int64).reshape(-1, 3)
+        on = np.all(pts % self.unit == 0, axis=1)
+        q = np.ascontiguousarray(np.where(on[:, None], pts // self.unit, self.lo - 1))
+        out = np.empty(q.shape[0], dtype=np.int64)
+        run_in_blocks(lambda a, b: _point_ids(self.grid, self.lo, q, out, a, b), q.shape[0], min_block=4096)
+        return out
+
+
 class Lattice:
     """The cubes and nodes of a graded lattice (module docstring). Build with :func:`build_lattice`.
 
@@ -92,15 +225,20 @@ class Lattice:
     ``stats`` counts per level and seconds."""
 
     def __init__(self, grading, level, ijk, nodes, depth, cell_nodes, hanging, parents, index, index_lo, stats,
-                 node_keys):
+                 node_grid):
         self.grading = grading
-        self.node_keys = node_keys
+        self.node_grid = node_grid     # the nodes' numbers on a dense grid (NodeGrid), for the coarser levels
         self.level, self.ijk = level, ijk
         self.nodes, self.depth = nodes, depth
         self.cell_nodes = cell_nodes
         self.hanging, self.parents = hanging, parents
         self._index, self._index_lo = index, index_lo
         self.stats = stats
+
+    @property
+    def node_keys(self) -> np.ndarray:
+        """(N,) int64: each node's integer coordinates (units of h0) packed in one key, ascending."""
+        return _pack(self.node_grid.coords)
 
     @property
     def n_nodes(self) -> int:
@@ -122,8 +260,9 @@ class Lattice:
         cell = np.empty(P.shape[0], dtype=np.int64)
         bary = np.empty((P.shape[0], 4))
         nodes = np.empty((P.shape[0], 4), dtype=np.int64)
-        locate_points(P, self.grading.h0, self._index, self._index_lo, self.level, self.ijk, self.cell_nodes,
-                      cell, bary, nodes)
+        run_in_blocks(lambda a, b: locate_points(P, self.grading.h0, self._index, self._index_lo, self.level,
+                                                 self.ijk, self.cell_nodes, cell, bary, nodes, a, b),
+                      P.shape[0], min_block=16384)
         return cell, bary, nodes
 
 
@@ -146,11 +285,12 @@ def kuhn_weights(x, y, z):
 
 
 @numba.njit(cache=True, nogil=True)
-def locate_points(P, h0, index, lo, level, ijk, cell_nodes, cell, bary, nodes):
-    """For each point: the cube holding it (dense index of level-0 cells), the Kuhn tetrahedron by the order of
-    its coordinates in the cube, the barycentrics and the corner nodes; cell -1 (weights 0) outside the lattice."""
+def locate_points(P, h0, index, lo, level, ijk, cell_nodes, cell, bary, nodes, p0, p1):
+    """For each point p0..p1: the cube holding it (dense index of level-0 cells), the Kuhn tetrahedron by the
+    order of its coordinates in the cube, the barycentrics and the corner nodes; cell -1 (weights 0) outside the
+    lattice."""
     nx, ny, nz = index.shape
-    for p in range(P.shape[0]):
+    for p in range(p0, p1):
         # lattice coordinates, nudged up by a rounding's worth: a node at k h0 computed as k - 1e-15 stays on k
         fx, fy, fz = P[p, 0] / h0 + _EPS, P[p, 1] / h0 + _EPS, P[p, 2] / h0 + _EPS
         i0 = int(math.floor(fx)) - lo[0]
@@ -182,10 +322,10 @@ def locate_points(P, h0, index, lo, level, ijk, cell_nodes, cell, bary, nodes):
         nodes[p, 3] = cell_nodes[c, 7]
 
 
-@numba.njit(cache=True)
-def _fill_index(index, lo, level, ijk):
-    """index[level-0 cell] = the cube covering it."""
-    for c in range(level.shape[0]):
+@numba.njit(cache=True, nogil=True)
+def _fill_index(index, lo, level, ijk, c0, c1):
+    """index[level-0 cell] = the cube covering it, for cubes c0..c1 (cubes cover disjoint cells)."""
+    for c in range(c0, c1):
         s = 1 << level[c]
         i0, j0, k0 = ijk[c, 0] * s - lo[0], ijk[c, 1] * s - lo[1], ijk[c, 2] * s - lo[2]
         for i in range(i0, i0 + s):
@@ -224,14 +364,16 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
     g = np.meshgrid(*[np.arange(a[i], b[i]) for i in range(3)], indexing="ij")
     cand = np.stack([x.ravel() for x in g], axis=1)
     cand_sign = np.zeros(cand.shape[0], dtype=np.int8)     # known side of each candidate (0: unknown)
+    centre_sign = cand_sign                                  # known side of each candidate's centre
+    parent_d = np.zeros(cand.shape[0])                       # its parent's depth bound at the parent's centre
     kept, counts, evaluated = [None] * (L + 1), [0] * (L + 1), 0
-    surface_cells = []          # (level, ijk) of kept cubes of level >= 1 that may be cut
+    surface = None              # which cubes kept at level 1 may be cut (they are evaluated with level 0)
     for l in range(L, 0, -1):
         h = h0 * 2 ** l
         r = 0.5 * math.sqrt(3.0) * h
         bound = max(bands[l] + 4 * r, grading.depth_max + 2 * r) if l == L else bands[l] + 4 * r
         centres = (cand + 0.5) * h
-        d = depth(centres, bound, sign=cand_sign, exact=False)
+        d = depth(centres, bound, sign=centre_sign, exact=False)
         evaluated += cand.shape[0]
         out = d < -r
         shallow = d - r < bands[l]
@@ -240,58 +382,61 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
             split = shallow & ~out
             split[split] = refine(centres[split])
             keep = ~(out | split) & (d - r <= grading.depth_max)
-            surface_cells.append(cand[keep & (d < r)])
+            surface = (d < r)[keep]
         else:
             split = shallow
             keep = ~(out | split) & (d - r <= grading.depth_max)
         kept[l] = cand[keep]
         counts[l] = int(keep.sum())
         sub = ~out & split
-        # a parent wholly on one side (|d| > r) gives its children its side: only children of parents the
-        # surface may cross need the winding number
-        side = np.where(np.abs(d[sub]) > r, np.sign(d[sub]), 0).astype(np.int8)
+        # a parent wholly on one side (|d| > r) gives its children its side, and a parent whose centre lies
+        # farther than r / 2 from the surface (|d| is a lower bound) its children's centres: only the rest need the
+        # winding number
+        ds = d[sub]
+        side = np.where(np.abs(ds) > r, np.sign(ds), 0).astype(np.int8)
         cand = (2 * cand[sub][:, None, :] + CORNERS[None, :, :]).reshape(-1, 3)
         cand_sign = np.repeat(side, 8)
-    # the corners of the finest candidates and of the coarser cubes that may be cut are evaluated once
+        centre_sign = np.repeat(np.where(np.abs(ds) > 0.5 * r, np.sign(ds), 0).astype(np.int8), 8)
+        parent_d = np.repeat(ds, 8)
+    # the corners of the finest candidates and of the coarser cubes that may be cut are numbered and evaluated once
     t_mid = time.perf_counter()
-    corner_keys = _pack(cand[:, None, :] + CORNERS[None, :, :])
-    if surface_cells and surface_cells[0].size:
-        coarse_keys = _pack(surface_cells[0][:, None, :] * 2 + CORNERS[None, :, :] * 2)
-        all_keys = np.concatenate([corner_keys.ravel(), coarse_keys.ravel()])
-    else:
-        coarse_keys = None
-        all_keys = corner_keys.ravel()
-    ck, cinv = np.unique(all_keys, return_inverse=True)
-    # a corner of a level-0 candidate whose parent lies wholly inside is inside
-    known = np.zeros(ck.size, dtype=np.int8)
-    cs = np.repeat(cand_sign, 8)                                   # the candidates' corners, candidate by candidate
-    np.maximum.at(known, cinv[:corner_keys.size], cs)
+    coarse = kept[1][surface] if surface is not None and surface.any() else np.zeros((0, 3), dtype=np.int64)
+    boxes = [x for x in (cand, cand + 1, 2 * coarse, 2 * coarse + 2) if x.size]
+    if not boxes:        # no cube the surface may cut: nothing inside
+        raise NoVolumeError("the mesh encloses no volume the lattice can resolve (winding number below 1/2 "
+                            f"everywhere at {h0:.3g} mm)")
+    grid = NodeGrid(np.min([x.min(axis=0) for x in boxes], axis=0), np.max([x.max(axis=0) for x in boxes], axis=0))
+    grid.mark(cand, 1)
+    grid.mark(coarse, 2)
+    n_corners = grid.number()
+    fine_ids = grid.corners(cand, 1)                                   # (C0, 8)
+    coarse_ids = grid.corners(coarse, 2)                               # (C1, 8)
+    # a corner of a level-0 candidate nearer its parent's centre than the parent's depth bound is on its side
+    known = np.zeros(n_corners, dtype=np.int8)
+    run_in_blocks(lambda a, b: _spread_sign(fine_ids, parent_d, h0, known, a, b), cand.shape[0], min_block=4096)
     # first each corner's side; the distance only at the corners of cubes the surface cuts (mixed sides): the
     # others' magnitude is never read (a cube with its corners on one side is whole or dropped)
-    pts = _unpack(ck).astype(np.float64) * h0
-    bnd = 4.0 * math.sqrt(3.0) * h0 if refine is not None else 2.0 * math.sqrt(3.0) * h0
+    pts = grid.coords.astype(np.float64) * h0
+    bnd = 2.0 * math.sqrt(3.0) * h0        # the depths are clipped there (:func:`_finish`, h_cut = h0)
     cd = np.asarray(depth(pts, bnd, sign=known, exact=None), dtype=np.float64)
     inside = cd > 0.0
-    need = np.zeros(ck.size, dtype=bool)
-    for sel in (cinv[:corner_keys.size], cinv[corner_keys.size:]):
-        if sel.size:
-            s8 = inside[sel].reshape(-1, 8)
-            need[sel.reshape(-1, 8)[s8.any(axis=1) & ~s8.all(axis=1)].ravel()] = True
+    need = np.zeros(n_corners, dtype=bool)
+    for ids in (fine_ids, coarse_ids):
+        if ids.size:
+            s8 = inside[ids]
+            need[ids[s8.any(axis=1) & ~s8.all(axis=1)].ravel()] = True
     if need.any():
         cd[need] = depth(pts[need], bnd, sign=np.where(inside[need], 1, -1).astype(np.int8))
-    evaluated += ck.size
-    cdep = cd[cinv[:corner_keys.size]].reshape(-1, 8)
-    keep0 = cdep.max(axis=1) > 0.0
+    evaluated += n_corners
+    keep0 = cd[fine_ids].max(axis=1) > 0.0 if fine_ids.size else np.zeros(0, dtype=bool)
     kept[0] = cand[keep0]
     counts[0] = int(keep0.sum())
-    if coarse_keys is not None:
+    if coarse.size:
         # a coarse surface cube whose corners are all outside holds no inside at the lattice's resolution
-        cdc = cd[cinv[corner_keys.size:]].reshape(-1, 8)
-        empty = cdc.max(axis=1) <= 0.0
+        empty = cd[coarse_ids].max(axis=1) <= 0.0
         if empty.any():
-            drop = _pack(surface_cells[0][empty])
-            k1 = _pack(kept[1])
-            kept[1] = kept[1][~np.isin(k1, drop)]
+            drop = np.flatnonzero(surface)[empty]
+            kept[1] = np.delete(kept[1], drop, axis=0)
             counts[1] = int(kept[1].shape[0])
     level = np.concatenate([np.full(k.shape[0], l, dtype=np.int64) for l, k in enumerate(kept)])
     ijk = np.concatenate(kept)
@@ -300,7 +445,7 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
                              f"everywhere at {h0:.3g} mm)")
     t1 = time.perf_counter()
     # every corner of a cube that may be cut was evaluated above; the others are inside
-    out = _finish(grading, level, ijk, None, ck, cd, h0)
+    out = _finish(grading, level, ijk, None, grid, cd, h0)
     out.stats["volume_cells_per_level"] = counts
     out.stats["volume_depth_queries"] += int(evaluated)
     out.stats["timings"] = {"lattice coarse cells": t_mid - t0, "lattice fine cells": t1 - t_mid,
@@ -310,26 +455,47 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
     return out
 
 
-def _finish(grading, level, ijk, depth, known_keys, known_depth, h_cut):
-    """The :class:`Lattice` of the cubes ``level``, ``ijk``: corners, their depths (``known_keys`` ->
-    ``known_depth`` reused; the corners of cubes of side ``h_cut`` or finer that may be cut evaluated, clipped
-    beyond two cells), hanging nodes and the point index."""
+@numba.njit(cache=True, nogil=True)
+def _spread_sign(ids, parent_d, h, known, c0, c1):
+    """known[corner] = the side of the parent's centre at the 8 corners of items c0..c1 that lie nearer that
+    centre than the parent's depth bound |parent_d| (item c is child c % 8 of its parent, a cube of side 2h; its
+    corner k lies at offsets in {-1, 0, 1} h from the parent's centre). Corners on known sides never disagree."""
+    for c in range(c0, c1):
+        pd = parent_d[c]
+        if pd == 0.0:
+            continue
+        o = c % 8
+        s = 1 if pd > 0.0 else -1
+        for k in range(8):
+            ox = (o & 1) + (k & 1) - 1
+            oy = ((o >> 1) & 1) + ((k >> 1) & 1) - 1
+            oz = ((o >> 2) & 1) + ((k >> 2) & 1) - 1
+            if abs(pd) > h * math.sqrt(ox * ox + oy * oy + oz * oz):
+                known[ids[c, k]] = s
+
+
+def _finish(grading, level, ijk, depth, known_grid, known_depth, h_cut):
+    """The :class:`Lattice` of the cubes ``level``, ``ijk``: corners numbered on a :class:`NodeGrid`, their depths
+    (read from ``known_grid`` -> ``known_depth`` where it has them; the corners of cubes of side ``h_cut`` or finer
+    that may be cut evaluated, clipped beyond two cells), hanging nodes and the point index."""
     import time
 
     t1 = time.perf_counter()
     h0 = float(grading.h0)
-    scale = np.left_shift(1, level)[:, None, None]
-    keys = _pack(ijk[:, None, :] * scale + CORNERS[None, :, :] * scale)          # (C, 8) in h0 units
-    node_keys, inverse = np.unique(keys.ravel(), return_inverse=True)
-    cell_nodes = inverse.reshape(-1, 8).astype(np.int64)
-    nodes = _unpack(node_keys).astype(np.float64) * h0
-    n = node_keys.size
+    scale = np.left_shift(1, level)
+    lo = np.min(ijk * scale[:, None], axis=0)
+    hi = np.max((ijk + 1) * scale[:, None], axis=0)
+    grid = NodeGrid(lo, hi, unit=int(scale.min()))
+    grid.mark(ijk, scale)
+    n = grid.number()
+    cell_nodes = grid.corners(ijk, scale)
+    nodes = grid.coords.astype(np.float64) * h0
     bound = 2.0 * math.sqrt(3.0) * h_cut
     dep = np.full(n, np.nan)
-    if known_keys is not None and known_keys.size:
-        pos = np.searchsorted(known_keys, node_keys)
-        hit = (pos < known_keys.size) & (known_keys[np.minimum(pos, known_keys.size - 1)] == node_keys)
-        dep[hit] = np.clip(known_depth[pos[hit]], -bound, bound)
+    if known_grid is not None:
+        kid = known_grid.ids(grid.coords)
+        hit = kid >= 0
+        dep[hit] = np.clip(known_depth[kid[hit]], -bound, bound)
     # corners still unknown: those of the finest cubes (the only ones the surface may cut) are evaluated; the
     # rest lie deeper than band 1 and are inside
     finest = level == level.min()
@@ -345,21 +511,18 @@ def _finish(grading, level, ijk, depth, known_keys, known_depth, h_cut):
     tiny = CORNER_SNAP * h0
     dep = np.where(np.abs(dep) < tiny, tiny, dep)
     t2 = time.perf_counter()
-    hanging, parents = _hanging_nodes(node_keys, level, ijk)
-    span_lo = np.min(ijk * np.left_shift(1, level)[:, None], axis=0)
-    span_hi = np.max((ijk + 1) * np.left_shift(1, level)[:, None], axis=0)
-    shape = tuple(int(x) for x in span_hi - span_lo)
+    hanging, parents = _hanging_nodes(grid, level, ijk)
+    shape = tuple(int(x) for x in hi - lo)
     if math.prod(shape) > MAX_INDEX_CELLS:
         raise MeshshadeError(f"the volume's lattice would need {math.prod(shape):.3g} cells of {h0:.3g} mm to "
                              "index; use a coarser volume resolution")
     index = np.full(shape, -1, dtype=np.int32)
-    _fill_index(index, span_lo, level, ijk)
+    run_in_blocks(lambda a, b: _fill_index(index, lo, level, ijk, a, b), level.size, min_block=4096)
     t3 = time.perf_counter()
     counts = np.bincount(level, minlength=grading.levels).tolist()
     info = {"volume_cells_per_level": counts, "volume_nodes": int(n), "volume_hanging_nodes": int(hanging.size),
             "volume_depth_queries": queries, "timings": {"lattice corners": t2 - t1, "lattice index": t3 - t2}}
-    return Lattice(grading, level, ijk, nodes, dep, cell_nodes, hanging, parents, index, span_lo, info,
-                   node_keys)
+    return Lattice(grading, level, ijk, nodes, dep, cell_nodes, hanging, parents, index, lo, info, grid)
 
 
 def coarser_lattice(lattice: Lattice, depth) -> Lattice:
@@ -369,40 +532,63 @@ def coarser_lattice(lattice: Lattice, depth) -> Lattice:
     already of the coarsest level."""
     lmin = int(lattice.level.min())
     fine = lattice.level == lmin
-    parents = np.unique(_pack(np.floor_divide(lattice.ijk[fine], 2)))
+    parents = sorted_unique(_pack(np.floor_divide(lattice.ijk[fine], 2)))
     level = np.concatenate([lattice.level[~fine], np.full(parents.size, lmin + 1, dtype=np.int64)])
     ijk = np.concatenate([lattice.ijk[~fine], _unpack(parents)])
     g = lattice.grading
     grading = g if lmin + 1 < g.levels else Grading(g.h0, tuple(g.bands) + (g.bands[-1] + g.h0 * 2 ** (lmin + 1),),
                                                     g.depth_max)
-    return _finish(grading, level, ijk, depth, lattice.node_keys, lattice.depth, g.h0 * 2 ** (lmin + 1))
+    return _finish(grading, level, ijk, depth, lattice.node_grid, lattice.depth, g.h0 * 2 ** (lmin + 1))
 
 
-def _hanging_nodes(node_keys, level, ijk):
-    """(hanging (H,), parents (H, 2)) node indices: corners of finer cubes that lie on an edge midpoint or a face
-    centre of a coarser cube, and the two nodes whose mean each must equal."""
-    found_h, found_p = [], []
-    n = node_keys.size
-    for l in range(1, int(level.max(initial=0)) + 1):
-        sel = level == l
-        if not sel.any():
-            continue
-        base = ijk[sel] * (1 << l)
-        half = 1 << (l - 1)
-        for pairs in (EDGES, FACE_DIAGONALS):
-            for p, q in pairs:
-                mid = _pack(base + (CORNERS[p] + CORNERS[q]) * half)
-                pos = np.minimum(np.searchsorted(node_keys, mid), n - 1)
-                hit = node_keys[pos] == mid
-                if not hit.any():
+@numba.njit(cache=True, inline="always")
+def _grid_id(grid, glo, unit, x, y, z):
+    """The number of the lattice point (x, y, z) (units of h0) on the grid, -1 where it has none."""
+    if x % unit or y % unit or z % unit:
+        return -1
+    i, j, k = x // unit - glo[0], y // unit - glo[1], z // unit - glo[2]
+    if 0 <= i < grid.shape[0] and 0 <= j < grid.shape[1] and 0 <= k < grid.shape[2]:
+        return grid[i, j, k]
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _hanging_scan(grid, glo, unit, level, ijk, order, pairs, found, parents):
+    """found[n], parents[n] for every node n at the midpoint of corners ``pairs`` (k, 2) (edges, then face
+    diagonals) of a coarser cube, in the order: levels up, the pairs, cubes in ``order`` (the first met kept)."""
+    lmax = 0
+    for c in range(level.size):
+        lmax = max(lmax, level[c])
+    for l in range(1, lmax + 1):
+        s = 1 << l
+        half = s >> 1
+        for e in range(pairs.shape[0]):
+            p, q = pairs[e, 0], pairs[e, 1]
+            for t in range(order.size):
+                c = order[t]
+                if level[c] != l:
                     continue
-                pa = np.searchsorted(node_keys, _pack(base[hit] + CORNERS[p] * 2 * half))
-                pb = np.searchsorted(node_keys, _pack(base[hit] + CORNERS[q] * 2 * half))
-                found_h.append(pos[hit])
-                found_p.append(np.stack([pa, pb], axis=1))
-    if not found_h:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 2), dtype=np.int64)
-    h = np.concatenate(found_h)
-    p = np.concatenate(found_p)
-    h, first = np.unique(h, return_index=True)
-    return h, p[first]
+                bx, by, bz = ijk[c, 0] * s, ijk[c, 1] * s, ijk[c, 2] * s
+                mid = _grid_id(grid, glo, unit, bx + ((p & 1) + (q & 1)) * half,
+                               by + (((p >> 1) & 1) + ((q >> 1) & 1)) * half,
+                               bz + (((p >> 2) & 1) + ((q >> 2) & 1)) * half)
+                if mid < 0 or found[mid]:
+                    continue
+                found[mid] = True
+                parents[mid, 0] = _grid_id(grid, glo, unit, bx + (p & 1) * s, by + ((p >> 1) & 1) * s,
+                                           bz + ((p >> 2) & 1) * s)
+                parents[mid, 1] = _grid_id(grid, glo, unit, bx + (q & 1) * s, by + ((q >> 1) & 1) * s,
+                                           bz + ((q >> 2) & 1) * s)
+
+
+def _hanging_nodes(grid: NodeGrid, level, ijk):
+    """(hanging (H,), parents (H, 2)) node numbers: corners of finer cubes that lie on an edge midpoint or a face
+    centre of a coarser cube, and the two nodes whose mean each must equal."""
+    n = grid.coords.shape[0]
+    found = np.zeros(n, dtype=bool)
+    parents = np.zeros((n, 2), dtype=np.int64)
+    order = np.argsort(level, kind="stable")
+    _hanging_scan(grid.grid, grid.lo, grid.unit, level, ijk, order,
+                  np.concatenate([EDGES, FACE_DIAGONALS]).astype(np.int64), found, parents)
+    h = np.flatnonzero(found)
+    return h, parents[h]

@@ -17,7 +17,8 @@ and almost all of marble's.
 
 :func:`lattice_loads` puts each smoothed point source on the lattice's nodes (its P1 weights: the Galerkin load of
 a point) at the nodes of a 2 x 2 Gauss-Hermite rule in the tangent plane (exact for the Gaussian's moments up to
-degree 3), and gathers them onto the unknowns. Compiled loop; no I/O.
+degree 3), and gathers them onto the unknowns. Compiled loop over fixed ranges of entries on the worker threads;
+no I/O.
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ from numpy.polynomial.hermite_e import hermegauss
 from numpy.polynomial.laguerre import laggauss
 
 from meshshade.errors import MeshshadeError
+from meshshade.pacing import parallel_for
 from meshshade.volume.lattice import kuhn_weights
 
 __all__ = ["SOURCE_POINTS", "line_rule", "ewald_weight", "lattice_loads", "SIDEWAYS_POINTS"]
@@ -37,6 +39,8 @@ __all__ = ["SOURCE_POINTS", "line_rule", "ewald_weight", "lattice_loads", "SIDEW
 SOURCE_POINTS = 6
 #: points per axis of the Gauss-Hermite rule of the sideways Gaussian
 SIDEWAYS_POINTS = 2
+#: the entries are loaded in this many fixed ranges, each into its own array (on the worker threads)
+LOAD_BLOCKS = 8
 
 
 def line_rule(albedo_prime: float, n: int = SOURCE_POINTS):
@@ -116,13 +120,28 @@ def lattice_loads(lattice, positions, refracted, normals, power, depths_mm, stre
         raise MeshshadeError("source depths and strengths must have one shape")
     k = depths_mm.shape[0]
     out = np.zeros((lattice.n_nodes, k))
-    dropped = np.zeros(k)
     if spread_mm > 0:
         gx, gw = hermegauss(SIDEWAYS_POINTS)
         gw = gw / gw.sum()
     else:
         gx, gw = np.zeros(1), np.ones(1)
     args = [np.ascontiguousarray(a, dtype=np.float64) for a in (positions, refracted, normals, power)]
-    _loads(*args, depths_mm, strengths, gx, gw, float(spread_mm), float(lattice.grading.h0), lattice._index,
-           lattice._index_lo, lattice.level, lattice.ijk, lattice.cell_nodes, out, dropped, 0, args[0].shape[0])
+    n = args[0].shape[0]
+    # LOAD_BLOCKS fixed ranges of entries, each into its own nodal array, summed in order: the same loads for any
+    # number of threads
+    blocks = min(LOAD_BLOCKS, max(1, n // 4096))
+    edges = [round(i * n / blocks) for i in range(blocks + 1)]
+    outs = [out] + [np.zeros_like(out) for _ in range(blocks - 1)]
+    drops = np.zeros((blocks, k))
+
+    def run(a, b):
+        for i in range(a, b):
+            _loads(*args, depths_mm, strengths, gx, gw, float(spread_mm), float(lattice.grading.h0), lattice._index,
+                   lattice._index_lo, lattice.level, lattice.ijk, lattice.cell_nodes, outs[i], drops[i], edges[i],
+                   edges[i + 1])
+
+    parallel_for(run, blocks, min_block=1)
+    for extra in outs[1:]:
+        out += extra
+    dropped = drops.sum(axis=0)
     return out, dropped

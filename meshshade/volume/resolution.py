@@ -2,7 +2,7 @@
 its grading with depth and the sources' sideways spread.
 
 The finest spacing h0 is set by the material: the channel that decays fastest (kappa = sqrt(sigma_a / D),
-d'Eon's D) is resolved at kappa h0 = RESOLVED_KAPPA_H (skin1's blue: h0 = 0.79 mm; marble's: 4 mm). On
+d'Eon's D: the material's :class:`~meshshade.medium.Medium`) is resolved at kappa h0 = RESOLVED_KAPPA_H (skin1's blue: h0 = 0.79 mm; marble's: 4 mm). On
 curved or small objects that is capped by the object (no coarser than its smallest extent over MIN_CELLS_ACROSS),
 and on large ones raised so that the finest level holds at most ``budget`` cubes (the bake stays affordable; the
 cost it saves and the accuracy it costs are in docs/benchmarks.md). h0 is rounded to the world lattice of
@@ -20,10 +20,9 @@ import math
 import numpy as np
 
 from meshshade.errors import MeshshadeError, NoVolumeError, ParameterError
-from meshshade.kernels.beam_diffusion import dipole_variant
 from meshshade.volume.lattice import Grading
 
-__all__ = ["VolumeResolution", "volume_resolution", "diffusion_constants", "DEFAULT_BUDGET", "RESOLVED_KAPPA_H"]
+__all__ = ["VolumeResolution", "volume_resolution", "DEFAULT_BUDGET", "RESOLVED_KAPPA_H"]
 
 #: kappa h0 of the fastest-decaying channel (1-D cut-cell study: 1-2 % at 1, 5 % at 1.6)
 RESOLVED_KAPPA_H = 1.0
@@ -47,13 +46,6 @@ LEVELS = 7
 #: fastest-decaying channel (2 would save 5-10 % of the 141k head's time at equal Monte Carlo errors, but the sun-lit
 #: ball's terminator reads 15.6 % off at worst instead of 10.7 %: tests/volume/test_volume_sun_ball.py)
 REFINE_EFOLDS = 3.0
-
-
-def diffusion_constants(material, c: int) -> tuple[float, float, float]:
-    """(D mm, sigma_a 1/mm, A) of channel ``c`` in d'Eon's diffusion theory (eq. (74)), the volume's."""
-    s = float(material.sigma_t_prime[c])
-    v = dipole_variant(float(material.albedo_prime[c]), float(material.eta), "better")
-    return v.D / s, float(material.sigma_a[c]), v.z_b / (2.0 * v.D)
 
 
 class VolumeResolution:
@@ -93,7 +85,7 @@ def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None 
                       budget: int = DEFAULT_BUDGET) -> VolumeResolution:
     """The resolution for ``material`` on a surface of ``area_mm2`` whose bounding box is ``extent_mm`` (3,);
     ``h0`` forces the finest spacing (mm), ``budget`` caps the level-0 cubes (module docstring)."""
-    kappa = np.array([math.sqrt(sa / D) for D, sa, _ in (diffusion_constants(material, c) for c in range(3))])
+    kappa = np.array(material.medium.kappa, dtype=np.float64)
     if h0 is not None:
         if not (isinstance(h0, (int, float)) and math.isfinite(h0) and h0 > 0):
             raise ParameterError(f"the volume's lattice spacing must be a positive number of mm, got {h0!r}")

@@ -5,17 +5,21 @@ Where light enters and where exitance is read are points of the surface, not onl
 asset (edges of several millimetres on skin) is sampled on its facets, split where they are long (edges halved in
 rounds until every edge is within ``spacing``; a triangle with one, two or three halved edges becomes two, three
 or four; the split is conforming and nothing is moved: the same polyhedron). New vertices take the facets' own
-normals (so light enters each flat facet at the facet's angle, as it does in the Monte Carlo), and the exitance at
-an input vertex is the average over its patch weighted by its hat function (the barycentric weight the Monte
-Carlo tallies with):
+normals (so light enters each flat facet at the facet's angle, as it does in the Monte Carlo).
+
+The exitance is one field, P1 on the split surface, and every output reads its point values: the input's vertices
+are the split surface's first vertices, so a vertex takes the solution there (:meth:`SamplingSurface.to_vertices`),
+and a texel or a pixel takes it at its own point (:meth:`SamplingSurface.locate`). The Monte Carlo tallies
+something else, the average over a vertex's patch weighted by its hat function (the barycentric weight of each exit
+point); the same average of the field, for comparing with it, is eq. (104) (:meth:`SamplingSurface.patch_average`):
 
     M_v = int w_v M dA / int w_v dA,   w_v = the P1 basis function of v on the input mesh,                (104)
 
-integrated exactly over the split triangles with M linear on each. Where no edge is split the samples are the
-vertices and (104) is the identity.
+integrated exactly over the split triangles with M linear on each.
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
@@ -41,14 +45,14 @@ def split_long_edges(vertices, faces, spacing: float, *, max_vertices: int = MAX
     bary = np.broadcast_to(np.eye(3), (F.shape[0], 3, 3)).copy()
     complete = True
     for _ in range(MAX_ROUNDS):
-        e = np.concatenate([F[:, [1, 2]], F[:, [2, 0]], F[:, [0, 1]]])        # edge k of a face: opposite corner k
-        lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
-        key = lo * np.int64(V.shape[0]) + hi
-        length = np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1)
-        long_ = length > spacing
-        if not long_.any():
+        long_ = np.empty(3 * F.shape[0], dtype=bool)                   # edge k of face f at k nf + f: opposite k
+        if not _long_edges(V, F, float(spacing), long_):
             break
-        ukeys, inv = np.unique(key[long_], return_inverse=True)
+        which = np.flatnonzero(long_)
+        k, f = which // F.shape[0], which % F.shape[0]
+        a, b = F[f, (k + 1) % 3], F[f, (k + 2) % 3]
+        key = np.minimum(a, b) * np.int64(V.shape[0]) + np.maximum(a, b)
+        ukeys, inv = np.unique(key, return_inverse=True)
         if V.shape[0] + ukeys.size > max_vertices:
             complete = False
             break
@@ -61,6 +65,22 @@ def split_long_edges(vertices, faces, spacing: float, *, max_vertices: int = MAX
         split = split.reshape(3, nf).T                                           # (f, k): midpoint opposite k
         F, origin, bary = _subdivide(F, origin, bary, split)
     return V, F, origin, bary, complete
+
+
+@numba.njit(cache=True, nogil=True)
+def _long_edges(V, F, spacing, out):
+    """out[k nf + f] = whether edge k of face f (opposite corner k) is longer than ``spacing``; whether any is."""
+    nf = F.shape[0]
+    any_long = False
+    s2 = spacing * spacing
+    for k in range(3):
+        for f in range(nf):
+            a, b = F[f, (k + 1) % 3], F[f, (k + 2) % 3]
+            dx, dy, dz = V[a, 0] - V[b, 0], V[a, 1] - V[b, 1], V[a, 2] - V[b, 2]
+            long_ = dx * dx + dy * dy + dz * dz > s2
+            out[k * nf + f] = long_
+            any_long |= long_
+    return any_long
 
 
 def _subdivide(F, origin, bary, split):
@@ -104,7 +124,8 @@ def _subdivide(F, origin, bary, split):
 
 class SamplingSurface:
     """``mesh`` sampled at ``spacing`` mm (module docstring): ``samples`` (a :class:`Mesh`: the input itself when
-    no edge is longer than ``spacing``), :meth:`to_vertices` eq. (104); ``complete``: False if
+    no edge is longer than ``spacing``; the input's vertices first, in order), :meth:`to_vertices` the field at the
+    input's vertices, :meth:`locate` at any point, :meth:`patch_average` eq. (104); ``complete``: False if
     :data:`MAX_SAMPLES` stopped the splitting."""
 
     def __init__(self, mesh, spacing: float):
@@ -112,24 +133,30 @@ class SamplingSurface:
         self.spacing = float(spacing)
         V, F, origin, bary, self.complete = split_long_edges(mesh.vertices, mesh.faces, self.spacing)
         self._origin, self._bary = origin, bary
+        self._W = None                                                    # eq. (104)'s weights, made when asked
         if F.shape[0] == mesh.n_faces:
             self.samples = mesh
-            self._W = None
             return
         report = MeshReport(n_vertices=int(V.shape[0]), n_faces=int(F.shape[0]), faces=F)
         self.samples = Mesh(V, F, mm_per_unit=mesh.mm_per_unit, source=mesh.source, defects=report)
-        self._W = _hat_weights(mesh, self.samples, origin, bary)
 
     @property
     def split(self) -> bool:
-        return self._W is not None
+        return self.samples is not self.source
 
     def to_vertices(self, values):
-        """(n_vertices, k) eq. (104) of ``values`` (n_samples, k) at the samples."""
-        if self._W is None:
-            return np.asarray(values)
-        return self._W @ np.asarray(values)
+        """(n_vertices, k): the field of ``values`` (n_samples, k), P1 on the samples, at the input's vertices: the
+        first rows (the input's vertices are the samples' first vertices), the same point values a texel or a pixel
+        reads there through :meth:`locate`."""
+        return np.asarray(values)[:self.source.n_vertices]
 
+    def patch_average(self, values):
+        """(n_vertices, k) eq. (104) of ``values`` (n_samples, k), P1 on the samples: the hat-weighted average over
+        each input vertex's patch, what the Monte Carlo tallies at a vertex (also where nothing is split: then the
+        samples are the input's triangles, and the average of a P1 field is not its vertex value)."""
+        if self._W is None:
+            self._W = _hat_weights(self.source, self.samples, self._origin, self._bary)
+        return self._W @ np.asarray(values)
 
     def locate(self, face, bary):
         """(sub_face (k,), lam (k, 3)): the face of the sampling surface holding each point given by its input
@@ -137,7 +164,7 @@ class SamplingSurface:
         the input's facets: every point of an input face lies in one of its split faces)."""
         face = np.asarray(face, dtype=np.int64)
         bary = np.asarray(bary, dtype=np.float64)
-        if self._W is None or face.size == 0:
+        if not self.split or face.size == 0:
             return face, bary
         inv = getattr(self, "_inv", None)
         if inv is None:

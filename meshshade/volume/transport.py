@@ -17,7 +17,8 @@ exitance at the mesh's vertices:
     M = phi / (2A)                       [the lattice's solution for the smoothed line sources, eqs. (99)-(100)]
         + M_f                            [the near field less what the lattice carries, eqs. (102)-(103)]
 
-averaged over each vertex's patch (eq. (104)). Each stage is timed.
+at the sampling surface's vertices, P1 between them; a vertex of the mesh takes it at its own point (as texels and
+pixels do, :mod:`meshshade.volume.surface`). Each stage is timed.
 """
 from __future__ import annotations
 
@@ -35,8 +36,9 @@ from meshshade.volume.inside import SurfaceVolume
 from meshshade.volume.lattice import build_lattice
 from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
 from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
-from meshshade.volume.remainder import RemainderTables, remainder_exitance
-from meshshade.volume.resolution import DEFAULT_BUDGET, diffusion_constants, volume_resolution
+from meshshade.volume.remainder import RemainderTables, longest_edges, remainder_exitance
+from meshshade.volume.options import VolumeOptions
+from meshshade.volume.resolution import volume_resolution
 from meshshade.volume.surface import SamplingSurface
 
 __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0"]
@@ -66,11 +68,13 @@ class VolumeTransport:
         self.mesh, self.material, self.resolution = mesh, material, resolution
         self.surface, self.inside, self.tables = surface, inside, tables
         self.timings = timings
-        consts = [diffusion_constants(material, c) for c in range(3)]
-        self.A = np.array([c[2] for c in consts])
-        self.coef = np.array([(D, 1.0 / (2.0 * A), sa) for D, sa, A in consts])
+        m = material.medium   # d'Eon's D [mm], boundary mismatch A and sigma_a [1/mm] per channel (eq. (74))
+        self.A = np.array(m.A, dtype=np.float64)
+        self.coef = np.stack([m.D, 1.0 / (2.0 * m.A), m.sigma_a], axis=1)
         self._lattice_key = None
+        self._spacing = None          # each sampling vertex's longest edge (eq. (103)'s subtracted radius)
         self.on_stage = None          # called with each stage's name as it ends (progress), or None
+        self.options = VolumeOptions()   # the resolution's and the solve's (build sets the ones it was given)
         self.lattice = self.assembly = self.operator = self.multigrid = None
         self.buried = self._buried_vertices()
         self.stats = {
@@ -84,14 +88,17 @@ class VolumeTransport:
         }
 
     @classmethod
-    def build(cls, mesh, material, *, h0: float | None = None, budget: int = DEFAULT_BUDGET,
-              sample_spacing: float | None = None, on_stage=None):
-        """Sample ``mesh``, find its inside and tabulate the correction (module docstring); ``h0`` forces the
-        lattice's surface spacing (mm), ``budget`` caps its surface cubes (:mod:`meshshade.volume.resolution`);
+    def build(cls, mesh, material, options: VolumeOptions | None = None, *, sample_spacing: float | None = None,
+              on_stage=None):
+        """Sample ``mesh``, find its inside and tabulate the correction (module docstring); ``options``
+        (:class:`~meshshade.volume.options.VolumeOptions`, default ones for None): the lattice's surface spacing or
+        its budget of surface cubes (:mod:`meshshade.volume.resolution`) and the solve's tolerance;
         ``on_stage(name)`` is called as each stage ends (progress)."""
+        options = VolumeOptions() if options is None else options
         timings = {}
         t = time.perf_counter()
-        res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm, h0=h0, budget=budget)
+        res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm, h0=options.h0,
+                                budget=options.budget)
         surface = SamplingSurface(mesh, SAMPLE_SPACING_OVER_H0 * res.h0 if sample_spacing is None else sample_spacing)
         inside = SurfaceVolume(mesh.vertices, mesh.nondegenerate_faces, surface.samples.vertices,
                                surface.spacing)
@@ -101,6 +108,7 @@ class VolumeTransport:
         _lap(timings, "near-field tables", t, on_stage)
         vt = cls(mesh, material, res, surface, inside, tables, timings)
         vt.on_stage = on_stage
+        vt.options = options
         return vt
 
     def _buried_vertices(self):
@@ -113,7 +121,8 @@ class VolumeTransport:
         return self.inside.buried(mesh.vertices, mesh.vertex_normals, offset)
 
     def to_vertices(self, sample_values):
-        """(n, 3) eq. (104) of values at the sampling surface's vertices, 0 at buried vertices."""
+        """(n, 3) values at the sampling surface's vertices read at the mesh's vertices (the same points), 0 at
+        buried vertices."""
         out = np.array(self.surface.to_vertices(sample_values), dtype=np.float64)
         out[self.buried] = 0.0
         return out
@@ -172,14 +181,14 @@ class VolumeTransport:
 
     def exitance(self, samples):
         """(M (n, 3) W/mm^2 at the mesh's vertices, stats with ``timings``) for ``samples``, the lights' entry
-        samples on ``self.surface.samples``: eq. (104) of :meth:`sample_exitance`."""
+        samples on ``self.surface.samples``: :meth:`sample_exitance` at the mesh's vertices."""
         Ms, stats = self.sample_exitance(samples)
         return self.to_vertices(Ms), stats
 
     def sample_exitance(self, samples):
         """(M (n_s, 3) W/mm^2 at the sampling surface's vertices, stats with ``timings``): the solution itself,
-        P1 on the sampling surface, which textures and per-pixel renders interpolate
-        (:meth:`meshshade.volume.surface.SamplingSurface.locate`)."""
+        P1 on the sampling surface: the mesh's vertices read it at their points (:meth:`to_vertices`), textures and
+        per-pixel renders between them (:meth:`meshshade.volume.surface.SamplingSurface.locate`)."""
         mat, surf = self.material, self.surface.samples
         stats = {}
         if len(samples) == 0:
@@ -200,12 +209,13 @@ class VolumeTransport:
         _lap(timings, "volume sources", t, on_stage)
         t = time.perf_counter()
         with kernel_interrupts():
-            x, its = solve_channels(self.operator, self.multigrid, b)
+            x, its = solve_channels(self.operator, self.multigrid, b, rtol=self.options.solve_rtol)
         phi = self.assembly.to_nodes(x)
         M, outside = self._read(phi, surf.vertices, surf.vertex_normals)
         _lap(timings, "volume solve", t, on_stage)
         t = time.perf_counter()
-        Mf, pairs = remainder_exitance(self.tables, *self._remainder_inputs(samples, cos_t))
+        Mf, pairs = remainder_exitance(self.tables, *self._remainder_inputs(samples, cos_t),
+                                       spacing_mm=self._mean_spacing())
         M += Mf
         _lap(timings, "near field", t, on_stage)
         if not np.all(np.isfinite(M)):
@@ -274,6 +284,12 @@ class VolumeTransport:
         M = np.einsum("pk,pkc->pc", bary, phi[nodes]) / (2.0 * self.A[None, :])
         return M, int(np.sum(cells < 0))
 
+    def _mean_spacing(self) -> float:
+        """The sampling surface's mean edge (mm) as a regular triangulation of its area and faces would have it,
+        sqrt(4 area / (sqrt 3 faces)): the scale of the near field's local reach (no pass over the edges)."""
+        surf = self.surface.samples
+        return math.sqrt(4.0 * float(surf.total_area) / (math.sqrt(3.0) * max(1, surf.n_faces)))
+
     def _remainder_inputs(self, samples, cos_t):
         """The entries and receivers of eq. (103) on the sampling surface: one entry per sampling vertex (every
         one, lit or not: the subtraction needs the whole neighbourhood) with the power of all lights entering
@@ -294,6 +310,8 @@ class VolumeTransport:
                "area": np.concatenate([area, np.zeros(int(pt.sum()))]),
                "cos_t": np.concatenate([cos_v, cos_t[pt]]),
                "light": np.zeros(nv + int(pt.sum()), dtype=np.int64)}
+        if self._spacing is None:
+            self._spacing = longest_edges(surf.vertices, surf.faces)
         rec = {"pos": surf.vertices, "normal": surf.vertex_normals, "radius": np.sqrt(area / math.pi),
-               "E": E[:, None], "cos_t": cos_v[:, None]}
+               "E": E[:, None], "cos_t": cos_v[:, None], "spacing": self._spacing}
         return src, rec

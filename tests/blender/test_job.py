@@ -18,7 +18,7 @@ from meshshade.geometry.procedural import icosphere
 from meshshade.light import BeamLight, DirectionalLight, PointLight, parse_light_spec
 from meshshade.light.sources import Spot
 from meshshade.materials import Material
-from meshshade.transport import bake
+from meshshade.transport import BakeOptions, SurfaceOptions, bake
 
 
 @pytest.mark.parametrize("light", [DirectionalLight((0.1, 0.2, -1.0), 1.234567890123e-3),
@@ -46,7 +46,8 @@ def test_job_equals_the_python_api_weighted_by_colour():
     seen = []
     radiance = job.wait(on_progress=lambda f, m: seen.append((f, m)), interval=0.02)
     mesh = Mesh.from_arrays(V, F)
-    expected = sum(c * bake(mesh, Material.preset("marble"), lights, model="dipole", transport="direct").radiance
+    expected = sum(c * bake(mesh, Material.preset("marble"), lights, BakeOptions(
+        model="dipole", surface=SurfaceOptions(transport="direct"))).radiance
                    for c, lights in groups)
     np.testing.assert_allclose(radiance, expected, rtol=1e-12, atol=0)
     assert job.fraction == 1.0 and job._dir is None            # the scratch folder is gone
@@ -60,7 +61,8 @@ def test_custom_coefficients_are_passed_exactly():
                             model="dipole", transport="direct")
     radiance = BakeJob(V, F, groups[:1], settings).wait()
     expected = groups[0][0] * bake(Mesh.from_arrays(V, F), Material((1.1, 0.9, 0.7), (0.011, 0.02, 1 / 30), 1.41),
-                                   groups[0][1], model="dipole", transport="direct").radiance
+                                   groups[0][1], BakeOptions(
+                                       model="dipole", surface=SurfaceOptions(transport="direct"))).radiance
     np.testing.assert_allclose(radiance, expected, rtol=1e-12)
 
 

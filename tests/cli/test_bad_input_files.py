@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from meshshade.transport.models import DEFAULT_MODEL
+from meshshade.names import DEFAULT_MODEL
 from meshshade.geometry.procedural import icosphere
 from meshshade.io import read_baked_ply, read_exr, write_ply
 

@@ -20,12 +20,14 @@ from meshshade.geometry.procedural import icosphere
 from meshshade.io import write_ply
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
+from meshshade.montecarlo import MCOptions
 from meshshade.montecarlo.simulation import check_mc_options, simulate
 from meshshade.output import compare as cmp_mod
-from meshshade.output.compare import run_comparison
+from meshshade.output.compare import CompareOptions, run_comparison
 from meshshade.output.render import auto_camera, check_image_size, render_radiance
 from meshshade.output.tonemap import drago_tonemap, tonemap
 from meshshade.profiles import Shape, profile_distances, profile_rows, reflectance_profile
+from meshshade.transport import BakeOptions, SurfaceOptions
 from meshshade.transport.baking import bake
 
 SKIN = ["--material", "skin1"]
@@ -287,7 +289,7 @@ def test_api_mc_refuses_before_any_work(sphere_mesh, monkeypatch):
 
     monkeypatch.setattr(sim, "make_scene", lambda *a, **k: pytest.fail("work started"))
     with pytest.raises(MeshshadeError, match="time_budget"):
-        simulate(sphere_mesh, Material(1.0, 0.01), [BeamLight((0, 0, 40), (0, 0, -1))], time_budget=np.nan)
+        simulate(sphere_mesh, Material(1.0, 0.01), [BeamLight((0, 0, 40), (0, 0, -1))], MCOptions(time_budget=np.nan))
     assert check_mc_options(1e5, seed=3.0) == (100_000, 3, None, 16, None)   # integral floats are counts
     assert check_mc_options(10 ** 14, time_budget=2.0)[0] == 10 ** 14        # a budget bounds any count
 
@@ -303,19 +305,33 @@ def test_api_image_size(sphere_mesh, size, needle):
         render_radiance(sphere_mesh, np.zeros((sphere_mesh.n_vertices, 3)), auto_camera(sphere_mesh), *size)
 
 
-@pytest.mark.parametrize("kwargs,needle", [
-    (dict(floor=np.nan), "floor"), (dict(floor=0.0), "floor"), (dict(floor=1.0), "floor"),
-    (dict(models=("curved",)), "exactly two"), (dict(models=("curved", "curved")), "different"),
-    (dict(models=("curved", "nope")), "nope"), (dict(models=("mc", "dipole"), mc_photons=0), "photons"),
-    (dict(models=("mc", "dipole"), seed=-1), "seed"), (dict(width=0), "width"), (dict(spp=1.5), "spp"),
-    (dict(cutoff_tol=np.nan), "cutoff"), (dict(geodesic="straight"), "geodesic"), (dict(camera="auto"), "Camera"),
+def _image(**kw):
+    return CompareOptions(**{"width": 8, "height": 8, "spp": 1, **kw})
+
+
+@pytest.mark.parametrize("call,needle", [
+    (lambda r: r(options=_image(floor=np.nan)), "floor"), (lambda r: r(options=_image(floor=0.0)), "floor"),
+    (lambda r: r(options=_image(floor=1.0)), "floor"), (lambda r: r(models=("curved",)), "exactly two"),
+    (lambda r: r(models=("curved", "curved")), "different"), (lambda r: r(models=("curved", "nope")), "nope"),
+    (lambda r: r(models=("mc", "dipole"), mc=MCOptions(photons=0)), "photons"),
+    (lambda r: r(models=("mc", "dipole"), mc=MCOptions(seed=-1)), "seed"),
+    (lambda r: r(models=("mc", "dipole"), mc=MCOptions(photons=2 ** 61)), "photons"),   # the run's estimate
+    (lambda r: r(options=_image(width=0)), "width"), (lambda r: r(options=_image(spp=1.5)), "spp"),
+    (lambda r: r(surface=SurfaceOptions(cutoff_tol=np.nan)), "cutoff"),
+    (lambda r: r(surface=SurfaceOptions(geodesic="straight")), "geodesic"),
+    (lambda r: r(models=("volume", "dipole"), surface=SurfaceOptions(far_field="off")), "far-field"),
+    (lambda r: r(camera="auto"), "Camera"), (lambda r: r(surface={"geodesic": "arc"}), "SurfaceOptions"),
 ])
-def test_api_run_comparison_checks_everything_first(sphere_mesh, monkeypatch, kwargs, needle):
+def test_api_run_comparison_checks_everything_first(sphere_mesh, monkeypatch, call, needle):
     monkeypatch.setattr(cmp_mod, "bake", lambda *a, **k: pytest.fail("work started"))
     monkeypatch.setattr(cmp_mod, "simulate", lambda *a, **k: pytest.fail("work started"))
+
+    def run(**kw):
+        kw = {"models": ("curved", "dipole"), "options": _image(), **kw}
+        return run_comparison(sphere_mesh, Material(1.0, 0.01), [BeamLight((0, 0, 40), (0, 0, -1))], **kw)
+
     with pytest.raises(MeshshadeError, match=needle):
-        run_comparison(sphere_mesh, Material(1.0, 0.01), [BeamLight((0, 0, 40), (0, 0, -1))],
-                       **{"models": ("curved", "dipole"), "width": 8, "height": 8, "spp": 1, **kwargs})
+        call(run)
 
 
 @pytest.mark.parametrize("kwargs,needle", [
@@ -324,9 +340,10 @@ def test_api_run_comparison_checks_everything_first(sphere_mesh, monkeypatch, kw
     (dict(curvature_radius_mm=np.nan), "curvature radius"), (dict(backend="optix"), "backend"),
     (dict(far_geodesic="none"), "far_geodesic"),
 ])
-def test_api_bake_options(sphere_mesh, kwargs, needle):
+def test_api_bake_options(kwargs, needle):
+    """The options records refuse bad values where they are made (before any bake)."""
     with pytest.raises(MeshshadeError, match=needle):
-        bake(sphere_mesh, Material(1.0, 0.01), [BeamLight((0, 0, 40), (0, 0, -1))], **kwargs)
+        BakeOptions(**kwargs) if "backend" in kwargs else SurfaceOptions(**kwargs)
 
 
 def test_api_bake_and_mc_refuse_a_scene_without_light_that_reaches_it(sphere_mesh):
@@ -334,6 +351,6 @@ def test_api_bake_and_mc_refuse_a_scene_without_light_that_reaches_it(sphere_mes
     with pytest.raises(LightError, match="no light given"):
         bake(sphere_mesh, mat, [])
     with pytest.raises(LightError, match="at least one light"):
-        simulate(sphere_mesh, mat, [], photons=1000)
+        simulate(sphere_mesh, mat, [], MCOptions(photons=1000))
     with pytest.raises(MaterialError, match="Material"):
         bake(sphere_mesh, "skin1", [DirectionalLight((0, 0, -1))])

@@ -16,6 +16,7 @@ from meshshade.materials import Material
 from meshshade.montecarlo.simulation import check_mc_options
 from meshshade.montecarlo.walks import check_engine
 from meshshade.profiles import Shape, profile_rows, reflectance_profile
+from meshshade.transport import BakeOptions, SurfaceOptions
 from meshshade.transport.baking import check_bake_options
 
 WARNING = "meshshade: warning: --near-field is deprecated; use --source-model"
@@ -87,14 +88,19 @@ def test_the_old_api_keyword_warns_and_gives_the_same_profile():
 def test_former_option_values_of_the_bake_and_monte_carlo_warn_and_map():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert check_bake_options("dipole", far_field="pairwise", far_geodesic="shared", source_model="beam") == \
-            "pairwise"
+        options = BakeOptions(model="dipole", surface=SurfaceOptions(far_field="pairwise", far_geodesic="shared",
+                                                                     source_model="beam"))
+        assert options.far_field == "pairwise"
         assert check_engine("fused") == "fused"
     with pytest.warns(DeprecationWarning, match="far_field='direct' is deprecated; use far_field='pairwise'"):
-        assert check_bake_options("dipole", far_field="direct") == "pairwise"
+        assert SurfaceOptions(far_field="direct").far_field == "pairwise"
     with pytest.warns(DeprecationWarning, match="far_geodesic='cluster' is deprecated; use far_geodesic='shared'"):
-        check_bake_options("auto", far_geodesic="cluster")
-    with pytest.warns(DeprecationWarning, match="near_field="):
+        assert SurfaceOptions(far_geodesic="cluster").far_geodesic == "shared"
+    with pytest.raises(MeshshadeError, match="beam source model"):
+        BakeOptions(model="volume", surface=SurfaceOptions(source_model="point"))
+    with pytest.warns(DeprecationWarning, match="check_bake_options is deprecated"):   # the former checker
+        assert check_bake_options("dipole", far_field="direct") == "pairwise"
+    with pytest.warns(DeprecationWarning, match="check_bake_options is deprecated"):
         with pytest.raises(MeshshadeError, match="beam source model"):
             check_bake_options("volume", near_field="point")
     with pytest.warns(DeprecationWarning, match="engine='direct' is deprecated; use engine='fused'"):

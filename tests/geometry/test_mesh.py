@@ -10,6 +10,7 @@ import pytest
 from meshshade.errors import MeshValidationError
 from meshshade.geometry import procedural
 from meshshade.geometry.mesh import Mesh, MeshDefectWarning, face_normals, validate_mesh
+from meshshade.transport import BakeOptions
 
 
 def _quiet_validate(V, F):
@@ -328,5 +329,5 @@ def test_bake_with_an_unreferenced_vertex_raises_no_numpy_warning(sphere, model)
         mesh = Mesh(np.vstack([V, [[1e3, 0, 0]]]), F)
     with warnings.catch_warnings(), np.errstate(invalid="raise", divide="raise"):
         warnings.simplefilter("error", RuntimeWarning)
-        res = bake(mesh, Material.preset("skin1"), [DirectionalLight((0.0, 0.0, -1.0))], model=model)
+        res = bake(mesh, Material.preset("skin1"), [DirectionalLight((0.0, 0.0, -1.0))], BakeOptions(model=model))
     assert np.all(np.isfinite(res.radiance)) and np.all(res.radiance[-1] == 0.0)

@@ -16,8 +16,7 @@ from meshshade.geometry.procedural import icosphere
 from meshshade.io import read_baked_ply, write_ply
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
-from meshshade.montecarlo import beam_radial_power, simulate
-from meshshade.montecarlo import distributed
+from meshshade.montecarlo import MCOptions, beam_radial_power, distributed, simulate
 from meshshade.montecarlo.engine import ENTRY_CHUNK
 from meshshade.montecarlo.walks import prepare_walks, walk_group
 
@@ -62,9 +61,9 @@ def test_chunk_ranges_of_one_run_add_up_to_the_whole_run():
 
 @pytest.mark.parametrize("material", [SKIN, GREY], ids=["skin1", "grey"])
 def test_two_workers_equal_one_worker_bitwise_and_one_process_to_rounding(material, dask_client, one_worker):
-    local = simulate(MESH, material, SUN, photons=PHOTONS, seed=11)
-    two = simulate(MESH, material, SUN, photons=PHOTONS, seed=11, client=dask_client)
-    one = simulate(MESH, material, SUN, photons=PHOTONS, seed=11, client=one_worker)
+    local = simulate(MESH, material, SUN, MCOptions(photons=PHOTONS, seed=11))
+    two = simulate(MESH, material, SUN, MCOptions(photons=PHOTONS, seed=11), client=dask_client)
+    one = simulate(MESH, material, SUN, MCOptions(photons=PHOTONS, seed=11), client=one_worker)
     for a in ("face_power", "face_power_stderr", "vertex_power", "radiance", "radiance_stderr", "lost"):
         assert np.array_equal(getattr(one, a), getattr(two, a)), a
     for k in one.totals:
@@ -77,8 +76,8 @@ def test_two_workers_equal_one_worker_bitwise_and_one_process_to_rounding(materi
 
 
 def test_beam_exits_give_the_same_radial_profile(dask_client):
-    local = simulate(MESH, GREY, BEAM, photons=PHOTONS, seed=2)
-    split = simulate(MESH, GREY, BEAM, photons=PHOTONS, seed=2, client=dask_client)
+    local = simulate(MESH, GREY, BEAM, MCOptions(photons=PHOTONS, seed=2))
+    split = simulate(MESH, GREY, BEAM, MCOptions(photons=PHOTONS, seed=2), client=dask_client)
     edges = np.linspace(0.0, 10.0, 21)
     (pa, sa), (pb, sb) = beam_radial_power(local, MESH, edges), beam_radial_power(split, MESH, edges)
     assert pa[0].sum() > 0
@@ -90,16 +89,16 @@ def test_beam_exits_give_the_same_radial_profile(dask_client):
 def test_each_worker_builds_the_walk_set_up_once(dask_client):
     dask_client.run(lambda: distributed._SETUPS.clear())
     for seed in (1, 2):
-        simulate(MESH, GREY, SUN, photons=PHOTONS, seed=seed, client=dask_client)
+        simulate(MESH, GREY, SUN, MCOptions(photons=PHOTONS, seed=seed), client=dask_client)
     sizes = dask_client.run(lambda: len(distributed._SETUPS))
     assert set(sizes.values()) <= {1}        # one set-up per worker for both runs (a worker may have had no task)
 
 
 def test_what_cannot_be_split_is_refused(dask_client):
     with pytest.raises(MeshshadeError, match="time budget"):
-        simulate(MESH, GREY, SUN, photons=None, time_budget=1.0, client=dask_client)
+        simulate(MESH, GREY, SUN, MCOptions(photons=None, time_budget=1.0), client=dask_client)
     with pytest.raises(MeshshadeError, match="fast_interior"):
-        simulate(MESH, GREY, SUN, photons=1000, fast_interior=False, client=dask_client)
+        simulate(MESH, GREY, SUN, MCOptions(photons=1000, fast_interior=False), client=dask_client)
 
 
 def test_mc_command_with_workers_writes_what_mc_writes(tmp_path, capsys, monkeypatch):

@@ -27,7 +27,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.light import AreaLight, EnvironmentLight, entry_samples
 from meshshade.materials import Material
-from meshshade.montecarlo import TOTAL_KEYS, simulate
+from meshshade.montecarlo import MCOptions, TOTAL_KEYS, simulate
 from meshshade.montecarlo.emitter import Emitter
 from meshshade.raycast import make_scene
 
@@ -121,9 +121,9 @@ def test_simulate_under_a_sky_and_an_area_light_is_balanced_and_reproducible():
     Y = np.ones((8, 16))
     Y[2, 3] = 30.0
     lights = [EnvironmentLight(Y), AreaLight((0, 0, 15.0), (0, 0, -1.0), "rect", (6.0, 4.0), power=0.5)]
-    a = simulate(mesh, mat, lights, photons=4000, seed=5, beam_distances=False)
-    b = simulate(mesh, mat, lights, photons=4000, seed=5, beam_distances=False)
-    c = simulate(mesh, mat, lights, photons=4000, seed=6, beam_distances=False)
+    a = simulate(mesh, mat, lights, MCOptions(photons=4000, seed=5, beam_distances=False))
+    b = simulate(mesh, mat, lights, MCOptions(photons=4000, seed=5, beam_distances=False))
+    c = simulate(mesh, mat, lights, MCOptions(photons=4000, seed=6, beam_distances=False))
     total = sum(a.totals[k] for k in TOTAL_KEYS) + a.lost
     np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(a.radiance, b.radiance)

@@ -20,7 +20,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.light import BeamLight
 from meshshade.materials import Material
-from meshshade.montecarlo import beam_radial_power, simulate
+from meshshade.montecarlo import MCOptions, beam_radial_power, simulate
 from meshshade.montecarlo.shapes import shape_mc_profile
 
 
@@ -38,7 +38,7 @@ def test_beam_rings_near_the_entry_point_match_the_exact_sphere(photons):
     edges = np.unique(np.concatenate([lo, hi]))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = simulate(mesh, m, [BeamLight((0, 0, 2 * R + 1), (0, 0, -1.0))], photons=photons, seed=5)
+        res = simulate(mesh, m, [BeamLight((0, 0, 2 * R + 1), (0, 0, -1.0))], MCOptions(photons=photons, seed=5))
     power, stderr = beam_radial_power(res, mesh, edges)
     ref = shape_mc_profile(m, s, shape="sphere", radius_mm=R, photons=photons, seed=6)
     for j in range(s.size):

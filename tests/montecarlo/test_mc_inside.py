@@ -28,8 +28,8 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import box, icosphere, uv_sphere
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
-from meshshade.montecarlo import simulate
-from meshshade.montecarlo.boundary import (BOUNDARY, REVERSED, TRANSPARENT, WalkSurface, coincident_faces,
+from meshshade.montecarlo import MCOptions, simulate
+from meshshade.montecarlo.boundary import (BOUNDARY, REVERSED, TRANSPARENT, coincident_faces,
                                            face_sides, walk_surface, welded_ids)
 
 SKIN = Material.preset("skin1")
@@ -45,11 +45,11 @@ def _mesh(V, F):
         return Mesh.from_arrays(V, F)
 
 
-def _run(mesh, photons, surface=None, seed=5, lights=(SUN,)):
+def _run(mesh, photons, inside="winding", seed=5, lights=(SUN,)):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return simulate(mesh, SKIN, list(lights), photons=photons, seed=seed, beam_distances=False,
-                        surface=surface)
+        return simulate(mesh, SKIN, list(lights), MCOptions(photons=photons, seed=seed, beam_distances=False,
+                                                             inside=inside))
 
 
 def _balance(res):
@@ -124,7 +124,7 @@ def test_a_closed_mesh_gives_what_its_faces_gave():
     """Bitwise the walk of the faces alone (the walk before issue 47)."""
     mesh = _mesh(*icosphere(20.0, 3))
     a = _run(mesh, 20_000)
-    b = _run(mesh, 20_000, surface=WalkSurface.of_faces(mesh))
+    b = _run(mesh, 20_000, inside="faces")
     assert np.array_equal(a.radiance, b.radiance) and np.array_equal(a.face_power, b.face_power)
     for key in a.totals:
         assert np.array_equal(a.totals[key], b.totals[key]), key
@@ -281,7 +281,7 @@ def test_across_a_planar_rim_the_lid_is_the_flat_disc():
 def test_a_sphere_with_holes_shines_as_the_closed_sphere():
     """The sun on a 20 mm sphere with three 3 mm holes on its lit side (bench_open_scan_mc): its totals, and the
     exitance 0.5-5 mm from the rims, are the closed sphere's within 4 sigma (here within 1.6). The walk of the faces
-    alone (a photon walks out through a hole: ``WalkSurface.of_faces``, or lids left out) fails both: at 1e5
+    alone (a photon walks out through a hole: ``MCOptions(inside="faces")``, or lids left out) fails both: at 1e5
     photons red's diffuse reflectance 3.1 % low (9 sigma), the band's exitance 6.1 % low (6 sigma)."""
     V, F, d = bench.sphere_with_holes()
     closed, holed = _mesh(V, F), _mesh(d.vertices, d.faces)

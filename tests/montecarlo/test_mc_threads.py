@@ -26,7 +26,7 @@ from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.light import AreaLight, BeamLight, DirectionalLight, EnvironmentLight, PointLight
 from meshshade.light.sources import Spot
 from meshshade.materials import Material
-from meshshade.montecarlo import engine, simulate
+from meshshade.montecarlo import MCOptions, engine, simulate
 from meshshade.montecarlo.emission import EmitterKernel, emission_base, fresnel_in, spot_falloff
 from meshshade.montecarlo.emitter import Emitter
 from meshshade.raycast import make_scene
@@ -163,7 +163,7 @@ def test_budget_is_not_starved_by_a_slow_first_round(monkeypatch, mc_work_clock)
     throughput was estimated from that round and emission stopped after the first BUDGET_START_LIVE photons
     (the red channel of a 16-thread run that returned a handful of photons, issue 30)."""
     mesh, mat, lights = _long_lived()
-    simulate(mesh, mat, lights, photons=200, beam_distances=False)   # compile / load the kernels
+    simulate(mesh, mat, lights, MCOptions(photons=200, beam_distances=False))   # compile / load the kernels
     clock = mc_work_clock()
     real = engine.PoolWalk._round
     calls = {"n": 0}
@@ -176,7 +176,7 @@ def test_budget_is_not_starved_by_a_slow_first_round(monkeypatch, mc_work_clock)
         return real(self, st, steps)
 
     monkeypatch.setattr(engine.PoolWalk, "_round", slow_first)
-    r = simulate(mesh, mat, lights, photons=None, time_budget=budget, beam_distances=False)
+    r = simulate(mesh, mat, lights, MCOptions(photons=None, time_budget=budget, beam_distances=False))
     # at ~1e3 steps per photon and 1e7 steps/s of work clock the budget holds ~3e4 photons; 0.75 of it is left
     assert r.photons > 4 * engine.BUDGET_START_LIVE, r.photons
     assert np.all(r.lost == 0.0)
@@ -190,7 +190,7 @@ def test_a_group_that_overran_leaves_the_next_ones_photons(monkeypatch, mc_work_
     mesh = Mesh.from_arrays(*icosphere(3.0, 2))
     mat = Material((10.0, 3.0, 1.0), (1e-4, 0.05, 0.5), eta=1.4)
     beam = BeamLight((0.01, 0.02, 10.0), (0, 0, -1))
-    simulate(mesh, mat, [beam], photons=200, beam_distances=False)
+    simulate(mesh, mat, [beam], MCOptions(photons=200, beam_distances=False))
     clock = mc_work_clock()
     real = engine.PoolWalk._round
     budget = 0.5
@@ -203,7 +203,7 @@ def test_a_group_that_overran_leaves_the_next_ones_photons(monkeypatch, mc_work_
         return real(self, st, steps)
 
     monkeypatch.setattr(engine.PoolWalk, "_round", first_round_of_group_0_overruns)
-    r = simulate(mesh, mat, [beam], photons=None, time_budget=budget, beam_distances=False)
+    r = simulate(mesh, mat, [beam], MCOptions(photons=None, time_budget=budget, beam_distances=False))
     assert np.all(r.photons_per_channel > 1000), r.photons_per_channel
 
 
@@ -214,9 +214,9 @@ def test_each_channel_is_normalised_by_its_own_photons(mc_work_clock):
     mesh = Mesh.from_arrays(*icosphere(3.0, 2))
     mat = Material((10.0, 3.0, 1.0), (1e-4, 0.05, 0.5), eta=1.4)
     beam = BeamLight((0.01, 0.02, 10.0), (0, 0, -1), power=2.0)
-    simulate(mesh, mat, [beam], photons=200, beam_distances=False)
+    simulate(mesh, mat, [beam], MCOptions(photons=200, beam_distances=False))
     mc_work_clock()
-    r = simulate(mesh, mat, [beam], photons=None, time_budget=1.0, beam_distances=False)
+    r = simulate(mesh, mat, [beam], MCOptions(photons=None, time_budget=1.0, beam_distances=False))
     per = r.photons_per_channel
     assert per.shape == (3,) and np.all(per > 0) and len(set(per.tolist())) == 3
     assert r.photons == per.min()

@@ -19,7 +19,7 @@ from meshshade.geometry.procedural import box, icosphere
 from meshshade.io import load_mesh, write_ply
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
-from meshshade.montecarlo import TOTAL_KEYS, mc_profile, simulate
+from meshshade.montecarlo import MCOptions, TOTAL_KEYS, mc_profile, simulate
 from meshshade.montecarlo.sampling import sample_hg_cos
 from meshshade.profiles import Shape, reflectance_profile
 
@@ -39,12 +39,12 @@ def _beam(z):
 
 def _slab(photons, seed=1):
     mesh = Mesh.from_arrays(*box((20.0, 20.0, 0.2)))
-    return simulate(mesh, Material(**SLAB), [_beam(1.0)], photons=photons, seed=seed, beam_distances=False)
+    return simulate(mesh, Material(**SLAB), [_beam(1.0)], MCOptions(photons=photons, seed=seed, beam_distances=False))
 
 
 def _semi(photons, seed=2):
     mesh = Mesh.from_arrays(*box((10.0, 10.0, 5.0)))
-    return simulate(mesh, Material(**SEMI), [_beam(10.0)], photons=photons, seed=seed, beam_distances=False)
+    return simulate(mesh, Material(**SEMI), [_beam(10.0)], MCOptions(photons=photons, seed=seed, beam_distances=False))
 
 
 def _close(t, key, ref, allowance=BOX_ALLOWANCE):
@@ -90,9 +90,9 @@ def test_simulate_energy_balance_and_determinism():
     mesh = Mesh.from_arrays(*icosphere(5.0, 2))
     mat = Material((1.0, 2.0, 0.5), (0.05, 0.1, 0.2), eta=1.4, g=0.5)
     lights = [DirectionalLight((0.2, -0.3, -1.0))]
-    a = simulate(mesh, mat, lights, photons=4000, seed=5, beam_distances=False)
-    b = simulate(mesh, mat, lights, photons=4000, seed=5, beam_distances=False)
-    c = simulate(mesh, mat, lights, photons=4000, seed=6, beam_distances=False)
+    a = simulate(mesh, mat, lights, MCOptions(photons=4000, seed=5, beam_distances=False))
+    b = simulate(mesh, mat, lights, MCOptions(photons=4000, seed=5, beam_distances=False))
+    c = simulate(mesh, mat, lights, MCOptions(photons=4000, seed=6, beam_distances=False))
     total = sum(a.totals[k] for k in TOTAL_KEYS) + a.lost
     np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-12)
     assert np.all(a.lost == 0.0)
@@ -193,8 +193,8 @@ def test_simulate_slab_matches_adding_doubling(mu_s, mu_a, g, n, d, side):
     ref = iad.Sample(a=mu_s / (mu_s + mu_a), b=(mu_s + mu_a) * d, g=g, n=n, n_above=1.0, n_below=1.0, quad_pts=16)
     R_ref, T_ref = (float(x) for x in ref.rt()[:2])
     mesh = Mesh.from_arrays(*box((side, side, d)))
-    r = simulate(mesh, Material(mu_s * (1 - g), mu_a, eta=n, g=g), [_beam(1.0 + d)], photons=200_000, seed=21,
-                 beam_distances=False)
+    r = simulate(mesh, Material(mu_s * (1 - g), mu_a, eta=n, g=g), [_beam(1.0 + d)], MCOptions(
+        photons=200_000, seed=21, beam_distances=False))
     t = r.totals
     R = t["specular_reflectance"][0] + t["diffuse_reflectance"][0]
     assert abs(R - R_ref) < 4 * t["diffuse_reflectance_stderr"][0] + 2e-3, (R, R_ref)

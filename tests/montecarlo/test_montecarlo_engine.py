@@ -19,7 +19,7 @@ from meshshade.geometry.procedural import box, icosphere
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.light import BeamLight, DirectionalLight, PointLight
 from meshshade.materials import Material
-from meshshade.montecarlo import TOTAL_KEYS, simulate
+from meshshade.montecarlo import MCOptions, TOTAL_KEYS, simulate
 from meshshade.montecarlo import engine
 from meshshade.montecarlo import interior as montecarlo_interior
 from meshshade.montecarlo import loops as K
@@ -101,27 +101,27 @@ def test_emitter_accepts_only_light_objects_outside_the_mesh():
              ([DirectionalLight((0, 0, -1)), PointLight((0.5, 0.0, 0.0))], "point light 1 .* is inside the mesh")]
     for lights, message in cases:
         with pytest.raises(LightError, match=message):
-            simulate(mesh, mat, lights, photons=16, beam_distances=False)
+            simulate(mesh, mat, lights, MCOptions(photons=16, beam_distances=False))
 
 
 # ------------------------------------------------------------------------------------------------ determinism
 def test_deterministic_for_seed_threads_and_pool():
     mesh, mat, lights = _sphere_scene()
     kw = dict(photons=20_000, seed=3, beam_distances=False)
-    a = simulate(mesh, mat, lights, **kw)
-    b = simulate(mesh, mat, lights, **kw)
+    a = simulate(mesh, mat, lights, MCOptions(**kw))
+    b = simulate(mesh, mat, lights, MCOptions(**kw))
     _assert_same(a, b)
-    c = simulate(mesh, mat, lights, **{**kw, "seed": 4})
+    c = simulate(mesh, mat, lights, MCOptions(**{**kw, "seed": 4}))
     assert not np.array_equal(a.radiance, c.radiance)
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        one = simulate(mesh, mat, lights, **kw)
+        one = simulate(mesh, mat, lights, MCOptions(**kw))
     finally:
         numba.set_num_threads(threads)
     _assert_same(a, one)                                     # bitwise, whatever the thread count
     # photon i's path does not depend on the pool: same events, same tallies up to the summation order
-    other = simulate(mesh, mat, lights, pool=3000, **kw)
+    other = simulate(mesh, mat, lights, MCOptions(pool=3000, **kw))
     assert (other.events, other.boundary_events, other.boundary_tests) == (a.events, a.boundary_events,
                                                                           a.boundary_tests)
     _assert_same(a, other, exact=False)
@@ -132,8 +132,8 @@ def test_batched_embreex_mode_walks_the_same_paths():
     """One embreex call per round (separate kernels, slow to compile) walks exactly the fused mode's paths."""
     mesh, mat, lights = _sphere_scene()
     kw = dict(photons=20_000, seed=3, beam_distances=False)
-    a = simulate(mesh, mat, lights, engine="fused", **kw)
-    b = simulate(mesh, mat, lights, engine="batched", **kw)
+    a = simulate(mesh, mat, lights, MCOptions(engine="fused", **kw))
+    b = simulate(mesh, mat, lights, MCOptions(engine="batched", **kw))
     assert (b.events, b.boundary_events, b.boundary_tests) == (a.events, a.boundary_events, a.boundary_tests)
     _assert_same(a, b, exact=False)
 
@@ -142,11 +142,11 @@ def test_batched_embreex_mode_walks_the_same_paths():
 def test_auto_engine_falls_back_to_batched(monkeypatch):
     mesh, mat, lights = _sphere_scene()
     kw = dict(photons=3000, seed=3, beam_distances=False)
-    a = simulate(mesh, mat, lights, engine="batched", **kw)
+    a = simulate(mesh, mat, lights, MCOptions(engine="batched", **kw))
     monkeypatch.setattr(montecarlo_embree, "_library", lambda: None)   # no bindable Embree library
-    _assert_same(a, simulate(mesh, mat, lights, engine="auto", **kw))
+    _assert_same(a, simulate(mesh, mat, lights, MCOptions(engine="auto", **kw)))
     with pytest.raises(MeshshadeError, match="fused"):
-        simulate(mesh, mat, lights, engine="fused", **kw)
+        simulate(mesh, mat, lights, MCOptions(engine="fused", **kw))
 
 
 def test_half_space_certificates_change_cost_not_paths(monkeypatch):
@@ -154,10 +154,10 @@ def test_half_space_certificates_change_cost_not_paths(monkeypatch):
     mesh = Mesh.from_arrays(*box((10.0, 10.0, 5.0)))
     args = (mesh, Material(9.0, 1.0, eta=1.5), [BeamLight((0.123, 0.0456, 10.0), (0.0, 0.0, -1.0))])
     kw = dict(photons=4000, seed=8, beam_distances=False)
-    with_planes = simulate(*args, **kw)
+    with_planes = simulate(*args, MCOptions(**kw))
     assert montecarlo_interior.PLANE_MAX_FACES >= 12                  # the box gets certificates ...
     monkeypatch.setattr(montecarlo_interior, "PLANE_MAX_FACES", 0)   # ... and here none
-    without = simulate(*args, **kw)
+    without = simulate(*args, MCOptions(**kw))
     assert (with_planes.events, with_planes.boundary_events) == (without.events, without.boundary_events)
     assert with_planes.boundary_tests < 0.7 * without.boundary_tests
     _assert_same(with_planes, without, exact=False)
@@ -168,7 +168,7 @@ def test_energy_balance_exact_with_point_beam_and_directional_lights():
     mesh, mat, _ = _sphere_scene()
     lights = [PointLight((0.0, 0.0, 12.0), 3.0), BeamLight((0.1, 0.2, 20.0), (0.0, 0.0, -1.0), 0.5),
               DirectionalLight((1.0, 0.0, 0.0), 0.2)]
-    r = simulate(mesh, mat, lights, photons=6000, seed=9, beam_distances=False)
+    r = simulate(mesh, mat, lights, MCOptions(photons=6000, seed=9, beam_distances=False))
     total = sum(r.totals[k] for k in TOTAL_KEYS) + r.lost
     np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-12)
     assert np.all(r.lost == 0.0)
@@ -188,10 +188,10 @@ def test_time_budget_overshoot_bounded(mc_work_clock):
     """Module docstring of the engine: the walk ends by the drain prediction before the budget (nothing lost),
     at the latest at budget (1 + HARD_OVERSHOOT) plus one round, on the walk's own clock."""
     mesh, mat, lights = _long_lived()
-    simulate(mesh, mat, lights, photons=200, beam_distances=False)   # compile / load the kernels
+    simulate(mesh, mat, lights, MCOptions(photons=200, beam_distances=False))   # compile / load the kernels
     clock = mc_work_clock()
     budget = 0.6
-    r = simulate(mesh, mat, lights, photons=None, time_budget=budget, beam_distances=False)
+    r = simulate(mesh, mat, lights, MCOptions(photons=None, time_budget=budget, beam_distances=False))
     assert r.photons > 100 and r.seconds == clock.t
     assert clock.t <= budget * (1 + engine.HARD_OVERSHOOT) + clock.longest_round, (clock.t, clock.longest_round)
     assert clock.longest_round <= 2 * engine.ROUND_FRACTION * budget   # rounds stay near ROUND_FRACTION budget
@@ -204,10 +204,10 @@ def test_time_budget_hard_cut_off_books_lost(monkeypatch, mc_work_clock):
     mesh, mat, lights = _long_lived()
     monkeypatch.setattr(engine, "DRAIN_SAFETY", 0.0)      # never stop emission early: force the hard limit
     monkeypatch.setattr(engine, "HARD_OVERSHOOT", 0.0)
-    simulate(mesh, mat, lights, photons=None, time_budget=0.05, beam_distances=False)   # compile cut_off
+    simulate(mesh, mat, lights, MCOptions(photons=None, time_budget=0.05, beam_distances=False))   # compile cut_off
     clock = mc_work_clock()
     budget = 0.3
-    r = simulate(mesh, mat, lights, photons=None, time_budget=budget, beam_distances=False)
+    r = simulate(mesh, mat, lights, MCOptions(photons=None, time_budget=budget, beam_distances=False))
     # cut off at the first check past the budget: within one round of it on the walk's own clock
     assert budget <= clock.t <= budget + clock.longest_round, (clock.t, clock.longest_round)
     assert r.lost[0] > 0.0
@@ -226,8 +226,8 @@ def _region_power(r, mesh):
 
 def test_pooled_engine_agrees_with_wavefront_baseline():
     mesh, mat, lights = _sphere_scene(level=3)
-    new = simulate(mesh, mat, lights, photons=24_000, seed=31, beam_distances=False)
-    old = simulate(mesh, mat, lights, photons=24_000, seed=32, beam_distances=False, fast_interior=False)
+    new = simulate(mesh, mat, lights, MCOptions(photons=24_000, seed=31, beam_distances=False))
+    old = simulate(mesh, mat, lights, MCOptions(photons=24_000, seed=32, beam_distances=False, fast_interior=False))
     z = []
     for key in ("specular_reflectance", "diffuse_reflectance", "transmittance"):
         se = np.hypot(new.totals[key + "_stderr"], old.totals[key + "_stderr"])

@@ -18,7 +18,7 @@ from meshshade.io import load_mesh, read_baked_ply, write_ply
 from meshshade.light import DirectionalLight
 from meshshade.output.bake_file import write_bake
 from meshshade.output.tonemap import srgb_encode
-from meshshade.transport import bake
+from meshshade.transport import BakeOptions, SurfaceOptions, bake
 
 pxr = pytest.importorskip("pxr", reason="usd-core is in the test extra")
 from pxr import Usd, UsdGeom  # noqa: E402
@@ -34,7 +34,8 @@ def baked(tmp_path_factory):
     F = F[rng.permutation(len(F))]                 # a face order no reader may "fix"
     write_ply(d / "ball_cm.ply", V, F)
     mesh = load_mesh(d / "ball_cm.ply", units="cm")
-    result = bake(mesh, Material.preset("marble"), LIGHTS, model="dipole", transport="direct")
+    result = bake(mesh, Material.preset("marble"), LIGHTS, BakeOptions(
+        model="dipole", surface=SurfaceOptions(transport="direct")))
     return d, mesh, result
 
 

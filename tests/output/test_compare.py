@@ -9,8 +9,9 @@ from meshshade.geometry import procedural
 from meshshade.geometry.mesh import Mesh
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
-from meshshade.montecarlo import simulate
-from meshshade.output.compare import compare_stats, relative_difference, run_comparison, split_image
+from meshshade.montecarlo import MCOptions, simulate
+from meshshade.output.compare import (CompareOptions, compare_stats, relative_difference, run_comparison,
+                                      split_image)
 
 
 def test_compare_stats_synthetic_pair():
@@ -75,13 +76,14 @@ def test_run_comparison_with_mc():
     V, F = procedural.icosphere(10.0, 2)
     mesh = Mesh.from_arrays(V, F)
     mat, lights = Material.preset("skin1"), [DirectionalLight((0, 0, -1))]
-    cmp = run_comparison(mesh, mat, lights, ("dipole", "mc"), width=24, height=24, spp=1, mc_photons=4000)
+    cmp = run_comparison(mesh, mat, lights, ("dipole", "mc"), CompareOptions(width=24, height=24, spp=1),
+                         mc=MCOptions(photons=4000))
     st = cmp["stats"]
     assert st["models"] == ["dipole", "mc"] and st["vertices"]["count"] > 0
     assert cmp["split"][0].shape == (24, 24, 3)
     # the "mc" model is simulate() with the comparison's seed (0): every exiting photon's power is in the image's
     # vertex radiance (exit power = incident x (diffuse reflectance + transmittance), exact bookkeeping)
-    mc = simulate(mesh, mat, lights, photons=4000, seed=0)
+    mc = simulate(mesh, mat, lights, MCOptions(photons=4000, seed=0))
     np.testing.assert_array_equal(cmp["bakes"][1].radiance, mc.radiance)
     t = mc.totals
     exit_mc = (t["diffuse_reflectance"] + t["transmittance"]) * mc.incident_power

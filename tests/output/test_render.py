@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from meshshade.transport.models import DEFAULT_MODEL
+from meshshade.names import DEFAULT_MODEL
 from meshshade import Material, io
 from meshshade.output import render
 from meshshade.cli.main import main
@@ -13,6 +13,7 @@ from meshshade.kernels.fresnel import fresnel_transmittance_entry
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.transport.baking import bake
+from meshshade.transport import BakeOptions
 
 
 def test_write_exr_round_trip(tmp_path):
@@ -46,7 +47,7 @@ def sphere_bake():
     V, F = procedural.icosphere(10.0, 4)
     mesh = Mesh.from_arrays(V, F)
     mat = Material(1.0, 0.01)
-    return mesh, mat, bake(mesh, mat, [BeamLight((0, 0, 30), (0, 0, -1))], model="exact-sphere")
+    return mesh, mat, bake(mesh, mat, [BeamLight((0, 0, 30), (0, 0, -1))], BakeOptions(model="exact-sphere"))
 
 
 @pytest.mark.parametrize("per_pixel, tol", [(True, 1e-2), (False, 5e-2)])
@@ -101,7 +102,7 @@ def test_cli_render(tmp_path):
 def test_pixel_gather_equals_bake_at_vertices():
     V, F = procedural.pebble(subdivisions=2)
     mesh = Mesh.from_arrays(V, F)
-    res = bake(mesh, Material.preset("skin1"), [DirectionalLight((0.3, -0.5, -1))], model="curved")
+    res = bake(mesh, Material.preset("skin1"), [DirectionalLight((0.3, -0.5, -1))], BakeOptions(model="curved"))
     g = render.PixelGather(mesh, res)
     f = np.array([np.flatnonzero((mesh.faces == v).any(1))[0] for v in range(mesh.n_vertices)])
     bary = (mesh.faces[f] == np.arange(mesh.n_vertices)[:, None]).astype(float)

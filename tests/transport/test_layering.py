@@ -1,5 +1,6 @@
-"""Import layering of the transport and output packages: meshshade imports at module top level only, and the
-dependency graph kernels <- geometry <- raycast <- light <- transport <- output <- bench/cli has no way back."""
+"""Import layering of the transports and the output: meshshade imports at module top level only, and the
+dependency graph kernels <- geometry <- raycast <- light <- (volume | surface) <- transport <- output <- bench/cli
+has no way back: the two transports know neither each other nor the bake that chooses between them."""
 import ast
 from pathlib import Path
 
@@ -9,7 +10,11 @@ import meshshade
 
 ROOT = Path(meshshade.__file__).parent
 #: packages a module of each package must not import (the layers above it)
-FORBIDDEN = {"transport": ("meshshade.output", "meshshade.bench", "meshshade.cli"),
+FORBIDDEN = {"volume": ("meshshade.surface", "meshshade.transport", "meshshade.output", "meshshade.bench",
+                        "meshshade.cli"),
+             "surface": ("meshshade.volume", "meshshade.transport", "meshshade.output", "meshshade.bench",
+                         "meshshade.cli"),
+             "transport": ("meshshade.output", "meshshade.bench", "meshshade.cli"),
              "output": ("meshshade.bench", "meshshade.cli")}
 
 

@@ -8,6 +8,7 @@ from meshshade.io import read_mesh_arrays
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.baking import bake
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 #: file -> realistic size of its largest extent in mm
 SIZES = {"spot.obj": 120.0, "blub.obj": 150.0, "bob.obj": 100.0, "hand.obj": 180.0, "boot.obj": 280.0,
@@ -22,7 +23,8 @@ def scaled(shared_meshes, name):
 
 def check_bake(mesh, material, geodesic="exact", *, min_ratio=2.0, min_sign=0.85):
     light = DirectionalLight((0.3, -0.6, -0.75), 1.0)
-    out = {m: bake(mesh, material, [light], model=m, geodesic=geodesic) for m in ("dipole", "curved")}
+    out = {m: bake(mesh, material, [light], BakeOptions(
+        model=m, surface=SurfaceOptions(geodesic=geodesic))) for m in ("dipole", "curved")}
     entering = out["dipole"].samples.power.sum()
     for model, res in out.items():
         assert np.all(np.isfinite(res.radiance)) and np.all(res.radiance >= 0), model

@@ -9,8 +9,9 @@ from meshshade.kernels.sphere import sphere_series_profile, sphere_total_reflect
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.baking import bake
-from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.patch_average import patch_average_factor
+from meshshade.surface.gather import cutoff_radii
+from meshshade.surface.patch_average import patch_average_factor
+from meshshade.transport import BakeOptions
 
 SKIN = Material(1.0, 0.01, 1.3, name="skin-like")  # the skin test case of docs/physics.md §11
 
@@ -44,7 +45,7 @@ def outside_entry_fan(mesh, result):
 def test_bake_exact_sphere_beam_matches_series(R, level):
     mesh = sphere_mesh(R, level)
     beam = BeamLight((0.3, 0.2, 3 * R), (0, 0, -1))  # off-vertex entry near the pole
-    res = bake(mesh, SKIN, [beam], model="exact-sphere")
+    res = bake(mesh, SKIN, [beam], BakeOptions(model="exact-sphere"))
     # geodesic distance from the actual entry point
     e = res.samples.positions[0] / np.linalg.norm(res.samples.positions[0])
     P = mesh.vertices / np.linalg.norm(mesh.vertices, axis=1, keepdims=True)
@@ -63,7 +64,7 @@ def test_bake_exact_sphere_converges_under_refinement():
     errs, h = [], []
     for level in (2, 3, 4):
         mesh = sphere_mesh(R, level)
-        res = bake(mesh, SKIN, [BeamLight((0, 0, 30), (0, 0, -1))], model="exact-sphere")
+        res = bake(mesh, SKIN, [BeamLight((0, 0, 30), (0, 0, -1))], BakeOptions(model="exact-sphere"))
         s, ref = beam_reference(mesh, R, res)
         sel = outside_entry_fan(mesh, res) & (s < 20)
         errs.append(np.abs(res.radiance[sel, 0] / ref[sel] - 1).max())
@@ -77,7 +78,7 @@ def test_bake_models_ordering_on_sphere():
     """On a convex sphere: dipole < curved and exact; curved within its first-order error of exact."""
     R = 50.0
     mesh = sphere_mesh(R, 5)
-    out = {m: bake(mesh, SKIN, [BeamLight((0, 0, 200), (0, 0, -1))], model=m) for m in
+    out = {m: bake(mesh, SKIN, [BeamLight((0, 0, 200), (0, 0, -1))], BakeOptions(model=m)) for m in
            ("dipole", "curved", "exact-sphere")}
     s, ref = beam_reference(mesh, R, out["exact-sphere"])
     sel = outside_entry_fan(mesh, out["dipole"]) & (s > 1) & (s < 5)
@@ -93,25 +94,26 @@ def test_bake_models_ordering_on_sphere():
 def test_bake_invariant_under_rigid_motion_and_units(rng):
     V, F = icosphere(10.0, 3)
     beam_dir = np.array([0.1, -0.2, -1.0])
-    base = bake(Mesh(V, F), SKIN, [BeamLight((0.5, 0.4, 40), beam_dir)], model="curved")
+    base = bake(Mesh(V, F), SKIN, [BeamLight((0.5, 0.4, 40), beam_dir)], BakeOptions(model="curved"))
     # rigid motion: rotate and translate mesh and light together
     A = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     if np.linalg.det(A) < 0:
         A[:, 0] *= -1
     t = np.array([100.0, -50.0, 7.0])
-    moved = bake(Mesh(V @ A.T + t, F), SKIN, [BeamLight(A @ [0.5, 0.4, 40] + t, A @ beam_dir)], model="curved")
+    moved = bake(Mesh(V @ A.T + t, F), SKIN, [BeamLight(A @ [0.5, 0.4, 40] + t, A @ beam_dir)],
+                 BakeOptions(model="curved"))
     np.testing.assert_allclose(moved.radiance, base.radiance, rtol=1e-6, atol=1e-12 * base.radiance.max())
     # units: the same mesh in metres with an explicit unit
     in_m = Mesh.from_arrays(V / 1000.0, F, units="m")
     beam_m = BeamLight(np.array([0.5, 0.4, 40]), beam_dir)  # light positions are always in mm here
-    scaled = bake(in_m, SKIN, [beam_m], model="curved")
+    scaled = bake(in_m, SKIN, [beam_m], BakeOptions(model="curved"))
     np.testing.assert_allclose(scaled.radiance, base.radiance, rtol=1e-9, atol=1e-14)
 
 
 def test_bake_energy_below_entering_power():
     mesh = sphere_mesh(20.0, 4)
     for model in ("dipole", "curved", "exact-sphere"):
-        res = bake(mesh, SKIN, [DirectionalLight((0, 0, -1), 1e-3)], model=model)
+        res = bake(mesh, SKIN, [DirectionalLight((0, 0, -1), 1e-3)], BakeOptions(model=model))
         out = (res.radiance * mesh.vertex_areas[:, None]).sum(axis=0)
         assert np.all(out <= res.samples.power.sum()), (model, out, res.samples.power.sum())
         assert np.all(out > 0.3 * res.samples.power.sum())
@@ -119,11 +121,11 @@ def test_bake_energy_below_entering_power():
 
 def test_bake_channels_with_equal_parameters_computed_once():
     mesh = sphere_mesh(10.0, 3)
-    res = bake(mesh, SKIN, [BeamLight((0, 0, 30), (0, 0, -1))], model="dipole")
+    res = bake(mesh, SKIN, [BeamLight((0, 0, 30), (0, 0, -1))], BakeOptions(model="dipole"))
     assert res.stats["channels_computed"] == 1
     assert np.array_equal(res.radiance[:, 0], res.radiance[:, 2])
     skin1 = Material.preset("skin1")
-    res = bake(mesh, skin1, [BeamLight((0, 0, 30), (0, 0, -1))], model="dipole")
+    res = bake(mesh, skin1, [BeamLight((0, 0, 30), (0, 0, -1))], BakeOptions(model="dipole"))
     assert res.stats["channels_computed"] == 3
     # red travels furthest in skin
     far = res.beam_distance > 5
@@ -142,7 +144,7 @@ def test_bake_energy_with_edges_much_longer_than_transport_length():
     R = 20.0
     mesh = sphere_mesh(R, 3)  # edges ~ 3.3 mm
     dense = Material(5.0, 0.02, 1.3)  # z_r = 0.2 mm
-    res = bake(mesh, dense, [DirectionalLight((0, 0, -1), 1.0)], model="exact-sphere")
+    res = bake(mesh, dense, [DirectionalLight((0, 0, -1), 1.0)], BakeOptions(model="exact-sphere"))
     out = (res.radiance[:, 0] * mesh.vertex_areas).sum()
     entering = res.samples.power.sum()
     assert out <= entering

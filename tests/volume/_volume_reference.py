@@ -1,5 +1,5 @@
 """Independent references and twins for the tests of meshshade.volume (loaded by path, like
-tests/transport/_sphere_reference.py; nothing here imports the code under test).
+tests/surface/_sphere_reference.py; nothing here imports the code under test).
 
 * The Robin ball (docs/physics.md eq. (94)): the exitance on a ball of radius R with the boundary phi + 2 A D
   d phi / dn = 0 for a unit isotropic point source at radius r' (angle gamma between the source's and the

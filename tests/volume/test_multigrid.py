@@ -25,7 +25,7 @@ from meshshade.materials import Material
 from meshshade.volume.cutfem import assemble
 from meshshade.volume.lattice import build_lattice, coarser_lattice
 from meshshade.volume.multigrid import ChannelOperator, Multigrid, prolongation, solve_channels
-from meshshade.volume.resolution import diffusion_constants, volume_resolution
+from meshshade.volume.resolution import volume_resolution
 
 _spec = importlib.util.spec_from_file_location("_volume_reference", Path(__file__).with_name("_volume_reference.py"))
 ref = importlib.util.module_from_spec(_spec)
@@ -42,7 +42,8 @@ def _problem(name, R, h0):
     lat = build_lattice(ref.ball_depth(c, R), c - R, c + R, res.grading,
                         refine=lambda x: np.linalg.norm(x - top, axis=1) < 6.0)
     asm = assemble(lat)
-    coef = np.array([(D, 1.0 / (2.0 * A), sa) for D, sa, A in (diffusion_constants(mat, k) for k in range(3))])
+    m = mat.medium
+    coef = np.stack([m.D, 1.0 / (2.0 * m.A), m.sigma_a], axis=1)
     op = ChannelOperator(asm, coef)
     return lat, asm, op, Multigrid(lat, op), coef
 

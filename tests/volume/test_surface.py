@@ -3,9 +3,11 @@
 Checked against the geometry itself, not the code's own bookkeeping: after splitting, no edge is longer than the
 spacing, the input's vertices come first and unchanged, every split face lies on its input face (its corners are
 the recorded barycentric combinations of the input face's corners) and the split is conforming (a closed input
-stays closed: every edge in exactly two faces) with the same area; eq. (104) keeps constants and the integral of
-a P1 function (sum_v A_v M_v, A_v a third of the input's faces at v, equals the exact integral over the split
-triangles); and ``locate`` puts any point of an input face back at the same 3D point on a split face of that face.
+stays closed: every edge in exactly two faces) with the same area; ``locate`` puts any point of an input face back
+at the same 3D point on a split face of that face; a vertex reads the field where a texel or a pixel at its point
+reads it (issue 47: one field); eq. (104), the Monte Carlo's patch average, keeps constants and the integral of a
+P1 function (sum_v A_v M_v, A_v a third of the input's faces at v, equals the exact integral over the split
+triangles) and equals a quadrature of its definition written here.
 """
 from __future__ import annotations
 
@@ -46,7 +48,7 @@ def test_split_is_conforming_on_the_input_facets(coarse):
 def test_patch_average_keeps_constants_and_the_integral(coarse, rng):
     mesh, ss = coarse
     S = ss.samples
-    np.testing.assert_allclose(ss.to_vertices(np.full((S.n_vertices, 3), 2.5)), 2.5, rtol=1e-13)
+    np.testing.assert_allclose(ss.patch_average(np.full((S.n_vertices, 3), 2.5)), 2.5, rtol=1e-13)
     values = rng.random((S.n_vertices, 3))
     tri = values[S.faces]                                              # (faces, corners, 3)
     area = 0.5 * np.linalg.norm(np.cross(S.vertices[S.faces[:, 1]] - S.vertices[S.faces[:, 0]],
@@ -54,7 +56,51 @@ def test_patch_average_keeps_constants_and_the_integral(coarse, rng):
     exact = np.einsum("f,fc->c", area / 3.0, tri.sum(axis=1))
     A_v = np.zeros(mesh.n_vertices)
     np.add.at(A_v, mesh.faces.ravel(), np.repeat(mesh.face_areas / 3.0, 3))
-    np.testing.assert_allclose(A_v @ ss.to_vertices(values), exact, rtol=1e-12)
+    np.testing.assert_allclose(A_v @ ss.patch_average(values), exact, rtol=1e-12)
+
+
+def test_patch_average_is_its_definition(rng):
+    """Eq. (104) against its definition by quadrature: on an icosahedron of radius 10 mm sampled at 2.5 mm, a P1
+    field of random values on the split surface, int w_v M dA / int w_v dA with w_v the input's hat of vertex v
+    (its barycentric in each input face) and M at the same point from the split face holding it, by a 6-point
+    Gauss rule (Dunavant, exact for degree 4) on every split face; and on the input itself (nothing split), where
+    the average of a P1 field is not its vertex value."""
+    for mesh, spacing in ((Mesh.from_arrays(*icosphere(10.0, 0)), 2.5), (Mesh.from_arrays(*icosphere(10.0, 1)), 100.0)):
+        ss = SamplingSurface(mesh, spacing)
+        S = ss.samples
+        values = rng.random((S.n_vertices, 2))
+        V, F, origin, bary, _ = split_long_edges(mesh.vertices, mesh.faces, spacing)
+        a, b = 0.445948490915965, 0.091576213509771                  # Dunavant's 6-point rule
+        wa, wb = 0.223381589678011, 0.109951743655322
+        pts = np.array([[a, a, 1 - 2 * a], [a, 1 - 2 * a, a], [1 - 2 * a, a, a],
+                        [b, b, 1 - 2 * b], [b, 1 - 2 * b, b], [1 - 2 * b, b, b]])
+        wts = np.array([wa] * 3 + [wb] * 3)
+        area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+        num = np.zeros((mesh.n_vertices, 2))
+        den = np.zeros(mesh.n_vertices)
+        for lam, w in zip(pts, wts):
+            M = np.einsum("k,qkc->qc", lam, values[F])                  # the field at the point
+            hat = np.einsum("k,qkm->qm", lam, bary)                    # the input's barycentrics there
+            for m in range(3):
+                np.add.at(num, mesh.faces[origin, m], (w * area * hat[:, m])[:, None] * M)
+                np.add.at(den, mesh.faces[origin, m], w * area * hat[:, m])
+        np.testing.assert_allclose(ss.patch_average(values), num / den[:, None], rtol=1e-10)
+        assert np.abs(ss.patch_average(values) - ss.to_vertices(values)).max() > 1e-2
+
+
+def test_a_vertex_reads_the_field_where_a_texel_does(coarse, rng):
+    """The field P1 on the split surface, read through ``locate`` at an input vertex (as a texel or a pixel on that
+    point is), is what ``to_vertices`` gives the vertex: the point value, not the patch average (issue 47)."""
+    mesh, ss = coarse
+    S = ss.samples
+    values = rng.random((S.n_vertices, 3))
+    F = mesh.faces
+    face = np.repeat(np.arange(F.shape[0]), 3)
+    bary = np.tile(np.eye(3), (F.shape[0], 1))                          # every corner of every input face
+    sub, lam = ss.locate(face, bary)
+    at_point = np.einsum("km,kmc->kc", lam, values[S.faces[sub]])
+    np.testing.assert_allclose(at_point, ss.to_vertices(values)[F.ravel()], rtol=1e-12)
+    assert ss.to_vertices(values).shape == (mesh.n_vertices, 3)
 
 
 def test_nothing_split_is_the_identity():

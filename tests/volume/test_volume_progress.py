@@ -11,19 +11,20 @@ from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.progress import INTERVAL_ENV
 from meshshade.transport.baking import VOLUME_STAGES, bake
+from meshshade.transport import BakeOptions
 
 
 def test_each_stage_is_reported(monkeypatch, capsys):
     monkeypatch.setenv(INTERVAL_ENV, "0")
     mesh = Mesh.from_arrays(*icosphere(8.0, 3))
     sun = [DirectionalLight((0.0, 0.0, -1.0), 1.0)]
-    res = bake(mesh, Material.preset("skin1"), sun, progress=True)
+    res = bake(mesh, Material.preset("skin1"), sun, BakeOptions(progress=True))
     lines = [x for x in capsys.readouterr().err.splitlines() if x.startswith("meshshade: bake:")]
     assert set(res.timings) == set(VOLUME_STAGES)                  # every stage ran and was timed
     named = [x.rsplit("[", 1)[1].rstrip("]") for x in lines]
     assert named == list(VOLUME_STAGES)[1:] + ["near field"]        # the next stage, then the last again
     assert "100 %" in lines[-1]
-    bake(mesh, Material.preset("skin1"), sun, volume=res.volume)
+    bake(mesh, Material.preset("skin1"), sun, reuse=res.volume)
     assert capsys.readouterr().err == ""
 
 

@@ -25,6 +25,7 @@ from meshshade.io import read_mesh_arrays
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.baking import bake
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "meshes"
 
@@ -51,14 +52,14 @@ def main(argv=None):
     args = ap.parse_args(argv)
     material = Material.preset("skin1")
     light = DirectionalLight((0.3, -0.4, -1.0), 1.0)
-    bake(Mesh(*icosphere(10.0, 2)), material, [light], model="curved")  # compile the numba loops first
+    bake(Mesh(*icosphere(10.0, 2)), material, [light], BakeOptions(model="curved"))  # compile the numba loops first
     rows = []
     for name, mesh in scenes(args.quick):
         base = None
         for run in args.runs.split(","):
             model, geodesic = run.split(":")
             t = time.perf_counter()
-            res = bake(mesh, material, [light], model=model, geodesic=geodesic)
+            res = bake(mesh, material, [light], BakeOptions(model=model, surface=SurfaceOptions(geodesic=geodesic)))
             wall = time.perf_counter() - t
             pairs = res.stats.get("pairs_found", 0)
             row = {"scene": name, "vertices": mesh.n_vertices, "model": model, "geodesic": geodesic,

@@ -41,6 +41,7 @@ from meshshade.geometry.procedural import icosphere, torus
 from meshshade.io import read_baked_ply, write_ply
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
+from meshshade.montecarlo import MCOptions
 
 MATERIALS = ("skin1", "marble", "ketchup")
 LIGHTS = ("directional:0.3,-0.4,-1", "directional:-1,0.2,-0.3")
@@ -150,14 +151,14 @@ def monte_carlo(args):
     mat = Material([1.0, 1.0, 1.0], [0.01, 0.01, 0.01], eta=1.3, name="sigma_s'=1, sigma_a=0.01")
     sun = DirectionalLight((0.3, -0.4, -1.0), 1.0)
     photons = int(args.photons)
-    simulate(mesh, mat, [sun], photons=20_000, seed=1)               # numba caches loaded here
-    res, t_in = _timed(lambda: simulate(mesh, mat, [sun], photons=photons, seed=1))
+    simulate(mesh, mat, [sun], MCOptions(photons=20_000, seed=1))               # numba caches loaded here
+    res, t_in = _timed(lambda: simulate(mesh, mat, [sun], MCOptions(photons=photons, seed=1)))
     row = {"kind": "mc", "photons": photons, "vertices": mesh.n_vertices, "seconds": {"in-process": round(t_in, 3)}}
     tallies = {}
     for n in (1, 2):
         with open_client(workers=n, quiet=True) as client:
-            simulate(mesh, mat, [sun], photons=20_000, seed=1, client=client)   # workers load their caches
-            r, t = _timed(lambda: simulate(mesh, mat, [sun], photons=photons, seed=1, client=client))
+            simulate(mesh, mat, [sun], MCOptions(photons=20_000, seed=1), client=client)   # workers load their caches
+            r, t = _timed(lambda: simulate(mesh, mat, [sun], MCOptions(photons=photons, seed=1), client=client))
         row["seconds"][f"dask, {n} worker(s)"] = round(t, 3)
         tallies[n] = r.face_power
     row["identical_1_vs_2_workers"] = bool(np.array_equal(tallies[1], tallies[2]))

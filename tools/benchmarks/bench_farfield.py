@@ -1,4 +1,4 @@
-"""Benchmark: clustered far-field dipole sum (meshshade/transport/farfield.py) against the direct sum, as JSON.
+"""Benchmark: clustered far-field dipole sum (meshshade/surface/farfield.py) against the direct sum, as JSON.
 
 Sources and receivers are the vertices of a cube-sphere (a subdivided box pushed onto a sphere) or of a box,
 lit by a directional light along -z (power = vertex area x max(0, n.z) W per unit irradiance, the same in the
@@ -25,10 +25,10 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from meshshade.transport.farfield import SourceTree, far_field_exitance, far_field_exitance_pairwise
+from meshshade.surface.farfield import SourceTree, far_field_exitance, far_field_exitance_pairwise
 from meshshade.geometry.procedural import box
 from meshshade.materials import Material
-from meshshade.transport.gather import cutoff_radii
+from meshshade.surface.gather import cutoff_radii
 
 
 def vertex_areas(V, F):

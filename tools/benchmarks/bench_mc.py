@@ -26,7 +26,7 @@ from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import box, icosphere
 from meshshade.light import BeamLight
 from meshshade.materials import Material
-from meshshade.montecarlo import simulate
+from meshshade.montecarlo import MCOptions, simulate
 
 
 def cases():
@@ -42,7 +42,7 @@ def cases():
 
 def run(mesh, mat, beam, photons, **kw):
     t0 = time.perf_counter()
-    r = simulate(mesh, mat, [beam], photons=photons, seed=1, beam_distances=False, **kw)
+    r = simulate(mesh, mat, [beam], MCOptions(photons=photons, seed=1, beam_distances=False, **kw))
     total = time.perf_counter() - t0
     cpu = r.cpu_seconds
     return r, {"photons": int(r.photons), "events": int(r.events), "boundary_tests": int(r.boundary_tests),
@@ -67,7 +67,7 @@ def main() -> None:
     all_cases = cases()
     warm = all_cases["mcml_slab_box"]
     for kw in ({}, {"engine": "batched"}, {"fast_interior": False}):   # numba compile / cache load
-        simulate(*warm[:2], [warm[2]], photons=1000, beam_distances=False, **kw)
+        simulate(*warm[:2], [warm[2]], MCOptions(photons=1000, beam_distances=False, **kw))
     out = {"machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
            "numba_threads": numba.get_num_threads(), "load_average_before": os.getloadavg(), "cases": {}}
     for name, (mesh, mat, beam) in all_cases.items():

@@ -40,7 +40,7 @@ from meshshade.geometry.procedural import box, icosphere
 from meshshade.io import read_mesh_arrays
 from meshshade.light import BeamLight, DirectionalLight, PointLight
 from meshshade.materials import Material, material_from_options
-from meshshade.montecarlo import simulate
+from meshshade.montecarlo import MCOptions, simulate
 
 SKIN1 = material_from_options("skin1")
 
@@ -134,7 +134,7 @@ def bench_scene(name, build, mat, make_light, photons, threads, repeats, timer=N
     light = make_light(mesh)
     kw = dict(photons=photons, seed=7, beam_distances=False, keep_beam_exits=False)
     numba.set_num_threads(max(threads))
-    simulate(mesh, mat, [light], **{**kw, "photons": 20_000})   # compile / load the kernels, touch the memory
+    simulate(mesh, mat, [light], MCOptions(**{**kw, "photons": 20_000}))   # compile / load the kernels, the memory
     rows = {t: [] for t in threads}
     first = {}
     for r in range(repeats):
@@ -142,7 +142,7 @@ def bench_scene(name, build, mat, make_light, photons, threads, repeats, timer=N
             numba.set_num_threads(t)
             if timer is not None:
                 timer.take()
-            res = simulate(mesh, mat, [light], **kw)
+            res = simulate(mesh, mat, [light], MCOptions(**kw))
             rows[t].append((res.seconds, res.cpu_seconds, res.events, res.boundary_events,
                             timer.take() if timer is not None else {}))
             first.setdefault(t, res.face_power)

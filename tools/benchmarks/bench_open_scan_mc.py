@@ -6,13 +6,14 @@ Two JSON rows.
 (:func:`sphere_with_holes`: the faces whose centroids lie within 3 mm of three points at 30 degrees from the pole,
 120 degrees apart: holes about 6 mm across), skin1, the sun straight down onto the pole. The Monte Carlo exitance over the faces
 0.5-5 mm from the rims (and in three bands within), relative to the same faces of the closed sphere, for the walk
-of the faces alone (``WalkSurface.of_faces``, the walk before issue 47: a photon walks out through a hole) and for
+of the faces alone (``MCOptions(inside="faces")``, the walk before issue 47: a photon walks out through a hole) and for
 the default walk (the bake's inside {w > 1/2}: the holes closed by lids, :mod:`meshshade.montecarlo.boundary`);
 with the standard errors of the differences (:func:`band_exitance`). ``--sphere-photons`` per run (three runs).
 
 ``open_scan_mc``: the scanned hand of ../shared/meshes/hand.obj at 190 mm with six holes punched
 (tools/benchmarks/mesh_defects.py, as bench_defects.py makes them: the 2-ring faces around six vertices removed),
-skin1, the sun of bench_defects.py. The default ``bake`` (its model), ``simulate(photons=--photons, seed=202)``
+skin1, the sun of bench_defects.py. The default ``bake`` (its model; its exitance averaged over each vertex's
+patch, ``BakeResult.patch_averaged``, as the Monte Carlo tallies it), ``simulate`` with ``--photons`` (seed 202)
 and a reference of ``--reference-photons`` (seed 101), both with the default inside, and the mean |M / ref - 1|
 per channel (r, g, b, %) of the bake and of the smaller run over the lit vertices (an unshadowed entry sample)
 that have a face: all of them (``lit_all``), those beyond D = 10 and 25 mm of the holes' centres, and those within
@@ -33,6 +34,7 @@ import json
 import sys
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -43,8 +45,7 @@ from meshshade.geometry.procedural import icosphere
 from meshshade.light import DirectionalLight
 from meshshade.light.samples import entry_samples
 from meshshade.materials import Material
-from meshshade.montecarlo import simulate
-from meshshade.montecarlo.boundary import WalkSurface
+from meshshade.montecarlo import MCOptions, simulate
 from meshshade.raycast import make_scene
 from meshshade.transport import bake
 
@@ -108,10 +109,10 @@ def sphere_row(photons: int) -> dict:
         warnings.simplefilter("ignore")
         closed = Mesh.from_arrays(V, F)
         holed = Mesh.from_arrays(d.vertices, d.faces)
-        runs = {"closed": simulate(closed, mat, [sun], photons=photons, seed=7, beam_distances=False),
-                "faces_only": simulate(holed, mat, [sun], photons=photons, seed=7, beam_distances=False,
-                                       surface=WalkSurface.of_faces(holed)),
-                "winding": simulate(holed, mat, [sun], photons=photons, seed=7, beam_distances=False)}
+        o = MCOptions(photons=photons, seed=7, beam_distances=False)
+        runs = {"closed": simulate(closed, mat, [sun], o),
+                "faces_only": simulate(holed, mat, [sun], replace(o, inside="faces")),
+                "winding": simulate(holed, mat, [sun], o)}
     dist = rim_distance(holed.vertices, holed.faces, holed.vertices[holed.faces].mean(axis=1))
     areas = holed.face_areas
     row = {"row": "sphere_holes", "photons": photons, "holes": runs["winding"].surface.holes,
@@ -152,10 +153,10 @@ def hand_row(reference_photons: int, photons: int) -> dict:
     t_bake = time.perf_counter() - t
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")                     # the open mesh's note (lids), said in the docstring
-        mc = simulate(mesh, mat, [light], photons=photons, seed=202, beam_distances=False)
-        old = simulate(mesh, mat, [light], photons=photons, seed=202, beam_distances=False,
-                       surface=WalkSurface.of_faces(mesh))
-        ref = simulate(mesh, mat, [light], photons=reference_photons, seed=101, beam_distances=False)
+        o = MCOptions(photons=photons, seed=202, beam_distances=False)
+        mc = simulate(mesh, mat, [light], o)
+        old = simulate(mesh, mat, [light], replace(o, inside="faces"))
+        ref = simulate(mesh, mat, [light], MCOptions(photons=reference_photons, seed=101, beam_distances=False))
     es = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, [light],
                        make_scene(mesh.vertices, mesh.faces), mat.eta)
     lit = np.zeros(mesh.n_vertices, dtype=bool)
@@ -172,7 +173,7 @@ def hand_row(reference_photons: int, photons: int) -> dict:
     for D in (10.0, 25.0):
         sets[f"lit_beyond_{int(D)}mm"] = md.far_from(mesh.vertices, d.points, D) & referenced & lit
     for name, sel in sets.items():
-        row[name] = {"bake": _errors(np.asarray(res.radiance), R, sel), "mc": _errors(np.asarray(mc.radiance), R, sel),
+        row[name] = {"bake": _errors(np.asarray(res.patch_averaged()), R, sel), "mc": _errors(np.asarray(mc.radiance), R, sel),
                      "mc_faces_only": _errors(np.asarray(old.radiance), R, sel), "vertices": int(sel.sum())}
     row["meets_target"] = all(b <= m for b, m in zip(row["lit_all"]["bake"], row["lit_all"]["mc"]))
     return row

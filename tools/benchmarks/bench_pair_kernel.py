@@ -18,8 +18,8 @@ import numpy as np
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
 from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
-from meshshade.transport.auto import AutoPlan
-from meshshade.transport.pair_kernel import PairKernel, SourceFrames
+from meshshade.surface.auto import AutoPlan
+from meshshade.surface.pair_kernel import PairKernel, SourceFrames
 
 from bench_kernels import best_time  # noqa: E402  (tools/ is not a package: this script's folder is on sys.path)
 

@@ -34,8 +34,10 @@ from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.montecarlo.simulation import simulate
 from meshshade.transport.baking import bake
-from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.hierarchical import far_distance_check
+from meshshade.surface.gather import cutoff_radii
+from meshshade.surface.hierarchical import far_distance_check
+from meshshade.montecarlo import MCOptions
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "meshes"
 LOW_ABSORPTION = Material([1.0, 1.0, 1.0], [0.01, 0.01, 0.01], eta=1.3, name="sigma_s'=1, sigma_a=0.01")
@@ -58,13 +60,15 @@ def scaling(args):
     rows = []
     for level in range(3, args.max_level + 1):
         mesh = Mesh(*icosphere(10.0, level))
-        h, th = _timed(lambda: bake(mesh, LOW_ABSORPTION, [SUN], model=args.model, transport="hierarchical"))
+        h, th = _timed(lambda: bake(mesh, LOW_ABSORPTION, [SUN], BakeOptions(
+            model=args.model, surface=SurfaceOptions(transport="hierarchical"))))
         row = {"kind": "scaling", "model": args.model, "level": level, "vertices": mesh.n_vertices,
                "hierarchical_s": round(th, 3), "timings": {k: round(v, 3) for k, v in h.timings.items()},
                "far_clusters": h.stats.get("far_clusters"), "far_pairs": h.stats.get("far_pairs"),
                "near_pairs": h.stats.get("near_pairs")}
         if level <= args.direct_max_level:
-            d, td = _timed(lambda: bake(mesh, LOW_ABSORPTION, [SUN], model=args.model, transport="direct"))
+            d, td = _timed(lambda: bake(mesh, LOW_ABSORPTION, [SUN], BakeOptions(
+                model=args.model, surface=SurfaceOptions(transport="direct"))))
             mean, p99 = _errors(h.radiance, d.radiance)
             row.update(direct_s=round(td, 3), speedup=round(td / th, 1), mean_rel_err=mean, p99_rel_err=p99)
         rows.append(row)
@@ -81,8 +85,8 @@ def scaling(args):
 def mc_ratio(args):
     mesh = Mesh(*icosphere(10.0, 5))
     skin = Material.preset("skin1")
-    b, tb = _timed(lambda: bake(mesh, skin, [SUN], model="auto"))
-    _, tm = _timed(lambda: simulate(mesh, skin, [SUN], photons=2_000_000, seed=1, beam_distances=False))
+    b, tb = _timed(lambda: bake(mesh, skin, [SUN], BakeOptions(model="auto")))
+    _, tm = _timed(lambda: simulate(mesh, skin, [SUN], MCOptions(photons=2_000_000, seed=1, beam_distances=False)))
     print(json.dumps({"kind": "mc", "vertices": mesh.n_vertices, "bake_auto_s": round(tb, 3),
                       "transport": b.stats["transport"], "mc_2e6_s": round(tm, 3), "mc_over_bake": round(tm / tb, 1)}),
           flush=True)
@@ -147,7 +151,7 @@ def main(argv=None):
         return
     if args.quick:
         args.max_level, args.direct_max_level = 4, 4
-    bake(Mesh(*icosphere(10.0, 2)), LOW_ABSORPTION, [SUN], model=args.model)  # compile the numba loops
+    bake(Mesh(*icosphere(10.0, 2)), LOW_ABSORPTION, [SUN], BakeOptions(model=args.model))  # compile the numba loops
     scaling(args)
     if not args.quick:
         mc_ratio(args)

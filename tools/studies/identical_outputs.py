@@ -14,9 +14,9 @@ import numpy as np
 
 from meshshade.bench.plan import QUICK
 from meshshade.bench.scenes import MATERIAL, SCENES
-from meshshade.montecarlo import simulate
+from meshshade.montecarlo import MCOptions, simulate
 from meshshade.profiles import Shape, profile_distances, reflectance_profile
-from meshshade.transport import MODELS, bake
+from meshshade.transport import BakeOptions, MODELS, SurfaceOptions, bake
 
 BAKE_SCENES = ("sphere_r5_beam", "sphere_r20_directional", "cylinder_r10_beam", "torus_beam", "torus_directional")
 PROFILE_MODELS = ("dipole", "exact", "curved", "fitted")
@@ -32,13 +32,13 @@ def outputs() -> dict:
         light = sc.make_light(mesh)
         for model in MODELS:
             for near in ((None,) if model == "volume" else ("point", "beam")):
-                res = bake(mesh, MATERIAL, [light], model=model, source_model=near)
+                res = bake(mesh, MATERIAL, [light], BakeOptions(model=model, surface=SurfaceOptions(source_model=near)))
                 out[f"bake/{name}/{model}/{near}"] = res.radiance
                 print(f"bake {name} {model} {near}", flush=True)
-        res = bake(mesh, MATERIAL, [light], model="curved", transport="direct")
+        res = bake(mesh, MATERIAL, [light], BakeOptions(model="curved", surface=SurfaceOptions(transport="direct")))
         out[f"bake/{name}/curved/direct"] = res.radiance
         for model in ("dipole", "curved"):   # the arc geodesics (the demo's dipole bake takes them)
-            res = bake(mesh, MATERIAL, [light], model=model, geodesic="arc")
+            res = bake(mesh, MATERIAL, [light], BakeOptions(model=model, surface=SurfaceOptions(geodesic="arc")))
             out[f"bake/{name}/{model}/arc"] = res.radiance
     s = profile_distances(20.0, 41)
     for shape in SHAPES:
@@ -56,7 +56,7 @@ def outputs() -> dict:
                         print(key, "refused:", e)
     sc = SCENES["sphere_r20_beam"]
     mesh = sc.build(3)
-    mc = simulate(mesh, MATERIAL, [sc.make_light(mesh)], photons=20_000, seed=3)
+    mc = simulate(mesh, MATERIAL, [sc.make_light(mesh)], MCOptions(photons=20_000, seed=3))
     out["mc/sphere_r20_beam/radiance"] = mc.radiance
     out["mc/profile/sphere"] = reflectance_profile(MATERIAL, s, model="mc", shape=Shape.make("sphere", 20.0),
                                                    photons=20_000, seed=3)

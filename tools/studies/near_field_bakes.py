@@ -26,7 +26,8 @@ from meshshade.bench.references import mc_reference, vertex_errors
 from meshshade.bench.scenes import MATERIAL, SCENES, Scene
 from meshshade.materials import Material
 from meshshade.montecarlo.simulation import simulate
-from meshshade.transport import bake
+from meshshade.transport import BakeOptions, SurfaceOptions, bake
+from meshshade.montecarlo import MCOptions
 
 EXTRA = {"sphere_r20_sun": Scene("sphere_r20_sun", "sphere", 20.0, "directional", "mc", level=4, geodesic="arc",
                                  patch_mm=3.0)}
@@ -53,18 +54,19 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             t = time.perf_counter()
-            long = simulate(mesh, mat, [light], photons=args.photons, seed=args.seed, keep_beam_exits=False,
-                            beam_distances=False)
+            long = simulate(mesh, mat, [light], MCOptions(
+                photons=args.photons, seed=args.seed, keep_beam_exits=False, beam_distances=False))
             t_long = time.perf_counter() - t
             if args.short_photons:
                 t = time.perf_counter()
-                short = simulate(mesh, mat, [light], photons=args.short_photons, seed=args.seed + 1000,
-                                 keep_beam_exits=False, beam_distances=False)
+                short = simulate(mesh, mat, [light], MCOptions(
+                    photons=args.short_photons, seed=args.seed + 1000, keep_beam_exits=False, beam_distances=False))
                 runs[f"mc {args.short_photons:.0e}"] = (short.radiance, time.perf_counter() - t)
             for model in args.models.split(","):
                 for nf in args.near_fields.split(","):
                     t = time.perf_counter()
-                    res = bake(mesh, mat, [light], model=model, geodesic=sc.geodesic, source_model=nf)
+                    res = bake(mesh, mat, [light], BakeOptions(
+                        model=model, surface=SurfaceOptions(geodesic=sc.geodesic, source_model=nf)))
                     runs[f"{model} {nf}"] = (res.radiance, time.perf_counter() - t)
         for ch in channels:
             ref = mc_reference(mesh, light, long, patch_mm=sc.patch_mm, channel=ch)

@@ -1,4 +1,4 @@
-"""Compiled loops of the clustered far-field sum (meshshade/transport/farfield.py): k-d tree build, node moments,
+"""Compiled loops of the clustered far-field sum (meshshade/surface/farfield.py): k-d tree build, node moments,
 traversal.
 
 Everything here is float64 on plain arrays. Distances are in mm; the dipole is evaluated in optical units per

@@ -1,4 +1,4 @@
-"""The light's sideways drift inside (docs/physics.md §13.4, eqs. (87)-(88); transport/source_factors.py).
+"""The light's sideways drift inside (docs/physics.md §13.4, eqs. (87)-(88); surface/source_factors.py).
 
 Light refracted at theta_t drifts a transport length along its direction before it forgets it, so its diffusion
 sources sit sin(theta_t)/sigma_t' sideways of the entry point. References: Snell's law in vector form, scipy's
@@ -22,8 +22,10 @@ from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.montecarlo.simulation import simulate
 from meshshade.transport.baking import bake
-from meshshade.transport.hierarchy_loops import bessel_i0e, drift_factor
-from meshshade.transport.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.hierarchy_loops import bessel_i0e, drift_factor
+from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.montecarlo import MCOptions
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 SKIN = Material.preset("skin1")
 BENCH = Material(1.0, 0.01, 1.3, 0.0)
@@ -109,8 +111,9 @@ def oblique_slab():
     d = np.array([math.sin(inc), 0.0, -math.cos(inc)])
     entry = np.array([0.0137, 0.0213, 10.0])
     light = BeamLight(tuple(entry - 30.0 * d), tuple(d))
-    mc = simulate(mesh, BENCH, [light], photons=300_000, seed=11, keep_beam_exits=False, beam_distances=False)
-    res = bake(mesh, BENCH, [light], model="dipole", source_model="beam")
+    mc = simulate(mesh, BENCH, [light], MCOptions(
+        photons=300_000, seed=11, keep_beam_exits=False, beam_distances=False))
+    res = bake(mesh, BENCH, [light], BakeOptions(model="dipole", surface=SurfaceOptions(source_model="beam")))
     return mesh, entry, mc, res
 
 
@@ -154,8 +157,8 @@ def test_hierarchical_and_direct_sums_carry_the_same_drift():
     low there)."""
     mesh = Mesh(*icosphere(20.0, 4))
     light = DirectionalLight((0.0, 0.0, -1.0))
-    out = {tr: bake(mesh, SKIN, [light], model="dipole", geodesic="arc", source_model="beam", transport=tr)
-           for tr in ("hierarchical", "direct")}
+    out = {tr: bake(mesh, SKIN, [light], BakeOptions(model="dipole", surface=SurfaceOptions(
+               geodesic="arc", source_model="beam", transport=tr))) for tr in ("hierarchical", "direct")}
     assert out["hierarchical"].stats["transport"] == "hierarchical"
     lit = mesh.vertices[:, 2] > 0.0
     q = out["hierarchical"].radiance[lit] / out["direct"].radiance[lit]

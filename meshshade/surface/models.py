@@ -4,7 +4,7 @@
 * ``curved``: the first-order k1/k2 kernel (kernels/curvature.py);
 * ``exact-sphere``: the exact sphere series with the local radius 2/(k1 + k2);
 * ``fitted``: the curvature model fitted to Monte Carlo beyond first order (kernels/fitted_curvature.py);
-* ``auto``: per entry sample the cheapest of the three that the scene calls for (transport/auto.py);
+* ``auto``: per entry sample the cheapest of the three that the scene calls for (surface/auto.py);
 * ``volume`` (the default): diffusion inside the object's volume with the analytic near field on top
   (meshshade/volume, docs/physics.md §15); open, many-part and coarse meshes included; on a mesh that encloses no
   volume (a flat sheet) the bake says so and uses ``auto`` with the beam near field.
@@ -19,7 +19,7 @@ from meshshade.names import DEFAULT_MODEL, KERNEL_NAMES, MODELS  # noqa: F401 (t
 class Kernel(IntEnum):
     """The kernel a source's pairs take: the one enumeration of kernels, used by the auto plans
     (``AutoPlan.kernel``, the NPZ's ``auto_kernel``), the hierarchical transport's sources and the compiled
-    evaluation (:func:`meshshade.transport.kernel_evaluation.kernel_value`)."""
+    evaluation (:func:`meshshade.surface.kernel_evaluation.kernel_value`)."""
 
     #: the planar dipole of the surface distance (what ``auto`` calls "dipole")
     DIPOLE_SURFACE = 0

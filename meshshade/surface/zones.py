@@ -5,7 +5,7 @@ whether the far zone goes to the far-field sum (source clusters of the dipole). 
 whole neighbourhood with one geodesic method; ``exact_near_arc_far`` and ``exact_near_shared_far`` use exact
 geodesics in the near zone and, beyond, arc geodesics or geodesics shared by groups of samples (sample_groups.py);
 ``exact_near``/``arc_near`` gather only to r_near and leave the rest to the far-field sum (farfield.py).
-transport.baking assigns the zones (:func:`assign_zones`), transport.gather runs them.
+transport.baking assigns the zones (:func:`assign_zones`), surface.gather runs them.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The near-field model in the bake (``source_model="beam"``, transport/source_factors.py, docs/physics.md eq. (80)).
+"""The near-field model in the bake (``source_model="beam"``, surface/source_factors.py, docs/physics.md eq. (80)).
 
 References are independent of the bake's sums: the near-field model's closed-form total and profile
 (kernels.near_field, eq. (76)) and the planar dipole's closed-form total. A 100 mm sphere stands in for the
@@ -20,7 +20,8 @@ from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.output.render import PixelGather
 from meshshade.transport.baking import bake
-from meshshade.transport.source_factors import near_field_factors
+from meshshade.surface.source_factors import near_field_factors
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 SKIN = Material.preset("skin1")
 R = 100.0
@@ -42,7 +43,8 @@ def test_a_beam_delivers_the_near_field_total_at_any_resolution(level, sphere5):
     edges (3.5 mm at level 5) are wider than the kernel's peak; the point source's point values are not (measured
     +56 % to +438 % at level 5, within 2 % at level 7)."""
     mesh = sphere5 if level == 5 else Mesh(*icosphere(R, level))
-    res = bake(mesh, SKIN, [BeamLight((0.3, 0.2, R + 10.0), (0.0, 0.0, -1.0))], model="dipole", source_model="beam")
+    res = bake(mesh, SKIN, [BeamLight((0.3, 0.2, R + 10.0), (0.0, 0.0, -1.0))], BakeOptions(
+        model="dipole", surface=SurfaceOptions(source_model="beam")))
     e = np.array(res.stats["exitant_power"]) / res.stats["entering_power"]
     assert res.stats["near_field"] == "beam"
     np.testing.assert_allclose(e, _totals("beam"), rtol=0.012)
@@ -58,8 +60,9 @@ def test_directional_light_carries_the_near_field_total(transport, material, sph
     (skin1 at normal incidence: +0.7 %, -6.5 %, -12.2 %; grazing light adds up to 16-28 %). At alpha' = 0.998 most
     of the light travels beyond the near radius, into the far field (clusters), whose tail scale is 0.96."""
     light = DirectionalLight((0.0, 0.0, -1.0))
-    res = {nf: bake(sphere5, material, [light], model="dipole", source_model=nf, transport=transport, geodesic="arc",
-                    far_field="clustered" if transport == "direct" else None) for nf in ("point", "beam")}
+    res = {nf: bake(sphere5, material, [light], BakeOptions(model="dipole", surface=SurfaceOptions(
+               source_model=nf, transport=transport, geodesic="arc",
+               far_field="clustered" if transport == "direct" else None))) for nf in ("point", "beam")}
     P = {nf: np.array(r.stats["exitant_power"]) for nf, r in res.items()}
     smp = res["beam"].samples
     ct = np.round(np.sqrt(1.0 - (1.0 - smp.cos_incidence ** 2) / material.eta ** 2), 3)   # 1e-3 bins
@@ -75,7 +78,8 @@ def test_directional_light_carries_the_near_field_total(transport, material, sph
 def test_a_beam_bake_follows_the_near_field_profile():
     mesh = Mesh(*icosphere(R, 6))
     entry = np.array([0.3, 0.2, np.sqrt(R * R - 0.13)])
-    res = bake(mesh, SKIN, [BeamLight((0.3, 0.2, R + 10.0), (0.0, 0.0, -1.0))], model="dipole", source_model="beam")
+    res = bake(mesh, SKIN, [BeamLight((0.3, 0.2, R + 10.0), (0.0, 0.0, -1.0))], BakeOptions(
+        model="dipole", surface=SurfaceOptions(source_model="beam")))
     s = res.beam_distance
     sel = (s > 4.0) & (s < 12.0)     # two patch radii and more from the entry point
     assert sel.sum() > 50
@@ -143,8 +147,9 @@ TAIL_MEDIUM = Material(1.0, 0.002, 1.3, 0.0)
 def tail_reference(sphere5):
     """The direct sum of every pair with its near-field factor, no far field (alpha' = 0.998, a sun along -z): the
     reference of both far fields below, baked once for the module."""
-    return bake(sphere5, TAIL_MEDIUM, [DirectionalLight((0.0, 0.0, -1.0))], model="dipole", source_model="beam",
-                transport="direct", geodesic="arc", far_field="off")
+    return bake(sphere5, TAIL_MEDIUM, [DirectionalLight((0.0, 0.0, -1.0))], BakeOptions(
+        model="dipole", surface=SurfaceOptions(
+            source_model="beam", transport="direct", geodesic="arc", far_field="off")))
 
 
 @pytest.mark.parametrize("kw", [{"transport": "direct", "far_field": "clustered", "far_tol": 0.5},
@@ -158,8 +163,8 @@ def test_the_far_field_carries_the_near_field_models_tail(kw, sphere5, tail_refe
     its energy: measured 1.5e-5 in energy and 1.8 % mean per vertex here, where most light is in the far field
     (3.1 % with no drift at all), so that case is held to 2.5 %."""
     ref = tail_reference
-    res = bake(sphere5, TAIL_MEDIUM, [DirectionalLight((0.0, 0.0, -1.0))], model="dipole", source_model="beam",
-               geodesic="arc", **kw)
+    res = bake(sphere5, TAIL_MEDIUM, [DirectionalLight((0.0, 0.0, -1.0))],
+               BakeOptions(model="dipole", surface=SurfaceOptions(source_model="beam", geodesic="arc", **kw)))
     e = res.stats["exitant_power"][0] / ref.stats["exitant_power"][0] - 1.0
     lit = ref.radiance[:, 0] > 1e-3 * ref.radiance[:, 0].max()
     rel = np.abs(res.radiance[lit, 0] / ref.radiance[lit, 0] - 1.0)

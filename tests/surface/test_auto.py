@@ -1,4 +1,4 @@
-"""``--model auto``: the per-sample decisions (meshshade/transport/auto.py) and their use in the bake and the CLI."""
+"""``--model auto``: the per-sample decisions (meshshade/surface/auto.py) and their use in the bake and the CLI."""
 import contextlib
 
 import numpy as np
@@ -17,8 +17,9 @@ from meshshade.kernels.curvature import curvature_ratios
 from meshshade.kernels.dipole import dipole_profile
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import material_from_options
-from meshshade.transport import auto, zones
-from meshshade.transport.models import Kernel
+from meshshade.surface import auto, cutoff_radii, zones
+from meshshade.surface.models import Kernel
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 SKIN = material_from_options("skin1")
 
@@ -76,7 +77,7 @@ def test_plan_small_sphere_uses_exact_sphere_and_saddle_uses_fitted():
     R0 = 10.0
     k1 = np.array([1 / R0, 0.05, 0.03])
     k2 = np.array([1 / R0, -0.05, 0.0])
-    cut = transport.cutoff_radii(SKIN, 1e-4)
+    cut = cutoff_radii(SKIN, 1e-4)
     kn = np.maximum(np.abs(k1), np.abs(k2))
     plan = auto.plan_sources(k1, k2, kn, kn, SKIN, cut.max(), cut)
     assert plan.kernel.tolist() == [Kernel.EXACT_SPHERE, Kernel.FITTED, Kernel.FITTED]
@@ -89,7 +90,7 @@ def test_plan_small_sphere_uses_exact_sphere_and_saddle_uses_fitted():
 
 def test_plan_threshold_is_the_documented_bound():
     """Just below / above curvature_tol / (W): dipole / curved (the decision is the stated inequality)."""
-    radius = transport.cutoff_radii(SKIN, 1e-4)
+    radius = cutoff_radii(SKIN, 1e-4)
     W = auto.curvature_bound_mm(SKIN, radius).max()
     k = np.array([0.99, 1.01]) * 1e-2 / W
     plan = auto.plan_sources(k, k * 0.5, k, k, SKIN, radius.max(), radius)
@@ -113,9 +114,10 @@ def sphere10():
 def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     """With curvature_tol = 0, validity_tol = inf and geodesic_tol = 0 auto must reproduce `curved` exactly."""
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
-    ref = transport.bake(sphere10, SKIN, light, model="curved", transport="direct")
+    ref = transport.bake(sphere10, SKIN, light, BakeOptions(model="curved", surface=SurfaceOptions(transport="direct")))
     opts = dict(curvature_tol=0.0, validity_tol=np.inf, geodesic_tol=0.0)
-    got = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_field="off", transport="direct")
+    got = transport.bake(sphere10, SKIN, light, BakeOptions(
+        model="auto", surface=SurfaceOptions(auto=opts, far_field="off", transport="direct")))
     assert got.stats["auto_kernel_curved"] == got.stats["entry_samples"]
     np.testing.assert_allclose(got.radiance, ref.radiance, rtol=1e-12, atol=0)
     # far zone on geodesics shared by groups of samples (default) or on arc geodesics, exact within r_near.
@@ -124,26 +126,27 @@ def test_auto_with_everything_forced_curved_equals_curved(sphere10):
     # (1.3 mm edges) are shorter by O(h^2), ~0.3 % (test_neighbourhood); at s ~ 20 mm the red kernel falls by
     # d ln R/ds ~ -(sigma_tr + 2/s) ~ -0.37/mm, so the dim far side may move by up to 0.3 % * 20 mm * 0.37/mm ~ 2.2 %
     lit = ref.radiance > 1e-3 * ref.radiance.max(axis=0)
-    assert zones.groups_pay(sphere10, transport.cutoff_radii(SKIN, 1e-4))
+    assert zones.groups_pay(sphere10, cutoff_radii(SKIN, 1e-4))
     for far_geodesic, zone, max_tol, median_tol in (("shared", "zone_exact_near_shared_far", 0.01, 2e-4),
                                                    ("arc", "zone_exact_near_arc_far", 0.025, 2e-3)):
-        split = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, far_geodesic=far_geodesic,
-                               transport="direct")
+        split = transport.bake(sphere10, SKIN, light, BakeOptions(
+            model="auto", surface=SurfaceOptions(auto=opts, far_geodesic=far_geodesic, transport="direct")))
         assert split.stats[zone] == split.stats["entry_samples"]
         if far_geodesic == "shared":  # one exact far query per group instead of per sample
             assert split.stats["geodesic_pairs_computed"] < 0.6 * ref.stats["geodesic_pairs_computed"]
         rel = np.abs(split.radiance - ref.radiance)[lit] / ref.radiance[lit]
         assert rel.max() < max_tol and np.median(rel) < median_tol, (far_geodesic, rel.max(), np.median(rel))
     # geodesic="arc" caps auto at arc geodesics everywhere
-    arc = transport.bake(sphere10, SKIN, light, model="auto", auto_options=opts, geodesic="arc", transport="direct")
+    arc = transport.bake(sphere10, SKIN, light, BakeOptions(
+        model="auto", surface=SurfaceOptions(auto=opts, geodesic="arc", transport="direct")))
     assert arc.stats["zone_arc"] == arc.stats["entry_samples"] and arc.stats["auto_geodesic_exact"] == 0
 
 
 def test_auto_on_small_sphere_picks_the_exact_sphere(sphere10):
     """R0 = 10 mm in skin is umbilic and outside first-order validity: auto = the exact-sphere model there."""
     light = [BeamLight((0.3, 0.2, 40.0), (0, 0, -1))]
-    ref = transport.bake(sphere10, SKIN, light, model="exact-sphere")
-    got = transport.bake(sphere10, SKIN, light, model="auto")
+    ref = transport.bake(sphere10, SKIN, light, BakeOptions(model="exact-sphere"))
+    got = transport.bake(sphere10, SKIN, light, BakeOptions(model="auto"))
     assert got.stats["auto_kernel_exact-sphere"] == 1 and got.stats["auto_geodesic_exact"] == 1
     np.testing.assert_allclose(got.radiance, ref.radiance, rtol=1e-12, atol=0)
 
@@ -151,8 +154,8 @@ def test_auto_on_small_sphere_picks_the_exact_sphere(sphere10):
 def test_auto_flat_forced_dipole_equals_geodesic_dipole(sphere10):
     """curvature_tol = inf: every sample uses the planar dipole of the geodesic distance = curved at k = 0."""
     light = [BeamLight((0.3, 0.2, 40.0), (0, 0, -1))]
-    got = transport.bake(sphere10, SKIN, light, model="auto", auto_options=dict(curvature_tol=np.inf,
-                                                                                  geodesic_tol=0.0))
+    got = transport.bake(sphere10, SKIN, light, BakeOptions(
+        model="auto", surface=SurfaceOptions(auto=dict(curvature_tol=np.inf, geodesic_tol=0.0))))
     assert got.stats["auto_kernel_dipole"] == 1
     d = got.beam_distance
     ok = np.isfinite(d) & (d > 1.0)
@@ -168,7 +171,7 @@ def test_auto_flat_forced_dipole_equals_geodesic_dipole(sphere10):
 def test_groups_pay_on_a_fine_large_mesh():
     """The cost estimate: a 60 mm sphere with 0.6 mm edges in skin (cutoff 28 mm, groups of 2.4 mm)
     saves most geodesic pairs; a 4 mm sphere with 1.3 mm edges (near zone = the whole sphere) saves nothing."""
-    cut = transport.cutoff_radii(SKIN, 1e-4)
+    cut = cutoff_radii(SKIN, 1e-4)
     big = Mesh.from_arrays(*icosphere(60.0, 6))
     small = Mesh.from_arrays(*icosphere(4.0, 2))
     assert zones.groups_pay(big, cut) and not zones.groups_pay(small, cut)
@@ -210,11 +213,12 @@ def test_far_field_dipole_model_matches_no_far_field(sphere40):
     (M > 5 % of the peak: the lit side and past the terminator) that share is < 1e-3; in the dim far side, which
     is lit only through the shell, it is not small (measured up to 8 %), and the test says nothing there."""
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
-    off = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", transport="direct")
-    direct = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="pairwise",
-                            transport="direct")
-    clustered = transport.bake(sphere40, MARBLE, light, model="dipole", geodesic="arc", far_field="clustered",
-                               far_rel_tol=1e-2)
+    off = transport.bake(sphere40, MARBLE, light, BakeOptions(
+        model="dipole", surface=SurfaceOptions(geodesic="arc", transport="direct")))
+    direct = transport.bake(sphere40, MARBLE, light, BakeOptions(
+        model="dipole", surface=SurfaceOptions(geodesic="arc", far_field="pairwise", transport="direct")))
+    clustered = transport.bake(sphere40, MARBLE, light, BakeOptions(
+        model="dipole", surface=SurfaceOptions(geodesic="arc", far_field="clustered", far_rel_tol=1e-2)))
     assert direct.stats["zone_arc_near"] == direct.stats["entry_samples"]
     assert np.all(np.array(direct.stats["near_mm"]) < np.array(direct.stats["cutoff_mm"]))
     lit = off.radiance > 5e-2 * off.radiance.max(axis=0)
@@ -230,10 +234,10 @@ def test_auto_uses_clustered_far_field_only_where_flat(sphere40):
     """On a 40 mm sphere in marble nothing is flat on the scale of the 48 mm cutoff: no clustered far field;
     with curvature_tol = inf (declare everything flat) all vertex samples go to the clustered zone."""
     light = [DirectionalLight((0.3, -0.2, -1.0), 1.0)]
-    r = transport.bake(sphere40, MARBLE, light, model="auto", transport="direct")
+    r = transport.bake(sphere40, MARBLE, light, BakeOptions(model="auto", surface=SurfaceOptions(transport="direct")))
     assert r.stats.get("zone_exact_near", 0) + r.stats.get("zone_arc_near", 0) == 0
-    flat = transport.bake(sphere40, MARBLE, light, model="auto", auto_options=dict(curvature_tol=np.inf),
-                          transport="direct")
+    flat = transport.bake(sphere40, MARBLE, light, BakeOptions(
+        model="auto", surface=SurfaceOptions(auto=dict(curvature_tol=np.inf), transport="direct")))
     assert flat.stats.get("zone_exact_near", 0) + flat.stats.get("zone_arc_near", 0) == flat.stats["entry_samples"]
     # the clustered far field covers every (vertex, source, channel) pair with near_c < chord <= cutoff_c: an
     # independent brute-force count (numpy, all pairs) equals the leaf pairs when no cluster is accepted (rel_tol
@@ -290,8 +294,8 @@ def test_auto_on_a_large_marble_box_uses_dipole_arc_and_far_field():
     computing fewer geodesic pairs."""
     mesh = Mesh.from_arrays(*box((300.0, 300.0, 300.0), 30))
     light = [DirectionalLight((0.2, 0.1, -1.0), 1.0)]
-    ref = transport.bake(mesh, MARBLE, light, model="fitted", transport="direct")
-    got = transport.bake(mesh, MARBLE, light, model="auto", transport="direct")
+    ref = transport.bake(mesh, MARBLE, light, BakeOptions(model="fitted", surface=SurfaceOptions(transport="direct")))
+    got = transport.bake(mesh, MARBLE, light, BakeOptions(model="auto", surface=SurfaceOptions(transport="direct")))
     s = got.stats
     assert s["auto_kernel_dipole"] > 0 and s["auto_kernel_curved"] + s["auto_kernel_fitted"] > 0
     assert s.get("zone_arc_near", 0) + s.get("zone_exact_near", 0) > 0 and s["far_field"] == "clustered"
@@ -299,7 +303,7 @@ def test_auto_on_a_large_marble_box_uses_dipole_arc_and_far_field():
     # where every pair within the cutoff stays on one face the two are the same kernel (the fitted model's pairs
     # across an edge see the edge's bend, eq. (85), which auto's dipole sources do not)
     v = mesh.vertices
-    inner = np.sort(150.0 - np.abs(v), axis=1)[:, 1] > transport.cutoff_radii(MARBLE, 1e-4).max()
+    inner = np.sort(150.0 - np.abs(v), axis=1)[:, 1] > cutoff_radii(MARBLE, 1e-4).max()
     lit = (ref.radiance[:, 0] > 1e-3 * ref.radiance[:, 0].max()) & inner
     assert lit.sum() > 200
     rel = np.abs(got.radiance - ref.radiance)[lit, 0] / ref.radiance[lit, 0]

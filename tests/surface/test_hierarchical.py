@@ -1,4 +1,4 @@
-"""The hierarchical transport (meshshade/transport/hierarchical.py) against the direct sum, its clusters against
+"""The hierarchical transport (meshshade/surface/hierarchical.py) against the direct sum, its clusters against
 their own leaves, the sigma points' moments, the distance check, reuse across lights, and the CLI option.
 
 Reference values: the direct sum (transport="direct", every pair within the cutoff with exact polyhedral
@@ -19,10 +19,11 @@ from meshshade.io import write_ply
 from meshshade.light import BeamLight, DirectionalLight, entry_samples
 from meshshade.materials import material_from_options
 from meshshade.transport.baking import bake
-from meshshade.transport.farfield_loops import kd_permutation, node_ranges, tree_depth
-from meshshade.transport.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
+from meshshade.surface.farfield_loops import kd_permutation, node_ranges, tree_depth
+from meshshade.surface.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
                                               vertex_power)
-from meshshade.transport.hierarchy_loops import cluster_geometry
+from meshshade.surface.hierarchy_loops import cluster_geometry
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 SKIN = material_from_options("skin1")
 MARBLE = material_from_options("marble")
@@ -53,8 +54,8 @@ LEVEL_TOL = {3: (8e-3, 3e-2), 4: (5e-3, 2e-2)}
 
 
 def _check_against_direct(mesh, material, model, level):
-    ref = bake(mesh, material, [SUN], model=model, transport="direct")
-    got = bake(mesh, material, [SUN], model=model, transport="hierarchical")
+    ref = bake(mesh, material, [SUN], BakeOptions(model=model, surface=SurfaceOptions(transport="direct")))
+    got = bake(mesh, material, [SUN], BakeOptions(model=model, surface=SurfaceOptions(transport="hierarchical")))
     assert got.stats["transport"] == "hierarchical" and ref.stats["transport"] == "direct"
     err = _errors(got.radiance, ref.radiance)
     mean_tol, p99_tol = LEVEL_TOL[level]
@@ -81,8 +82,8 @@ def test_hierarchical_matches_the_direct_sum_on_a_finer_sphere(model):
 
 def test_auto_transport_uses_the_hierarchy_on_a_sphere_and_beams_stay_direct(sphere3):
     lights = [SUN, BeamLight((0.0, 0.0, 30.0), (0.0, 0.0, -1.0), 1.0)]
-    ref = bake(sphere3, SKIN, lights, model="auto", transport="direct")
-    got = bake(sphere3, SKIN, lights, model="auto")
+    ref = bake(sphere3, SKIN, lights, BakeOptions(model="auto", surface=SurfaceOptions(transport="direct")))
+    got = bake(sphere3, SKIN, lights, BakeOptions(model="auto"))
     assert got.stats["transport"] == "hierarchical"
     assert got.beam_distance is not None and got.plan is not None and got.plan.kernel.shape == (len(got.samples),)
     np.testing.assert_array_equal(got.plan.kernel[got.samples.vertex < 0], ref.plan.kernel[ref.samples.vertex < 0])
@@ -149,26 +150,27 @@ def test_the_distance_check_refuses_a_thin_torus_and_auto_falls_back(caplog):
     mesh = Mesh(*torus(4.0, 2.5, 48, 24))
     with pytest.raises(FarFieldUnsupported, match="not accurate on this mesh"):
         SurfaceTransport.build(mesh, SKIN, "dipole")
-    res = bake(mesh, SKIN, [SUN], model="dipole")
+    res = bake(mesh, SKIN, [SUN], BakeOptions(model="dipole"))
     assert res.stats["transport"].startswith("direct (hierarchical far field not accurate")
     with caplog.at_level(logging.WARNING, logger="meshshade"):
-        forced = bake(mesh, SKIN, [SUN], model="dipole", transport="hierarchical")
+        forced = bake(mesh, SKIN, [SUN], BakeOptions(model="dipole", surface=SurfaceOptions(transport="hierarchical")))
     assert forced.stats["transport"] == "hierarchical" and "asked for" in caplog.text
 
 
 def test_one_transport_serves_many_lights(sphere3):
     core = SurfaceTransport.build(sphere3, SKIN, "curved")
     other = DirectionalLight((-1.0, 0.2, 0.1), 0.5)
-    both = bake(sphere3, SKIN, [SUN, other], model="curved", transport=core)
-    again = bake(sphere3, SKIN, [SUN, other], model="curved", transport="hierarchical")
+    both = bake(sphere3, SKIN, [SUN, other], BakeOptions(model="curved"), reuse=core)
+    again = bake(sphere3, SKIN, [SUN, other], BakeOptions(
+        model="curved", surface=SurfaceOptions(transport="hierarchical")))
     np.testing.assert_allclose(both.radiance, again.radiance, rtol=1e-12, atol=0)
-    one = bake(sphere3, SKIN, [SUN], model="curved", transport=core)
-    two = bake(sphere3, SKIN, [other], model="curved", transport=core)
+    one = bake(sphere3, SKIN, [SUN], BakeOptions(model="curved"), reuse=core)
+    two = bake(sphere3, SKIN, [other], BakeOptions(model="curved"), reuse=core)
     # M is linear in the sources; the clusters depend on the power distribution, so only to the cluster error
     err = _errors(one.radiance + two.radiance, both.radiance)
     assert np.all(err[:, 0] <= 2e-3), err
     with pytest.raises(ValueError, match="built for another"):
-        bake(sphere3, MARBLE, [SUN], model="curved", transport=core)
+        bake(sphere3, MARBLE, [SUN], BakeOptions(model="curved"), reuse=core)
 
 
 @settings(max_examples=15, deadline=None)
@@ -218,7 +220,7 @@ def test_cli_transport_option(tmp_path, capsys):
 def test_the_far_field_verification_sees_the_arc_errors_of_a_lit_configuration(sphere3):
     """verify_far_field (receiver side, actual powers) is small on a sphere (arcs exact) and large on the thin
     torus (arcs across the hole; conservative there: the dipole's far share is small at this resolution)."""
-    res = bake(sphere3, SKIN, [SUN], model="dipole", transport="auto")
+    res = bake(sphere3, SKIN, [SUN], BakeOptions(model="dipole", surface=SurfaceOptions(transport="auto")))
     assert res.stats["transport"] == "hierarchical"
     v = res.stats["far_field_verified"]
     assert v["receivers"] == 24 and v["mean"] < 2e-3
@@ -229,7 +231,7 @@ def test_the_far_field_verification_sees_the_arc_errors_of_a_lit_configuration(s
     M, _ = core.exitance(pv)
     v = verify_far_field(core, M, pv)
     assert v["mean"] > 5 * VERIFY_TOL[0]
-    assert bake(mesh, SKIN, [SUN], model="dipole").stats["transport"].startswith("direct (")
+    assert bake(mesh, SKIN, [SUN], BakeOptions(model="dipole")).stats["transport"].startswith("direct (")
 
 
 def test_far_field_does_not_depend_on_threads_or_blocks(sphere3, monkeypatch):
@@ -238,7 +240,7 @@ def test_far_field_does_not_depend_on_threads_or_blocks(sphere3, monkeypatch):
     computed on its own; a scratch value carried from one receiver to the next within a block would differ)."""
     import numba
 
-    from meshshade.transport import hierarchical
+    from meshshade.surface import hierarchical
 
     core = SurfaceTransport.build(sphere3, SKIN, "curved")
     rng = np.random.default_rng(5)

@@ -1,9 +1,9 @@
-"""Zones of the bake (meshshade/transport/zones.py): named methods and the assignment per entry sample."""
+"""Zones of the bake (meshshade/surface/zones.py): named methods and the assignment per entry sample."""
 import numpy as np
 
-from meshshade.transport import zones
-from meshshade.transport.auto import AutoPlan
-from meshshade.transport.zones import ZONES, assign_zones
+from meshshade.surface import zones
+from meshshade.surface.auto import AutoPlan
+from meshshade.surface.zones import ZONES, assign_zones
 
 
 def test_zones_are_named_and_indexed_by_their_constants():

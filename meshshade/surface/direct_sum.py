@@ -2,53 +2,41 @@
 
 :func:`direct_sum` runs, for the entry samples it is given: the near/far split of the far field, the auto plan,
 the zones (zones.py), the gather per zone (gather.py), the clustered far field (farfield.py) and the first beam's
-distance field. :func:`~meshshade.transport.baking.bake` calls it for ``transport="direct"``, where the
+distance field. :func:`~meshshade.surface.baking.surface_bake` calls it for ``transport="direct"``, where the
 hierarchical transport does not hold, and for the beams' point samples.
 """
 from __future__ import annotations
 
 import logging
 from dataclasses import replace
-from typing import NamedTuple
 
 import numpy as np
 
 from meshshade.light import BeamLight
 from meshshade.progress import Progress, kernel_interrupts
-from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
-from meshshade.transport.farfield import far_field_exitance, far_field_exitance_pairwise, far_field_radius
-from meshshade.transport.gather import PairStream, chunk_size, gather
-from meshshade.transport.source_factors import drift_angles, near_field_factors, refracted_drift
-from meshshade.transport.pair_kernel import PairKernel, source_frames
-from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
-from meshshade.transport.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay, neighbourhood_solver
+from meshshade.surface.auto import AutoPlan, neighbourhood_curvature, plan_sources
+from meshshade.surface.farfield import far_field_exitance, far_field_exitance_pairwise, far_field_radius
+from meshshade.surface.gather import PairStream, chunk_size, gather
+from meshshade.surface.options import SurfaceOptions
+from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.pair_kernel import PairKernel, source_frames
+from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
+from meshshade.surface.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay, neighbourhood_solver
 
 log = logging.getLogger("meshshade")
 
 
-class SumOptions(NamedTuple):
-    """The options of :func:`bake` that its direct sum uses (their meanings there)."""
-
-    model: str
-    far_field: str
-    far_tol: float
-    far_rel_tol: float
-    far_geodesic: str
-    geodesic: str
-    rtol: float
-    auto_options: dict | None
-    progress: bool | str
-    source_model: str = "point"
-
-
-def direct_sum(mesh, material, lights, samples, curv, cut, clock, opts: SumOptions):
-    """The direct sum of :func:`bake` over ``samples``: (M, beam distance, stats, AutoPlan or None, kernel stats)."""
-    model, far_field, far_tol, far_rel_tol, far_geodesic, geodesic, rtol, auto_options, progress, source_model = opts
+def direct_sum(mesh, material, lights, samples, curv, cut, clock, model: str, options: SurfaceOptions,
+               progress: bool | str = False):
+    """The direct sum of model ``model`` with ``options`` over ``samples``: (M, beam distance, stats, AutoPlan or
+    None, kernel stats)."""
+    far_geodesic, geodesic, rtol = options.far_geodesic, options.geodesic, options.rtol
+    source_model = options.source_model_of(model)
     frames = source_frames(samples, curv, mesh.faces)
-    far_field, near = _near_radius(mesh, material, samples, cut, far_field, far_tol)
+    far_field, near = _near_radius(mesh, material, samples, cut, options.far_field_of(model), options.far_tol)
     plan = None
     if model == "auto":
-        plan = _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, auto_options)
+        plan = _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, options.auto)
         clock.lap("auto")
     if plan is not None and far_geodesic == "shared" and not groups_pay(mesh, cut):
         far_geodesic = "none"  # small mesh or short cutoff: shared far-zone geodesics would not save work
@@ -76,7 +64,7 @@ def direct_sum(mesh, material, lights, samples, curv, cut, clock, opts: SumOptio
         M, gstats = _gather_near(kernel, stream, groups, chord_cut, progress)
         stats.update(gstats)
         if np.any(clustered):
-            M_far, fstats = _far_field(samples, clustered, mesh, material, near, cut, far_field, far_rel_tol,
+            M_far, fstats = _far_field(samples, clustered, mesh, material, near, cut, far_field, options.far_rel_tol,
                                        None if factors is None else kernel.source_scale,
                                        None if factors is None else (factors.log_ratio_table(),
                                                                      *factors.slope_table(0)[1:]))
@@ -122,9 +110,9 @@ def _near_radius(mesh, material, samples, cut, far_field: str, far_tol: float) -
     return far_field, near
 
 
-def _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, auto_options):
+def _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, tolerances):
     """The AutoPlan of the entry samples: curvature maxima within each sample's near radius and cutoff, then
-    :func:`~meshshade.transport.auto.plan_sources` (exact geodesics switched off when ``geodesic`` is "arc")."""
+    :func:`~meshshade.surface.auto.plan_sources` (exact geodesics switched off when ``geodesic`` is "arc")."""
     k = len(samples)
     area = samples.vertex >= 0
     near_radius = (np.where(area, NEAR_MARGIN * near.max(), cut.max()) if far_field != "off"
@@ -135,7 +123,7 @@ def _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geod
                                               mesh.mean_edge_length)
     k_near, k_far, kmin_far = kn_near[:, 0], kn_far[:, 0], -kn_far[:, 1]
     plan = plan_sources(frames.k1, frames.k2, k_near, k_far, material, near_radius, cut, kmin_far=kmin_far,
-                        **(auto_options or {}))
+                        **tolerances.keywords())
     if geodesic != "exact":
         plan = replace(plan, exact_geodesic=np.zeros(k, dtype=bool))
     return plan

@@ -43,10 +43,9 @@ import numpy as np
 
 from meshshade.errors import ParameterError
 from meshshade.kernels.dipole import dipole_profile
-from meshshade.kernels.near_field import (incidence_gain, near_field_profile, near_field_ring, near_field_sources,
-                                          near_field_total)
+from meshshade.kernels.near_field import NearFieldModel
 from meshshade.materials import Material
-from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, _disc_average
+from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, _disc_average
 
 #: the source models: what enters the medium at an entry sample, the kernels' own point source at z_r ("point") or
 #: the near-field model ("beam")
@@ -79,16 +78,18 @@ def source_model_keyword(source_model, near_field, stacklevel: int = 3):
 
 
 class _Channel:
-    """The factor tables of one (alpha', eta, g), optical units."""
+    """The factor tables of one medium channel (its :class:`~meshshade.kernels.near_field.NearFieldModel`),
+    optical units."""
 
-    def __init__(self, albedo_prime: float, eta: float, g: float):
-        self.kw = {"albedo_prime": albedo_prime, "eta": eta}
-        self.g = g
-        self.clamped = near_field_sources(albedo_prime, eta, g)[2]
-        self.total = near_field_total(g=g, **self.kw)
+    def __init__(self, model: NearFieldModel):
+        self.model = model
+        self.kw = {"albedo_prime": model.albedo_prime, "eta": model.eta}
+        self.g = model.g
+        self.clamped = model.clamped
+        self.total = model.total()
         r = np.exp(_N_LOG_R)
         with np.errstate(under="ignore", divide="ignore", invalid="ignore"):
-            log_n = np.log(near_field_profile(r, g=g, **self.kw) / dipole_profile(r, **self.kw))
+            log_n = np.log(model.profile(r) / dipole_profile(r, **self.kw))
         ok = np.isfinite(log_n)   # far out both kernels underflow: the last finite ratio from there on
         last = int(np.flatnonzero(ok)[-1])
         log_n[last + 1:] = log_n[last]
@@ -96,17 +97,17 @@ class _Channel:
         # the near-field model's logarithmic slope -d ln R_near / d ln r (eq. (88)); where R_near underflows its
         # exponential tail continues the slope in proportion to r
         with np.errstate(under="ignore", divide="ignore"):
-            log_near = np.log(near_field_profile(r, g=g, **self.kw))
+            log_near = np.log(model.profile(r))
         fin = np.isfinite(log_near)
         lastn = int(np.flatnonzero(fin)[-1])
         slope = -np.gradient(log_near[:lastn + 1], _N_LOG_R[:lastn + 1])
         self.slope = np.concatenate([slope, slope[-1] * r[lastn + 1:] / r[lastn]])
         self._spline = None
-        self.incidence = np.array([incidence_gain(g=g, cos_t=c, **self.kw) for c in _COS_T])
+        self.incidence = np.array([model.incidence_gain(c) for c in _COS_T])
 
     # kernels and tails
     def near(self, r):
-        return near_field_profile(r, g=self.g, **self.kw)
+        return self.model.profile(r)
 
     def near_tail(self, r):
         """int_r^inf R_near 2 pi r dr (arrays)."""
@@ -115,7 +116,7 @@ class _Channel:
         pos = r > 0
         if np.any(pos):
             rp = r[pos]
-            out[pos] = self.total - np.pi * rp * rp * near_field_ring(0.0 * rp, rp, g=self.g, **self.kw)
+            out[pos] = self.total - np.pi * rp * rp * self.model.ring(0.0 * rp, rp)
         return np.maximum(out, 0.0)
 
     def point(self, r):
@@ -163,11 +164,10 @@ class NearFieldFactors:
     def __init__(self, material: Material):
         self.material = material
         self._channels = {}
-        for c in range(3):
-            key = (float(material.albedo_prime[c]), float(material.eta), float(material.g))
-            if key not in self._channels:
-                self._channels[key] = _Channel(*key)
         self._key = [(float(material.albedo_prime[c]), float(material.eta), float(material.g)) for c in range(3)]
+        for c, key in enumerate(self._key):   # a channel like an earlier one shares its tables
+            if key not in self._channels:
+                self._channels[key] = _Channel(material.medium.near_field(c))
 
     @property
     def clamped(self) -> bool:

@@ -17,9 +17,10 @@ from meshshade.kernels.fitted_curvature import chord_curvature, helix_chord_curv
 from meshshade.light import BeamLight, DirectionalLight
 from meshshade.materials import Material
 from meshshade.profiles import Shape, reflectance_profile
-from meshshade.transport import auto, cutoff_radii
+from meshshade.surface import auto, cutoff_radii
 from meshshade.transport.baking import bake
-from meshshade.transport.models import Kernel
+from meshshade.surface.models import Kernel
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 MAT = Material(1.0, 0.01, 1.3, name="skin-like")
 R = 10.0
@@ -55,7 +56,7 @@ def test_beam_bake_follows_the_profile_on_a_sphere(sphere10):
     tessellation; the fitted model's exponent reaches 1.2 there, so a bake that used the wrong curvatures along
     the pairs, or none, misses by 20-200 %)."""
     top = np.array([0.0131, 0.0071, R])
-    res = bake(sphere10, MAT, [BeamLight(top + [0, 0, 10.0], (0.0, 0.0, -1.0))], model="fitted")
+    res = bake(sphere10, MAT, [BeamLight(top + [0, 0, 10.0], (0.0, 0.0, -1.0))], BakeOptions(model="fitted"))
     v = sphere10.vertices
     s = R * np.arccos(np.clip(v @ top / (R * np.linalg.norm(top)), -1.0, 1.0))
     m = (s > 1.5) & (s < 25.0)
@@ -63,7 +64,7 @@ def test_beam_bake_follows_the_profile_on_a_sphere(sphere10):
     got = res.radiance[m, 0] / res.stats["entering_power"]
     assert np.median(np.abs(got / want - 1)) < 0.03
     assert np.max(np.abs(got / want - 1)) < 0.06
-    curved = bake(sphere10, MAT, [BeamLight(top + [0, 0, 10.0], (0.0, 0.0, -1.0))], model="curved")
+    curved = bake(sphere10, MAT, [BeamLight(top + [0, 0, 10.0], (0.0, 0.0, -1.0))], BakeOptions(model="curved"))
     far = m & (s > 15.0)
     assert np.mean(res.radiance[far, 0]) > 1.3 * np.mean(curved.radiance[far, 0])   # beyond first order
 
@@ -79,8 +80,10 @@ def test_direct_and_hierarchical_transports_agree(level):
     (measured: median 1e-4, max 9e-4 at both levels)."""
     mesh = Mesh(*icosphere(R, level))
     light = DirectionalLight((0.0, 0.0, -1.0))
-    direct = bake(mesh, MAT, [light], model="fitted", geodesic="arc", transport="direct")
-    hier = bake(mesh, MAT, [light], model="fitted", geodesic="arc", transport="hierarchical")
+    direct = bake(mesh, MAT, [light], BakeOptions(
+        model="fitted", surface=SurfaceOptions(geodesic="arc", transport="direct")))
+    hier = bake(mesh, MAT, [light], BakeOptions(
+        model="fitted", surface=SurfaceOptions(geodesic="arc", transport="hierarchical")))
     lit = direct.radiance[:, 0] > 1e-3 * direct.radiance[:, 0].max()
     rel = np.abs(hier.radiance[lit, 0] / direct.radiance[lit, 0] - 1)
     assert np.median(rel) < 0.01 and np.max(rel) < 0.05

@@ -3,9 +3,9 @@
 The kernel is expanded at the entry point x_i (docs/physics.md §1.3): rho is the geodesic distance from x_i to x_o,
 phi the direction of x_o in x_i's tangent plane from x_i's first principal direction, and k1, k2 are x_i's
 principal curvatures (:class:`SourceFrames`). :class:`PairKernel` evaluates the kernel of each source
-(:class:`~meshshade.transport.models.Kernel`, from the model or the auto plan) per channel for arrays of pairs,
-through the one compiled evaluation :func:`~meshshade.transport.kernel_evaluation.kernel_value`; the patch average
-of a vertex sample's kernel is :mod:`meshshade.transport.patch_average`.
+(:class:`~meshshade.surface.models.Kernel`, from the model or the auto plan) per channel for arrays of pairs,
+through the one compiled evaluation :func:`~meshshade.surface.kernel_evaluation.kernel_value`; the patch average
+of a vertex sample's kernel is :mod:`meshshade.surface.patch_average`.
 """
 from __future__ import annotations
 
@@ -17,9 +17,9 @@ from meshshade.errors import ParameterError
 from meshshade.kernels.curvature import VALIDITY_TOL
 from meshshade.kernels.fitted_curvature import chord_curvature, normal_curvatures
 from meshshade.materials import Material
-from meshshade.transport.kernel_evaluation import (SPHERE_THETA_POINTS, KernelParams, SphereTables, curved_values,
+from meshshade.surface.kernel_evaluation import (SPHERE_THETA_POINTS, KernelParams, SphereTables, curved_values,
                                                    kernel_params, kernel_values)
-from meshshade.transport.models import MODEL_KERNEL, MODELS, Kernel
+from meshshade.surface.models import MODEL_KERNEL, MODELS, Kernel
 
 
 @dataclass(frozen=True)
@@ -74,9 +74,9 @@ def source_frames(samples, curv, faces) -> SourceFrames:
 class PairKernel:
     """Evaluates R [mm^-2] of one model and material for arrays of (source, exit) pairs.
 
-    Each source takes one :class:`~meshshade.transport.models.Kernel`: the model's, or for ``model="auto"`` the
-    one its plan gives (``plan``, meshshade.transport.auto.AutoPlan). Every pair is evaluated by
-    :func:`~meshshade.transport.kernel_evaluation.kernel_values` with the :class:`KernelParams` ``params`` (built
+    Each source takes one :class:`~meshshade.surface.models.Kernel`: the model's, or for ``model="auto"`` the
+    one its plan gives (``plan``, meshshade.surface.auto.AutoPlan). Every pair is evaluated by
+    :func:`~meshshade.surface.kernel_evaluation.kernel_values` with the :class:`KernelParams` ``params`` (built
     here, reaching ``reach_mm`` or the longest pair seen, when not given). Exact-sphere sources read the series
     from :class:`SphereTables` (``sphere``, built here when not given), except that a radius bin with at most
     ``sphere_series_pairs`` pairs in one call (a beam) takes the series at each pair exactly. Channels with equal
@@ -89,17 +89,17 @@ class PairKernel:
         if model not in MODELS or model == "volume":
             raise ParameterError(f"unknown surface model {model!r}; choose one of "
                                  f"{', '.join(m for m in MODELS if m != 'volume')}")
-        #: the near-field factors (transport.source_factors.NearFieldFactors) the gather multiplies pairs by, or None
+        #: the near-field factors (surface.source_factors.NearFieldFactors) the gather multiplies pairs by, or None
         #: for the kernels' own point source at z_r; with them, ``source_scale`` (k, 3): each source's incidence
         #: scale per channel (NearFieldFactors.incidence_scale), or None
         self.near_factors = near
         self.source_scale = None
         #: with the near-field factors, each source's sideways drift (sin theta_t (k,), its azimuth psi (k,) in the
-        #: source frame; transport.source_factors.drift_angles), or None: the gather multiplies pairs by
+        #: source frame; surface.source_factors.drift_angles), or None: the gather multiplies pairs by
         #: NearFieldFactors.drift_factor (docs/physics.md eq. (88))
         self.source_drift = None
         if model == "auto" and plan is None:
-            raise ValueError("model 'auto' needs the per-sample plan (meshshade.transport.auto.plan_sources)")
+            raise ValueError("model 'auto' needs the per-sample plan (meshshade.surface.auto.plan_sources)")
         self.model, self.material, self.frames, self.plan = model, material, frames, plan
         #: (k,) int8: each source's kernel
         self.kind = (np.asarray(plan.kernel, dtype=np.int8) if model == "auto"

@@ -2,7 +2,7 @@
 
 Scene: the bench's ``sphere_r20_directional`` (meshshade/bench/scenes.py: radius 20 mm, 1.5 mm edges at icosphere
 level 4), sigma_s' = 1, sigma_a = 0.01 /mm, eta = 1.3, a directional light along -z, ``model="exact-sphere"``.
-The reference (tests/transport/_sphere_reference.py) integrates the exact sphere series over the lit cap with the
+The reference (tests/surface/_sphere_reference.py) integrates the exact sphere series over the lit cap with the
 Fresnel entry written out independently; it is checked here first (convergence, energy, planar limit, Fresnel
 edges), then the bake is held to it. Errors are relative, over every vertex whose reference exitance exceeds
 1e-3 of its peak (here the whole sphere, shadow side included).
@@ -26,7 +26,8 @@ from meshshade.kernels.sphere import sphere_total_reflectance
 from meshshade.light import DirectionalLight
 from meshshade.materials import Material
 from meshshade.transport.baking import bake
-from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
+from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
+from meshshade.transport import BakeOptions, SurfaceOptions
 
 _spec = importlib.util.spec_from_file_location("_sphere_reference", Path(__file__).with_name("_sphere_reference.py"))
 ref = importlib.util.module_from_spec(_spec)
@@ -150,7 +151,8 @@ def test_level3_bake_against_the_reference(level3, transport):
     """Level 3 (3 mm edges, 3 transport lengths): lit side measured 1.1 %/3.4 % (direct) and 1.15 %/3.5 %
     (hierarchical), mean/max; before the near-field fix 3.3 %/5.5 % (a -3.3 % bias). The whole sphere (2.4 %/8.0 %
     direct, 2.0 %/7.3 % hierarchical) is dominated by the quadric fit's local radius, 1.8 % short at this level."""
-    res = bake(level3, MAT, [SUN], model="exact-sphere", cutoff_tol=FULL_CUTOFF, transport=transport)
+    res = bake(level3, MAT, [SUN], BakeOptions(
+        model="exact-sphere", surface=SurfaceOptions(cutoff_tol=FULL_CUTOFF, transport=transport)))
     assert res.stats["transport"] == transport
     err = _errors(res, level3)
     assert err["lit"][0] <= 0.015 and err["lit"][1] <= 0.04, err
@@ -162,7 +164,7 @@ def test_level4_meets_the_issue_target():
     default (hierarchical) transport: 0.42 %/1.60 % (before the fix 1.41 %/4.22 %); lit 0.35 %/1.60 %, shadow
     0.50 %/1.57 %; level 5: 0.11 %/0.74 % (before 0.78 %/2.21 %)."""
     mesh = Mesh(*icosphere(R, 4))
-    res = bake(mesh, MAT, [SUN], model="exact-sphere", cutoff_tol=FULL_CUTOFF)
+    res = bake(mesh, MAT, [SUN], BakeOptions(model="exact-sphere", surface=SurfaceOptions(cutoff_tol=FULL_CUTOFF)))
     err = _errors(res, mesh)
     assert err["all"][0] <= 0.005 and err["all"][1] <= 0.02, err
     assert err["lit"][0] <= 0.004, err
@@ -175,7 +177,8 @@ def test_level4_meets_the_issue_target():
                    "with the exact radius 0.23 %/1.61 %")
 def test_level4_direct_sum_meets_the_issue_target():
     mesh = Mesh(*icosphere(R, 4))   # ~40 s: every pair of 2562 vertices with exact polyhedral geodesics
-    res = bake(mesh, MAT, [SUN], model="exact-sphere", cutoff_tol=FULL_CUTOFF, transport="direct")
+    res = bake(mesh, MAT, [SUN], BakeOptions(
+        model="exact-sphere", surface=SurfaceOptions(cutoff_tol=FULL_CUTOFF, transport="direct")))
     err = _errors(res, mesh)
     assert err["lit"][0] <= 0.004 and err["lit"][1] <= 0.02, err        # the near field itself holds
     assert err["all"][0] <= 0.005 and err["all"][1] <= 0.02, err
@@ -183,8 +186,8 @@ def test_level4_direct_sum_meets_the_issue_target():
 
 @pytest.mark.xfail(strict=True, reason="the default cutoff (cutoff_tol 1e-4 of the planar dipole's total: 39.7 mm) "
                    "is shorter than the sphere's half circumference (62.8 mm), and the sphere kernel's far tail is "
-                   "far above the dipole's: the shadow side loses up to 70 % (transport/gather.py cutoff_radii)")
+                   "far above the dipole's: the shadow side loses up to 70 % (surface/gather.py cutoff_radii)")
 def test_default_cutoff_reaches_the_shadow_side(level3):
-    res = bake(level3, MAT, [SUN], model="exact-sphere")
+    res = bake(level3, MAT, [SUN], BakeOptions(model="exact-sphere"))
     err = _errors(res, level3)
     assert err["shadow"][1] <= 0.1, err

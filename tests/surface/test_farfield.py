@@ -1,4 +1,4 @@
-"""Clustered far-field dipole sum (meshshade/transport/farfield.py, transport/farfield_loops.py).
+"""Clustered far-field dipole sum (meshshade/surface/farfield.py, surface/farfield_loops.py).
 
 References: the dipole and its t-derivatives from an mpmath implementation of Jensen's formula
 (docs/physics.md eq. (15))
@@ -13,14 +13,14 @@ import mpmath as mp
 import numpy as np
 import pytest
 
-from meshshade.transport import farfield_loops as fk
+from meshshade.surface import farfield_loops as fk
 from meshshade.errors import MeshshadeError
-from meshshade.transport.farfield import SourceTree, far_field_exitance, far_field_exitance_pairwise, far_field_radius
+from meshshade.surface.farfield import SourceTree, far_field_exitance, far_field_exitance_pairwise, far_field_radius
 from meshshade.geometry.procedural import box, icosphere
 from meshshade.kernels.dipole import dipole_profile, dipole_tail_reflectance, dipole_total_reflectance
 from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
-from meshshade.transport.gather import cutoff_radii
+from meshshade.surface.gather import cutoff_radii
 
 MATERIALS = ("skin1", "marble", "wholemilk")
 

@@ -8,7 +8,6 @@ vertices (:func:`gather`).
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,10 +15,10 @@ import numpy as np
 from meshshade.kernels.dipole import dipole_cutoff_radius
 from meshshade.materials import Material
 from meshshade.progress import kernel_interrupts
-from meshshade.transport.sample_groups import group_samples, expand_far_pairs
-from meshshade.transport.pair_kernel import PairKernel, SourceFrames
-from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
-from meshshade.transport.zones import NEAR_MARGIN, ZONES, group_geometry
+from meshshade.surface.sample_groups import group_samples, expand_far_pairs
+from meshshade.surface.pair_kernel import PairKernel, SourceFrames
+from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
+from meshshade.surface.zones import NEAR_MARGIN, ZONES, group_geometry
 
 #: pairs evaluated per chunk (memory ~ 100 bytes per pair)
 PAIRS_PER_CHUNK = 4_000_000
@@ -43,8 +42,8 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
     reflectance is negligible); ``cutoff_mm`` is (3,), or (k, 3) per source and channel. ``chord_cutoff_mm``
     (k, 3) or None: pairs must also have chord <= it (the near zone of sources whose far field is summed by
     clusters). ``source_radius`` (k,) mm: patch radius of each source (0 for a pencil beam), see
-    :func:`~meshshade.transport.patch_average.patch_average_factor`. With the near field of ``kernel.near_factors``
-    (transport/source_factors.py) every pair is also multiplied by its near-field factor (and, with
+    :func:`~meshshade.surface.patch_average.patch_average_factor`. With the near field of ``kernel.near_factors``
+    (surface/source_factors.py) every pair is also multiplied by its near-field factor (and, with
     ``kernel.source_drift``, by the drift factor of eq. (88)), and a point source (a beam)
     is averaged over the receiver's patch, of radius ``receiver_radius`` (n_vertices,) mm: a vertex's exitance
     stands for its patch, and the near field peaks within it. Returns M (n_vertices, 3) W/mm^2 and counts.
@@ -84,25 +83,6 @@ def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, so
             for cc in same:
                 M[:, cc] += acc
     return M, {"pairs_evaluated": int(n_pairs.sum()), "channels_computed": len(kernel.channels)}
-
-
-class Stopwatch:
-    """Wall time per stage: :meth:`lap` charges the time since the previous lap to a stage (seconds, summed)."""
-
-    def __init__(self):
-        self.timings: dict = {}
-        self._t0 = time.perf_counter()
-
-    def lap(self, name: str) -> None:
-        t = time.perf_counter()
-        self.timings[name] = self.timings.get(name, 0.0) + t - self._t0
-        self._t0 = t
-
-    def charge(self, timings: dict) -> None:
-        """Add stage times measured elsewhere (``{stage: seconds}``) and restart the lap there."""
-        for name, seconds in timings.items():
-            self.timings[name] = self.timings.get(name, 0.0) + seconds
-        self._t0 = time.perf_counter()
 
 
 def chunk_size(mesh, src_cut) -> int:

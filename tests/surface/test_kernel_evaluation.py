@@ -1,4 +1,4 @@
-"""The one compiled kernel evaluation (meshshade/transport/kernel_evaluation.py) against independent routes.
+"""The one compiled kernel evaluation (meshshade/surface/kernel_evaluation.py) against independent routes.
 
 References: the curved kernel written out here from its definition (docs/physics.md eqs. (49)-(53), soft policy
 and entry-point cap) with the ratios a, b by direct quadrature (``curvature_ratios``, not the table the evaluation
@@ -21,11 +21,11 @@ from meshshade.kernels.curvature import CurvatureTable
 from meshshade.kernels.optics import diffusion_params
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
-from meshshade.transport import hierarchy_loops
-from meshshade.transport.auto import AutoPlan
-from meshshade.transport.kernel_evaluation import SphereTables, kernel_params, kernel_values
-from meshshade.transport.models import KERNEL_NAMES, MODEL_KERNEL, Kernel
-from meshshade.transport.pair_kernel import PairKernel, SourceFrames
+from meshshade.surface import hierarchy_loops
+from meshshade.surface.auto import AutoPlan
+from meshshade.surface.kernel_evaluation import SphereTables, kernel_params, kernel_values
+from meshshade.surface.models import KERNEL_NAMES, MODEL_KERNEL, Kernel
+from meshshade.surface.pair_kernel import PairKernel, SourceFrames
 
 MAT = Material([1.0, 0.8, 0.5], [0.01, 0.03, 0.1], 1.3, name="three channels")
 
@@ -169,7 +169,7 @@ def test_the_far_traversal_takes_records_not_positional_tuples():
 
 def test_compiled_loops_hold_one_kernel_each():
     """One compiled loop per kernel kind, compiled on first use only (a dipole bake compiles no other kernel)."""
-    from meshshade.transport import kernel_evaluation
+    from meshshade.surface import kernel_evaluation
 
     for table in (kernel_evaluation._VALUES, hierarchy_loops.FAR_TRAVERSE):
         assert set(table) == {int(k) for k in Kernel}

@@ -44,7 +44,7 @@ from scipy.spatial import cKDTree
 from meshshade.geometry.topology import vertex_adjacency
 from meshshade.kernels.curvature import VALIDITY_TOL, curvature_ratios
 from meshshade.materials import Material
-from meshshade.transport.models import KERNEL_NAMES, Kernel
+from meshshade.surface.models import KERNEL_NAMES, Kernel
 
 #: defaults (see module docstring; the validity tolerance is the curvature kernel's own, VALIDITY_TOL)
 CURVATURE_TOL = 1e-2
@@ -54,7 +54,7 @@ UMBILIC_TOL = 0.1
 
 @dataclass(frozen=True)
 class AutoPlan:
-    """Per entry sample: ``kernel`` (k,) int8, a :class:`~meshshade.transport.models.Kernel` 0-3 (named by
+    """Per entry sample: ``kernel`` (k,) int8, a :class:`~meshshade.surface.models.Kernel` 0-3 (named by
     KERNEL_NAMES); ``exact_geodesic`` (k,) bool (exact geodesics in the near zone); ``far_dipole`` (k,) bool (the
     surface is flat on the scale of the cutoff around the sample, so its far field may be summed by clusters with
     the planar dipole of the chord)."""

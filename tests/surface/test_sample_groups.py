@@ -1,4 +1,4 @@
-"""Far-zone geodesics shared by groups of entry samples (meshshade/transport/sample_groups.py)."""
+"""Far-zone geodesics shared by groups of entry samples (meshshade/surface/sample_groups.py)."""
 import numpy as np
 import pytest
 from hypothesis import given
@@ -8,9 +8,9 @@ from meshshade.geometry.curvature import principal_curvatures
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 from meshshade.geometry.procedural import icosphere, saddle_patch
-from meshshade.transport.sample_groups import (NORMAL_COS, _law_of_cosines, group_samples, expand_far_pairs,
+from meshshade.surface.sample_groups import (NORMAL_COS, _law_of_cosines, group_samples, expand_far_pairs,
                                           expand_far_pairs_reference)
-from meshshade.transport.pair_kernel import source_frames
+from meshshade.surface.pair_kernel import source_frames
 
 
 class _Samples:

@@ -1,4 +1,4 @@
-"""Compiled loops of the hierarchical transport (meshshade/transport/hierarchical.py): cluster geometry per light and
+"""Compiled loops of the hierarchical transport (meshshade/surface/hierarchical.py): cluster geometry per light and
 the far-field traversal with every model's kernel.
 
 Everything is float64 on plain arrays, lengths in mm. A source cluster (a node of the k-d tree over vertex
@@ -10,8 +10,8 @@ replaced by four kernel values with an error of third order in the cluster's siz
 cancel by symmetry: fourth order for symmetric clusters), whatever the kernel. The third eigenvalue (the sagitta
 of a curved cluster) is dropped: (k a^2/2)^2 against a^2.
 
-Every pair's kernel is :func:`meshshade.transport.kernel_evaluation.kernel_value` (``kind`` a
-:class:`~meshshade.transport.models.Kernel`), the one evaluation the near zone and the direct sum use too; the
+Every pair's kernel is :func:`meshshade.surface.kernel_evaluation.kernel_value` (``kind`` a
+:class:`~meshshade.surface.models.Kernel`), the one evaluation the near zone and the direct sum use too; the
 fitted model's pairs take the normal-section curvature between their two points (:func:`fitted_geometry`). The
 surface distance of a far pair is the arc of docs/physics.md eq. (59) from the chord and the two normals.
 """
@@ -23,8 +23,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from meshshade.transport.farfield_loops import log_grid_interp, near_factor
-from meshshade.transport.kernel_evaluation import FITTED, kernel_value, per_kernel
+from meshshade.surface.farfield_loops import log_grid_interp, near_factor
+from meshshade.surface.kernel_evaluation import FITTED, kernel_value, per_kernel
 
 STACK_SIZE = 256
 
@@ -92,7 +92,7 @@ def arc_length(chord, k_chord):
     """Surface distance of a pair from its chord (mm) and the normal-section curvature estimate
     ``k_chord = k c / 2`` (eq. (59)): ``c asin(u)/u`` with ``u = min(|k c/2|, 1)``. Unlike the arc geodesics'
     ``geometry.geodesics.arc._arc``, which marks |k c/2| >= 1 invalid for its Dijkstra fallback, the far field
-    needs a value for every pair: a half circle, pi c / 2. :func:`meshshade.transport.hierarchical.arc_distances`
+    needs a value for every pair: a half circle, pi c / 2. :func:`meshshade.surface.hierarchical.arc_distances`
     is the array twin the distance checks use."""
     u = min(abs(k_chord), 1.0)
     if u < 1e-4:
@@ -292,7 +292,7 @@ def cluster_geometry(pos, nrm, shape, power, patch, near, sph, logr, lo, hi):
 @njit(cache=True)
 def bessel_i0e(x):
     """exp(-x) I0(x) for x >= 0 (Abramowitz & Stegun 9.8.1-9.8.2, relative error < 2e-7; checked against
-    scipy.special.i0e in tests/transport/test_drift.py)."""
+    scipy.special.i0e in tests/surface/test_drift.py)."""
     if x < 3.75:
         t = (x / 3.75) ** 2
         return math.exp(-x) * (1.0 + t * (3.5156229 + t * (3.0899424 + t * (1.2067492 + t * (0.2659732 + t * (
@@ -322,13 +322,13 @@ def drift_factor(u0, u1, u2, n0, n1, n2, d0, d1, d2, s, dslope, dlog0, dlogstep,
 # ---------------------------------------------------------------------------------------------------- traversal
 def _traverse_of(kind):
     """:func:`far_traverse` for the sources of kernel ``kind`` (a constant of the closure: only that kernel's
-    code is typed and compiled; :func:`~meshshade.transport.kernel_evaluation.per_kernel`)."""
+    code is typed and compiled; :func:`~meshshade.surface.kernel_evaluation.per_kernel`)."""
 
     def far_traverse(recv, rnrm, order, tree, clusters, opening, rep, params, factors):
         """Far-field exitance M (len(order), 3) [W/mm^2] at the receivers ``recv[order]`` (normals ``rnrm``),
         from the sources of one :class:`TreeSources` (``tree``, all of kernel ``kind``) and their
         :class:`Clusters`, with the :class:`Opening` criteria, the kernel's
-        :class:`~meshshade.transport.kernel_evaluation.KernelParams` and the near-field model's :class:`FarFactors`.
+        :class:`~meshshade.surface.kernel_evaluation.KernelParams` and the near-field model's :class:`FarFactors`.
 
         A node is skipped when its sources are all beyond the cutoff (chord), used whole (sigma points, mean
         normal, mean shape operator, representative sphere row) when all its pairs are far (d - a > its largest

@@ -6,7 +6,7 @@ here with the dipole of the chord distance. Following Jensen & Buhler 2002 ("A r
 technique for translucent materials", SIGGRAPH), the sources are clustered in a tree and a cluster far enough
 from the receiver is replaced by its total power at its power-weighted centroid.
 
-Cluster expansion and error bound (derivation in farfield_loops.py; tested in tests/transport/test_farfield.py): a
+Cluster expansion and error bound (derivation in farfield_loops.py; tested in tests/surface/test_farfield.py): a
 cluster with total power P, power-weighted centroid c, second-moment tensor Q, radius a about c and mean cubed
 radius m3, seen from a receiver at distance d > a, is replaced by the second-order Taylor expansion of the
 dipole about c (the first-order term vanishes at the power-weighted centroid):
@@ -43,10 +43,9 @@ from scipy.spatial import cKDTree
 
 from meshshade.errors import ParameterError
 from meshshade.kernels.dipole import dipole_cutoff_radius
-from meshshade.kernels.optics import diffusion_params
 from meshshade.materials import Material
 from meshshade.pacing import run_in_blocks
-from meshshade.transport.farfield_loops import (accumulate_pairs, kd_permutation, node_moments, node_ranges,
+from meshshade.surface.farfield_loops import (accumulate_pairs, kd_permutation, node_moments, node_ranges,
                                                   traverse, tree_depth)
 
 #: default guaranteed relative tolerance on the far-field sum (measured maximum errors are 40-100x below it)
@@ -97,7 +96,7 @@ def _radii(name, value, *, allow_zero) -> np.ndarray:
 
 def _channel_params(material: Material):
     """(sigma_t' [1/mm], alpha', mu = sigma_tr/sigma_t', z_v [optical]) per channel, (3,) each."""
-    p = diffusion_params(material.albedo_prime, material.eta)
+    p = material.medium.jensen
     return (np.ascontiguousarray(material.sigma_t_prime, dtype=np.float64), np.ascontiguousarray(p.albedo_prime),
             np.ascontiguousarray(p.mu), np.ascontiguousarray(p.z_v))
 

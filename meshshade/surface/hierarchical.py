@@ -10,7 +10,7 @@ distance of each pair (docs/physics.md §9.1, eq. (71)):
   across a fold are dropped): the model's own kernel (PairKernel, exact or arc geodesics, the patch average of
   eq. (58)), computed once per mesh and material into a sparse matrix per channel, ``M_near = W Phi``;
 * **far zone** — every other pair within the cutoff: a k-d tree of the lit sources per kernel kind, traversed
-  per receiver (transport/hierarchy_loops.py). A cluster of radius a at distance d >= a/theta is replaced by
+  per receiver (surface/hierarchy_loops.py). A cluster of radius a at distance d >= a/theta is replaced by
   four sigma points carrying its zeroth to second moments, with its mean normal and mean shape operator (the
   kernel stays expanded at the source, as in the direct sum); closer clusters are opened, and leaves are summed
   pair by pair. Surface distances of far pairs are arcs from the chord and the two normals (eq. (59)).
@@ -37,19 +37,19 @@ from meshshade.kernels.dipole import dipole_profile
 from meshshade.materials import Material
 from meshshade.pacing import Pacer, default_threads, run_paced
 from meshshade.progress import Progress
-from meshshade.transport.auto import AutoPlan, neighbourhood_curvature, plan_sources
-from meshshade.transport.farfield import _receiver_order
-from meshshade.transport.farfield_loops import kd_permutation, node_ranges, tree_depth
-from meshshade.transport.gather import cutoff_radii
-from meshshade.transport.hierarchy_loops import (FAR_TRAVERSE, Clusters, FarFactors, Opening, TreeSources,
+from meshshade.surface.auto import AutoPlan, neighbourhood_curvature, plan_sources
+from meshshade.surface.farfield import _receiver_order
+from meshshade.surface.farfield_loops import kd_permutation, node_ranges, tree_depth
+from meshshade.surface.gather import cutoff_radii
+from meshshade.surface.hierarchy_loops import (FAR_TRAVERSE, Clusters, FarFactors, Opening, TreeSources,
                                                    cluster_geometry)
-from meshshade.transport.kernel_evaluation import SphereTables, kernel_params
-from meshshade.transport.models import MODEL_KERNEL, MODELS, Kernel
-from meshshade.transport.source_factors import (check_source_model, drift_angles, near_field_factors,
-                                            refracted_drift, source_model_keyword)
-from meshshade.transport.pair_kernel import PairKernel, source_frames
-from meshshade.transport.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
-from meshshade.transport.zones import NEAR_MARGIN, neighbourhood_solver
+from meshshade.surface.kernel_evaluation import SphereTables, kernel_params
+from meshshade.surface.models import MODEL_KERNEL, MODELS, Kernel
+from meshshade.surface.options import SurfaceOptions, options_from_keywords
+from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.pair_kernel import PairKernel, source_frames
+from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
+from meshshade.surface.zones import NEAR_MARGIN, neighbourhood_solver
 
 #: candidate near radii of each source, in radii of its dual patch (>= PATCH_AVERAGE_RADII: the far field is
 #: point to point); :func:`far_distance_check` picks the smallest whose far-field distances are good enough
@@ -98,7 +98,7 @@ class FarFieldUnsupported(MeshshadeError):
 
 
 def arc_distances(chord, k_chord):
-    """Array twin of :func:`~meshshade.transport.hierarchy_loops.arc_length` (the far field's surface distance)."""
+    """Array twin of :func:`~meshshade.surface.hierarchy_loops.arc_length` (the far field's surface distance)."""
     w = np.minimum(np.abs(k_chord), 1.0)
     return np.where(w < 1e-4, chord * (1.0 + w * w / 6.0), chord * np.arcsin(w) / np.maximum(w, 1e-300))
 
@@ -234,7 +234,7 @@ class SurfaceTransport:
     params: object
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
-    #: the source model, "point" or "beam" (transport/source_factors.py: with "beam" the near matrices and every far
+    #: the source model, "point" or "beam" (surface/source_factors.py: with "beam" the near matrices and every far
     #: pair carry the near-field factor N(s) of eq. (80))
     source_model: str = "point"
     #: with the source model "beam": the near pairs' sources, distances and azimuths (:class:`NearPairs`) for the
@@ -243,27 +243,28 @@ class SurfaceTransport:
 
     # ------------------------------------------------------------------------------------------------ build
     @classmethod
-    def build(cls, mesh, material: Material, model: str = "auto", *, geodesic: str = "exact",
-              cutoff_tol: float = 1e-4, curvature=None, curvature_radius_mm: float | None = None,
-              auto_options: dict | None = None, rtol: float = 1e-10, theta: float = THETA,
-              near_patch_radii: float | None = None, progress: bool | str = False,
-              source_model: str | None = None, near_field: str | None = None) -> "SurfaceTransport":
+    def build(cls, mesh, material: Material, model: str = "auto", options: SurfaceOptions | None = None, *,
+              curvature=None, theta: float = THETA, near_patch_radii: float | None = None,
+              progress: bool | str = False, **deprecated) -> "SurfaceTransport":
         """The geometric work for ``mesh`` (a Mesh in mm), ``material`` and ``model`` (one of MODELS).
 
-        ``geodesic`` ("exact" or "arc"): the near zone's geodesics (with ``auto``, exact where the plan asks
-        for it and "exact" is allowed). ``curvature``: PrincipalCurvatures of the mesh, if already computed.
-        ``theta`` in (0, 1): the clusters' opening criterion. ``near_patch_radii`` (>= 4, or None): the near
-        radius in patch radii; None lets :func:`far_distance_check` choose it from NEAR_PATCH_RADII on this mesh,
-        and raises :class:`FarFieldUnsupported` when none of them makes the far field's distances accurate
-        enough (bake's ``transport="auto"`` then uses the direct sum). ``source_model``: "point" (default) or
-        "beam" (transport/source_factors.py: the near matrices and the far field's pairs carry the near-field factor
-        N(s)); ``near_field``: its former name (deprecated).
+        ``options`` (:class:`~meshshade.surface.options.SurfaceOptions`, default ones for None): its ``geodesic``
+        ("exact" or "arc": the near zone's geodesics; with ``auto``, exact where the plan asks for it and "exact"
+        is allowed), ``cutoff_tol``, ``curvature_radius_mm``, ``rtol``, ``auto`` and ``source_model`` ("point", the
+        default, or "beam": surface/source_factors.py, the near matrices and the far field's pairs carry the
+        near-field factor N(s)). ``curvature``: PrincipalCurvatures of the mesh, if already computed. ``theta`` in
+        (0, 1): the clusters' opening criterion. ``near_patch_radii`` (>= 4, or None): the near radius in patch
+        radii; None lets :func:`far_distance_check` choose it from NEAR_PATCH_RADII on this mesh, and raises
+        :class:`FarFieldUnsupported` when none of them makes the far field's distances accurate enough (bake's
+        ``transport="auto"`` then uses the direct sum). The former keywords (``geodesic``, ``cutoff_tol``,
+        ``curvature_radius_mm``, ``auto_options``, ``rtol``, ``source_model``, ``near_field``) are accepted with a
+        DeprecationWarning.
         """
-        source_model = check_source_model(source_model_keyword(source_model, near_field) or "point")
+        options = options_from_keywords(options, deprecated, "SurfaceTransport.build")
+        source_model = options.source_model or "point"
+        geodesic, cutoff_tol, rtol = options.geodesic, options.cutoff_tol, options.rtol
         if model not in MODELS:
             raise ParameterError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
-        if geodesic not in ("exact", "arc"):
-            raise ParameterError(f"unknown geodesic method {geodesic!r}; choose exact or arc")
         if not 0.0 < float(theta) < 1.0:
             raise ParameterError(f"theta (cluster opening criterion) must lie in (0, 1), got {theta!r}")
         if near_patch_radii is not None and not PATCH_AVERAGE_RADII <= float(near_patch_radii) <= 1e3:
@@ -271,8 +272,8 @@ class SurfaceTransport:
                                  f"got {near_patch_radii!r}")
         timings: dict = {}
         t0 = time.perf_counter()
-        curv = curvature if curvature is not None else principal_curvatures(mesh.vertices, mesh.faces,
-                                                                            radius_mm=curvature_radius_mm)
+        curv = curvature if curvature is not None else principal_curvatures(
+            mesh.vertices, mesh.faces, radius_mm=options.curvature_radius_mm)
         timings["curvature"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         src = VertexSources(mesh)
@@ -295,7 +296,7 @@ class SurfaceTransport:
             kn_near, kn_far = neighbourhood_curvature(src, vals, mesh.vertices, mesh.faces,
                                                       [NEAR_MARGIN * near_mm, cut.max()], mesh.mean_edge_length)
             plan = plan_sources(frames.k1, frames.k2, kn_near[:, 0], kn_far[:, 0], material, NEAR_MARGIN * near_mm,
-                                cut, kmin_far=-kn_far[:, 1], **(auto_options or {}))
+                                cut, kmin_far=-kn_far[:, 1], **options.auto.keywords())
         H = 0.5 * (frames.k1 + frames.k2)
         kind = (np.asarray(plan.kernel, dtype=np.int8) if model == "auto"
                 else np.full(n, MODEL_KERNEL[model], dtype=np.int8))

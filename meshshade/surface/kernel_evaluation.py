@@ -1,8 +1,8 @@
 """The one evaluation of every bake model's kernel R(x_o; x_i) for a pair, compiled, behind one parameter record.
 
 Every path of the bake evaluates its kernel through :func:`kernel_value`: the direct sum and the hierarchical near
-field through :class:`~meshshade.transport.pair_kernel.PairKernel` (:func:`kernel_values`, a loop over arrays of
-pairs), the hierarchical far field inside its traversal (transport/hierarchy_loops.py, per pair). The physics
+field through :class:`~meshshade.surface.pair_kernel.PairKernel` (:func:`kernel_values`, a loop over arrays of
+pairs), the hierarchical far field inside its traversal (surface/hierarchy_loops.py, per pair). The physics
 lives in meshshade.kernels, each equation in one compiled scalar function:
 
 ==========================  ===================================================================================
@@ -35,10 +35,9 @@ from meshshade.kernels.curvature.table import curved_dipole, kernel_ratios
 from meshshade.kernels.dipole import dipole_diffuse_reflectance
 from meshshade.kernels.fitted_curvature import (effective_coefficients, euler_curvatures, fitted_dipole,
                                                 fitted_row_table, matched_table, shipped_coefficients)
-from meshshade.kernels.optics import diffusion_params
 from meshshade.kernels.sphere import sphere_series_profile
 from meshshade.materials import Material
-from meshshade.transport.models import Kernel
+from meshshade.surface.models import Kernel
 
 #: relative width of the exact-sphere radius bins and the number of points of their theta grid over [0, pi]
 SPHERE_RADIUS_RTOL = 1e-3
@@ -85,7 +84,7 @@ def kernel_params(material: Material, rho_max_mm, sphere: "SphereTables | None" 
     channel; 1.25 times that, at least 10 transport lengths: the kernels compute beyond a table directly) and the
     exact-sphere tables of ``sphere`` (none when None). ``curvature=False``: no curvature or fitted tables (the
     dipole and exact-sphere kernels do not read them)."""
-    p = diffusion_params(material.albedo_prime, material.eta)
+    p = material.medium.jensen
     st = np.ascontiguousarray(material.sigma_t_prime, dtype=np.float64)
     b3 = lambda v: np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (3,)))  # noqa: E731
     al, mu, zr, zv = b3(p.albedo_prime), b3(p.mu), b3(p.z_r), b3(p.z_v)
@@ -178,7 +177,7 @@ class SphereTables:
 def sphere_table_value(log_table, r0, row, c, s):
     """R [1/mm^2] of channel ``c`` at surface distance ``s`` (mm) from table row ``row`` of :class:`SphereTables`:
     log-linear interpolation on the uniform theta grid (relative error ~1e-5, up to 1e-4 within a few grid steps of
-    the peak on spheres of tens of transport lengths: tests/transport/test_kernel_evaluation.py)."""
+    the peak on spheres of tens of transport lengths: tests/surface/test_kernel_evaluation.py)."""
     r = row * 3 + c
     th = min(s / r0[row], math.pi)
     m = log_table.shape[1] - 1
@@ -190,7 +189,7 @@ def sphere_table_value(log_table, r0, row, c, s):
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def kernel_value(kind, c, chord, s, kn, knp, t2, sph_row, p):
-    """R [1/mm^2] of channel ``c`` for one pair: ``kind`` a :class:`~meshshade.transport.models.Kernel`, chord and
+    """R [1/mm^2] of channel ``c`` for one pair: ``kind`` a :class:`~meshshade.surface.models.Kernel`, chord and
     surface distance ``s`` (mm), the source's normal curvatures towards the receiver and across ``kn``, ``knp``
     (1/mm), its squared twist ``t2`` (1/mm^2, FITTED), its sphere-table row (EXACT_SPHERE; -1: the chord dipole),
     ``p`` the :class:`KernelParams`."""
@@ -211,7 +210,7 @@ def kernel_value(kind, c, chord, s, kn, knp, t2, sph_row, p):
 
 
 def per_kernel(loop, **options) -> dict:
-    """``{kind: loop compiled with that kind fixed}`` for every :class:`~meshshade.transport.models.Kernel`:
+    """``{kind: loop compiled with that kind fixed}`` for every :class:`~meshshade.surface.models.Kernel`:
     ``loop(kind)`` returns a plain function that reads ``kind`` as a constant (a closure); each is compiled with
     ``numba.njit(cache=True, **options)`` on its first call only.
 
