@@ -65,6 +65,11 @@ __all__ = ["WalkSurface", "walk_surface", "face_sides", "probe_sides", "coincide
 SIDE_OFFSET, SIDE_FLOOR = 1e-4, 1e-5
 #: most halvings of a face that a seam of overlapping parts crosses (the seam is then followed to 1/32 of an edge)
 SEAM_LEVELS = 5
+#: a probe whose winding number lies within PROBE_UNSURE of 1/2 is evaluated again with the triangle hierarchy's
+#: expansion taken only beyond PROBE_BETA times a node's radius (within ~1e-7 of the exact sum of the triangles'
+#: solid angles, against ~6e-4 at the volume's beta = 2: measured beside a fin on a 20 mm sphere, where the exact
+#: value is 1/2 - 2.7e-4)
+PROBE_UNSURE, PROBE_BETA = 0.02, 16.0
 #: where the probes' jump is not the sheet's, they move this many times nearer (down to the floor)
 PROBE_SHRINK = 16.0
 #: a lid's centre must land at least this fraction of its rim's radius away from every face of the mesh
@@ -145,7 +150,13 @@ def probe_sides(volume: SurfaceVolume, tri, net, floor, at=0) -> np.ndarray:
     todo = np.arange(tri.shape[0])
     while todo.size:
         f, b = _probes(tri[todo], offset[todo], at)
-        w = volume.winding(np.concatenate([f, b]))
+        P = np.concatenate([f, b])
+        w = volume.winding(P)
+        # near 1/2 (beside a lone sheet: a fin, w = +-(1/2 - O(offset / edge))) the expansion's error (~1e-3)
+        # decides the class: such probes are summed again with the hierarchy opened further
+        unsure = np.flatnonzero(np.abs(w - 0.5) < PROBE_UNSURE)
+        if unsure.size:
+            w[unsure] = volume.tree.winding(P[unsure], PROBE_BETA)
         wf, wb = w[:todo.size], w[todo.size:]
         side[todo] = face_sides(wf, wb)
         bad = (np.abs((wb - wf) - net[todo]) > 0.5) & (offset[todo] > floor)
