@@ -41,8 +41,8 @@ eq. (129)).
 
 A closed, consistently oriented mesh without overlapping parts gives every face the class "boundary" and no rim:
 the walk surface is then the mesh's own arrays (``identity``), and a run is bitwise what it was before this module
-existed. Pure array work over the winding numbers of :class:`meshshade.volume.inside.SurfaceVolume` (libigl's fast
-winding number); no I/O.
+existed. Pure array work over the winding numbers of :class:`meshshade.volume.inside.SurfaceVolume` (the triangle
+hierarchy's fast winding number, :mod:`meshshade.volume.triangle_tree`); no I/O.
 """
 from __future__ import annotations
 
@@ -60,8 +60,9 @@ __all__ = ["WalkSurface", "walk_surface", "face_sides", "probe_sides", "coincide
 
 #: the two winding-number probes of a face sit SIDE_OFFSET of its longest edge, and at least SIDE_FLOOR of the
 #: mesh's half-diagonal, in front of and behind its centroid: far below a wall's thickness (a 0.2 mm slab of 20 mm
-#: faces: 0.003 mm), far above the float32 rounding of libigl's fast winding number (~6e-8 of the coordinates,
-#: which are centred first): nearer, a sliver's probes no longer see its sheet (measured on marching-cubes meshes)
+#: faces: 0.003 mm), far above rounding (the floor was measured on marching-cubes meshes with libigl's float32
+#: winding number, below which a sliver's probes no longer saw its sheet; the float64 triangle hierarchy that
+#: replaced it needs no more, and the floor is kept)
 SIDE_OFFSET, SIDE_FLOOR = 1e-4, 1e-5
 #: most halvings of a face that a seam of overlapping parts crosses (the seam is then followed to 1/32 of an edge)
 SEAM_LEVELS = 5
@@ -503,7 +504,7 @@ def walk_surface(mesh) -> WalkSurface:
     probe = np.flatnonzero(good & (rep == np.arange(m)) & (net != 0))
     lo, hi = V.min(axis=0), V.max(axis=0)
     centre, floor = 0.5 * (lo + hi), SIDE_FLOOR * 0.5 * float(np.linalg.norm(hi - lo))
-    Vc = V - centre                     # libigl's fast winding number rounds to float32: coordinates centred
+    Vc = V - centre                     # coordinates centred: the probes' offsets are small against them
     volume = SurfaceVolume(Vc, F)
     side = np.zeros(m, dtype=np.int8)
     side[probe] = probe_sides(volume, Vc[F[probe]], net[probe], floor)
