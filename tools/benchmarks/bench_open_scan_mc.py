@@ -1,14 +1,17 @@
 """The Monte Carlo's inside on open meshes (issue 47), and the default bake against it on an open scan (issue 41).
 
-Two JSON rows.
+Three JSON rows.
 
 ``sphere_holes``: a 20 mm icosphere (level 5, edges 0.76 mm) with three 3 mm holes on its lit side
 (:func:`sphere_with_holes`: the faces whose centroids lie within 3 mm of three points at 30 degrees from the pole,
-120 degrees apart: holes about 6 mm across), skin1, the sun straight down onto the pole. The Monte Carlo exitance over the faces
-0.5-5 mm from the rims (and in three bands within), relative to the same faces of the closed sphere, for the walk
-of the faces alone (``MCOptions(inside="faces")``, the walk before issue 47: a photon walks out through a hole) and for
-the default walk (the bake's inside {w > 1/2}: the holes closed by lids, :mod:`meshshade.montecarlo.boundary`);
+120 degrees apart: holes about 6 mm across), skin1, the sun straight down onto the pole. The Monte Carlo exitance
+over the faces 0.5-5 mm from the rims (and in three bands within), relative to the same faces of the closed sphere,
+for the walk of the faces alone (``MCOptions(inside="faces")``, the walk before issue 47: a photon walks out through
+a hole) and for the default walk (the bake's inside {w > 1/2}: the holes closed by lids, :mod:`meshshade.montecarlo.boundary`);
 with the standard errors of the differences (:func:`band_exitance`). ``--sphere-photons`` per run (three runs).
+
+``walk_surface`` (:func:`walk_row`): what the walk surface costs to build (the clean hand, the hand with six
+holes, a 328k-face sphere), and how well it follows the seam of two overlapping spheres.
 
 ``open_scan_mc``: the scanned hand of ../shared/meshes/hand.obj at 190 mm with six holes punched
 (tools/benchmarks/mesh_defects.py, as bench_defects.py makes them: the 2-ring faces around six vertices removed),
@@ -19,11 +22,12 @@ per channel (r, g, b, %) of the bake and of the smaller run over the lit vertice
 that have a face: all of them (``lit_all``), those beyond D = 10 and 25 mm of the holes' centres, and those within
 5 mm of a rim (``lit_rims``: the rims' own vertices included). ``mc_faces_only`` is the smaller run walked on the
 faces alone, against the same reference (what the Monte Carlo did before issue 47). ``meets_target``: the bake's
-error at most the smaller run's over all lit vertices, on every channel. Without ../shared/meshes the row is
+error at most the smaller run's over all lit vertices, on every channel. ``bake_bias``: the bake's mean signed
+M / ref - 1 (the bake lets light in through the mesh's faces only, the Monte Carlo through the lids too). Without ../shared/meshes the row is
 "skipped".
 
-    python tools/benchmarks/bench_open_scan_mc.py [--rows sphere,hand] [--reference-photons 2e7] [--photons 2e6]
-                                                  [--sphere-photons 1e6]
+    python tools/benchmarks/bench_open_scan_mc.py [--rows sphere,walk,hand] [--reference-photons 2e7]
+                                                  [--photons 2e6] [--sphere-photons 1e6] [--seam-photons 2e5]
 
 The reference of 2e7 photons takes about 80-100 s of walk on 2 free cores (the whole row 3-4 minutes).
 """
@@ -132,10 +136,71 @@ def sphere_row(photons: int) -> dict:
     return row
 
 
-def _errors(M, R, sel):
-    """Mean |M / R - 1| (%) per channel over ``sel`` where the reference is positive."""
-    return [round(100.0 * float(np.mean(np.abs(M[sel & (R[:, c] > 0), c] / R[sel & (R[:, c] > 0), c] - 1.0))), 2)
-            for c in range(3)]
+def two_spheres(radius: float = 10.0, distance: float = 10.0, level: int = 3):
+    """(V, F) of two icospheres of ``radius`` whose centres lie ``distance`` apart on x (overlapping, unwelded; the
+    second turned half round about z, so that its first largest face lies outside the first sphere: the mesh's
+    validation would otherwise call it a cavity and turn it inward), and the area of their union's surface scaled
+    to the polyhedra: (4 pi R^2 - 2 pi R h) x 2 with h = R - d / 2, times the icosphere's area over 4 pi R^2."""
+    V, F = icosphere(radius, level)
+    W = V * [-1.0, -1.0, 1.0]
+    poly = float(np.sum(np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1))) / 2
+    h = radius - 0.5 * distance
+    union = 2.0 * (4.0 * np.pi * radius ** 2 - 2.0 * np.pi * radius * h) * poly / (4.0 * np.pi * radius ** 2)
+    return np.concatenate([V, W + [distance, 0.0, 0.0]]), np.concatenate([F, F + V.shape[0]]), union
+
+
+def walk_row(photons: int) -> dict:
+    """``walk_surface``: its cost (seconds, once warm) on the clean hand, the hand with six holes and a
+    328k-face sphere; and the seam of two overlapping 10 mm spheres (level 3): the walk surface's area against the
+    union's, and the red light lost at the seam (``--seam-photons``, sun from above), with the seams split to
+    1/32 of an edge (the default) and with the straddling faces kept whole (``SEAM_LEVELS = 0``)."""
+    from meshshade.montecarlo import boundary
+
+    row = {"row": "walk_surface", "seconds": {}}
+    meshes = {"sphere_328k": icosphere(SPHERE_R, 7)}
+    got = bench.scene_arrays("hand190")
+    if got is not None:
+        V, F, sun = got
+        meshes["hand190"] = (V, F)
+        d = bench.defective("holes6", V, F, sun)
+        meshes["hand190_holes6"] = (d.vertices, d.faces)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        boundary.walk_surface(Mesh.from_arrays(*icosphere(5.0, 1)))         # compiled kernels loaded
+        for name, (V, F) in meshes.items():
+            mesh = Mesh.from_arrays(V, F)
+            t = time.perf_counter()
+            s = boundary.walk_surface(mesh)
+            row["seconds"][name] = round(time.perf_counter() - t, 2)
+            row.setdefault("faces", {})[name] = int(mesh.n_faces)
+            row.setdefault("identity", {})[name] = bool(s.identity)
+        V, F, union = two_spheres()
+        mesh = Mesh.from_arrays(V, F)
+        if mesh.defects.n_components_flipped:
+            raise SystemExit("two_spheres: a sphere was taken for a cavity")
+        sun = DirectionalLight((0.0, 0.0, -1.0), 1.0)
+        levels = boundary.SEAM_LEVELS
+        for name, lv in (("split", levels), ("whole", 0)):
+            boundary.SEAM_LEVELS = lv
+            try:
+                s = boundary.walk_surface(mesh)
+                res = simulate(mesh, Material.preset("skin1"), [sun], MCOptions(photons=photons, seed=3,
+                                                                                beam_distances=False))
+            finally:
+                boundary.SEAM_LEVELS = levels
+            row[f"seam_{name}"] = {"area_vs_union_%": round(100.0 * (float(s.areas.sum()) / union - 1.0), 3),
+                                   "split_faces": s.split_faces, "transparent": s.transparent,
+                                   "lost_%": [round(100.0 * float(x), 3) for x in res.lost]}
+    return row
+
+
+def _errors(M, R, sel, signed: bool = False):
+    """Mean |M / R - 1| (%) per channel over ``sel`` where the reference is positive (``signed``: mean M / R - 1)."""
+    out = []
+    for c in range(3):
+        r = M[sel & (R[:, c] > 0), c] / R[sel & (R[:, c] > 0), c] - 1.0
+        out.append(round(100.0 * float(np.mean(r if signed else np.abs(r))), 2))
+    return out
 
 
 def hand_row(reference_photons: int, photons: int) -> dict:
@@ -173,22 +238,27 @@ def hand_row(reference_photons: int, photons: int) -> dict:
     for D in (10.0, 25.0):
         sets[f"lit_beyond_{int(D)}mm"] = md.far_from(mesh.vertices, d.points, D) & referenced & lit
     for name, sel in sets.items():
-        row[name] = {"bake": _errors(np.asarray(res.patch_averaged()), R, sel), "mc": _errors(np.asarray(mc.radiance), R, sel),
-                     "mc_faces_only": _errors(np.asarray(old.radiance), R, sel), "vertices": int(sel.sum())}
+        B = np.asarray(res.patch_averaged())
+        row[name] = {"bake": _errors(B, R, sel), "mc": _errors(np.asarray(mc.radiance), R, sel),
+                     "mc_faces_only": _errors(np.asarray(old.radiance), R, sel),
+                     "bake_bias": _errors(B, R, sel, signed=True), "vertices": int(sel.sum())}
     row["meets_target"] = all(b <= m for b, m in zip(row["lit_all"]["bake"], row["lit_all"]["mc"]))
     return row
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rows", default="sphere,hand", help="comma-separated: sphere, hand")
+    ap.add_argument("--rows", default="sphere,walk,hand", help="comma-separated: sphere, walk, hand")
     ap.add_argument("--reference-photons", type=float, default=2e7)
     ap.add_argument("--photons", type=float, default=2e6, help="the hand's Monte Carlo run compared with the bake")
     ap.add_argument("--sphere-photons", type=float, default=1e6)
+    ap.add_argument("--seam-photons", type=float, default=2e5, help="the overlapping spheres of the walk row")
     args = ap.parse_args(argv)
     rows = [r.strip() for r in args.rows.split(",") if r.strip()]
     if "sphere" in rows:
         print(json.dumps(sphere_row(int(args.sphere_photons))), flush=True)
+    if "walk" in rows:
+        print(json.dumps(walk_row(int(args.seam_photons))), flush=True)
     if "hand" in rows:
         print(json.dumps(hand_row(int(args.reference_photons), int(args.photons))), flush=True)
     return 0
