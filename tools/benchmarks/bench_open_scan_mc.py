@@ -7,8 +7,8 @@ Three JSON rows.
 120 degrees apart: holes about 6 mm across), skin1, the sun straight down onto the pole. The Monte Carlo exitance
 over the faces 0.5-5 mm from the rims (and in three bands within), relative to the same faces of the closed sphere,
 for the walk of the faces alone (``MCOptions(inside="faces")``, the walk before issue 47: a photon walks out through
-a hole) and for the default walk (the bake's inside {w > 1/2}: the holes closed by lids, :mod:`meshshade.montecarlo.boundary`);
-with the standard errors of the differences (:func:`band_exitance`). ``--sphere-photons`` per run (three runs).
+a hole) and for the default walk (the bake's inside {w > 1/2}: the holes closed by lids,
+:mod:`meshshade.montecarlo.boundary`); with the standard errors of the differences (:func:`band_exitance`). ``--sphere-photons`` per run (three runs).
 
 ``walk_surface`` (:func:`walk_row`): what the walk surface costs to build (the clean hand, the hand with six
 holes, a 328k-face sphere), and how well it follows the seam of two overlapping spheres.
@@ -23,8 +23,8 @@ that have a face: all of them (``lit_all``), those beyond D = 10 and 25 mm of th
 5 mm of a rim (``lit_rims``: the rims' own vertices included). ``mc_faces_only`` is the smaller run walked on the
 faces alone, against the same reference (what the Monte Carlo did before issue 47). ``meets_target``: the bake's
 error at most the smaller run's over all lit vertices, on every channel. ``bake_bias``: the bake's mean signed
-M / ref - 1 (the bake lets light in through the mesh's faces only, the Monte Carlo through the lids too). Without ../shared/meshes the row is
-"skipped".
+M / ref - 1 (the bake lets light in through the mesh's faces only, the Monte Carlo through the lids too). Without
+../shared/meshes the row is "skipped".
 
     python tools/benchmarks/bench_open_scan_mc.py [--rows sphere,walk,hand] [--reference-photons 2e7]
                                                   [--photons 2e6] [--sphere-photons 1e6] [--seam-photons 2e5]

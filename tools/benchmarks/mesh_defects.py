@@ -32,7 +32,8 @@ from scipy.spatial import cKDTree
 from meshshade.geometry.procedural import icosphere
 
 __all__ = ["Defected", "punch_holes", "cut_discs", "duplicate_faces", "add_part", "add_ball", "add_fin",
-           "add_stray_vertices", "flip_faces", "far_from", "relative_change", "vertex_faces", "ring_faces", "boundary_vertices"]
+           "add_stray_vertices", "flip_faces", "far_from", "relative_change", "vertex_faces", "ring_faces",
+           "boundary_vertices"]
 
 
 class Defected(NamedTuple):
