@@ -8,7 +8,8 @@ Three JSON rows.
 over the faces 0.5-5 mm from the rims (and in three bands within), relative to the same faces of the closed sphere,
 for the walk of the faces alone (``MCOptions(inside="faces")``, the walk before issue 47: a photon walks out through
 a hole) and for the default walk (the bake's inside {w > 1/2}: the holes closed by lids,
-:mod:`meshshade.montecarlo.boundary`); with the standard errors of the differences (:func:`band_exitance`). ``--sphere-photons`` per run (three runs).
+:mod:`meshshade.montecarlo.boundary`); with the standard errors of the differences (:func:`band_exitance`).
+``--sphere-photons`` per run (three runs).
 
 ``walk_surface`` (:func:`walk_row`): what the walk surface costs to build (the clean hand, the hand with six
 holes, a 328k-face sphere), and how well it follows the seam of two overlapping spheres.
