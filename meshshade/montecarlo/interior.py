@@ -20,7 +20,7 @@ every boundary hit; the certificates only prove the absence of one, like the dis
 
 The walk runs in the walk surface of :mod:`meshshade.montecarlo.boundary` (the boundary of the bake's inside
 {w > 1/2}: holes closed by lids, faces inside or outside the medium left out), which is closed; the grid is built
-on it. Where the walk is the mesh's faces alone (``WalkSurface.of_faces``, or a mesh that encloses no volume) and
+on it. Where the walk is the mesh's faces alone (``MCOptions(inside="faces")``, or a mesh enclosing no volume) and
 the surface does not bound a volume, :func:`open_surface_warning` says what the walk then does: at a hole
 (boundary edges) a photon simply flies through: there is no face to exit by, so it walks on beyond the hole as if
 the material continued, until it is absorbed (booked as absorbed), comes back in, or meets a face from the front

@@ -4,7 +4,7 @@ Exact checks: a closed mesh is walked as it is (bitwise the walk of its faces); 
 another and a fin outside are left out, so the run is bitwise the clean mesh's; two overlapping boxes whose seam
 follows their grid lines are walked on exactly the triangles of their union; lids close every hole
 (each walk edge is used once each way round) on the level surface w = 1/2 (checked with the exact sum of the
-triangles' solid angles, :func:`_exact_winding`, not libigl's fast winding number that the lids are built with;
+triangles' solid angles, :func:`_exact_winding`, not the fast winding number that the lids are built with;
 across a planar rim the level surface is the flat disc, since the solid angle of an open surface depends only on
 its boundary curve).
 
@@ -34,8 +34,9 @@ from meshshade.montecarlo.boundary import (BOUNDARY, REVERSED, TRANSPARENT, coin
                                            face_sides, walk_surface, welded_ids)
 
 SKIN = Material.preset("skin1")
-#: the lids lie on the level surface of libigl's fast winding number (as the bake's volume does), which differs from
-#: the exact one by up to ~2e-3 near a rim (measured: 2.4e-3 on the UV sphere's cap, 1.6e-3 on the box's corner)
+#: the lids lie on the level surface of the triangle hierarchy's fast winding number (as the bake's volume does),
+#: which differs from the exact one by up to a few 1e-3 near a rim (measured: 6.5e-4 on the UV sphere's cap, 3.3e-3
+#: on the box's corner)
 LEVEL_TOL = 5e-3
 SUN = DirectionalLight((0.0, 0.0, -1.0), 1.0)
 
@@ -265,7 +266,7 @@ def test_lids_close_the_holes_outward():
 
 def test_a_lid_lies_on_the_level_surface():
     """A box with its corner cut off (a rim that is far from planar): the lid's inner vertices have the exact
-    winding number 1/2 (:func:`_exact_winding`; the lids are built with libigl's fast one)."""
+    winding number 1/2 (:func:`_exact_winding`; the lids are built with the fast one)."""
     V, F = box(20.0, 8)
     corner = np.array([10.0, 10.0, 10.0])
     d = md.cut_discs(V, F, [corner], 6.0)
@@ -291,7 +292,7 @@ def test_across_a_planar_rim_the_lid_is_the_flat_disc():
     lid = s.vertices[ids]
     r = float(np.max(np.hypot(lid[:, 0], lid[:, 1])))
     # the spherical cap sags r^2 / 2R = 1.5 mm below the pole; the lid lies in the rim's plane to the accuracy of
-    # libigl's fast winding number, which the lids (as the bake's volume) are built with: ~1e-3 in w, 0.03 mm here
+    # the fast winding number, which the lids (as the bake's volume) are built with: ~1e-3 in w, 0.008 mm here
     assert np.max(np.abs(lid[:, 2] - z0)) < 1e-2 * r, (np.max(np.abs(lid[:, 2] - z0)), r)
     inner = s.vertices[ids[welded_ids(s.vertices)[ids] == ids]]      # not the rim's copies
     w = _exact_winding(V, F[~cap], inner)

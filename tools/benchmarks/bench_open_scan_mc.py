@@ -24,7 +24,8 @@ that have a face: all of them (``lit_all``), those beyond D = 10 and 25 mm of th
 5 mm of a rim (``lit_rims``: the rims' own vertices included). ``mc_faces_only`` is the smaller run walked on the
 faces alone, against the same reference (what the Monte Carlo did before issue 47). ``meets_target``: the bake's
 error at most the smaller run's over all lit vertices, on every channel. ``bake_bias``: the bake's mean signed
-M / ref - 1 (the bake lets light in through the mesh's faces only, the Monte Carlo through the lids too). Without
+M / ref - 1 (the bake lets light in through the mesh's faces only, the Monte Carlo through the lids too);
+``bake_points``: the bake's own vertex values (the field at the vertex, not its patch average) against the same. Without
 ../shared/meshes the row is "skipped".
 
     python tools/benchmarks/bench_open_scan_mc.py [--rows sphere,walk,hand] [--reference-photons 2e7]
@@ -242,7 +243,8 @@ def hand_row(reference_photons: int, photons: int) -> dict:
         B = np.asarray(res.patch_averaged())
         row[name] = {"bake": _errors(B, R, sel), "mc": _errors(np.asarray(mc.radiance), R, sel),
                      "mc_faces_only": _errors(np.asarray(old.radiance), R, sel),
-                     "bake_bias": _errors(B, R, sel, signed=True), "vertices": int(sel.sum())}
+                     "bake_bias": _errors(B, R, sel, signed=True),
+                     "bake_points": _errors(np.asarray(res.radiance), R, sel), "vertices": int(sel.sum())}
     row["meets_target"] = all(b <= m for b, m in zip(row["lit_all"]["bake"], row["lit_all"]["mc"]))
     return row
 
