@@ -8,7 +8,8 @@ tally for those photons. The tallies are added on the workers by a binary tree o
 task 2 + task 3, ..., then the sums pairwise), so the result is bitwise the same for 1, 2 or 100 workers; against
 the same run in one process only the order of the sums differs (~1e-15 relative).
 
-What travels: the mesh once per worker (``client.scatter(..., broadcast=True)``); per task, the material, lights
+What travels: the mesh and its walk surface (:mod:`meshshade.montecarlo.boundary`) once per worker
+(``client.scatter(..., broadcast=True)``); per task, the material, lights
 and a chunk range (bytes), and back the per-batch tallies ``B x (faces + vertices + 7)`` floats, added on the
 workers, so only one tally per channel group reaches the client. Each worker process builds the walk's set-up
 (Embree scene, safe-distance grid, emitter) once per mesh, lights and material (:func:`_setup`, a small per-process
@@ -18,11 +19,13 @@ from __future__ import annotations
 
 import hashlib
 import threading
+import warnings
 from collections import OrderedDict
 
 import numpy as np
 
 from meshshade.batch.dask_cluster import task_threads
+from meshshade.geometry.mesh import MeshDefectWarning
 from meshshade.montecarlo.engine import ENTRY_CHUNK
 from meshshade.montecarlo.walks import GroupTally, channel_groups, prepare_walks, walk_group
 
@@ -48,10 +51,12 @@ def _photons_in(chunks, n_photons: int) -> int:
     return min(chunks[1] * ENTRY_CHUNK, n_photons) - chunks[0] * ENTRY_CHUNK
 
 
-def setup_key(mesh, material, lights, engine) -> str:
-    """Content hash of what a walk's set-up depends on (mesh arrays, material, lights, engine)."""
+def setup_key(mesh, material, lights, engine, surface=None) -> str:
+    """Content hash of what a walk's set-up depends on (mesh arrays, the walk surface's, material, lights,
+    engine)."""
     h = hashlib.sha256()
-    for a in (mesh.vertices, mesh.faces):
+    extra = () if surface is None else (surface.vertices, surface.faces, surface.face_of)
+    for a in (mesh.vertices, mesh.faces, *extra):
         a = np.ascontiguousarray(a)
         h.update(str((a.dtype, a.shape)).encode())
         h.update(a.tobytes())
@@ -60,12 +65,14 @@ def setup_key(mesh, material, lights, engine) -> str:
     return h.hexdigest()
 
 
-def _setup(key, mesh, material, lights, engine):
+def _setup(key, mesh, material, lights, engine, surface=None):
     with _LOCK:
         if key in _SETUPS:
             _SETUPS.move_to_end(key)
             return _SETUPS[key]
-    setup = prepare_walks(mesh, material, lights, engine=engine)
+    with warnings.catch_warnings():   # the client has said it (one line per run, not one per worker)
+        warnings.simplefilter("ignore", MeshDefectWarning)
+        setup = prepare_walks(mesh, material, lights, engine=engine, surface=surface)
     with _LOCK:
         _SETUPS[key] = setup
         while len(_SETUPS) > SETUPS_KEPT:
@@ -73,10 +80,11 @@ def _setup(key, mesh, material, lights, engine):
     return setup
 
 
-def _walk_task(mesh, key, material, lights, engine, gi, n_photons, seed, n_batches, pool, keep_beam, chunks):
+def _walk_task(mesh, key, material, lights, engine, gi, n_photons, seed, n_batches, pool, keep_beam, chunks,
+               surface=None):
     """One task: channel group ``gi``, entry chunks ``chunks`` (runs on a worker)."""
     task_threads()
-    setup = _setup(key, mesh, material, lights, engine)
+    setup = _setup(key, mesh, material, lights, engine, surface)
     return walk_group(setup, gi, n_photons, seed=seed, n_batches=n_batches, pool=pool, keep_beam=keep_beam,
                       chunks=chunks)
 
@@ -86,14 +94,14 @@ def _add(a: GroupTally, b: GroupTally) -> GroupTally:
 
 
 def walk_on_client(client, mesh, material, lights, n_photons: int, *, seed: int, n_batches: int, pool,
-                   keep_beam: bool, engine: str = "auto", progress=None) -> list[GroupTally]:
+                   keep_beam: bool, engine: str = "auto", progress=None, surface=None) -> list[GroupTally]:
     """The :class:`GroupTally` of every channel group of a run of ``n_photons`` photons per group, walked on the
     client's workers (module docstring). ``progress``: a :class:`meshshade.progress.Progress` advanced by the
-    photons of each finished task."""
+    photons of each finished task; ``surface``: the walk surface (default: each worker computes the mesh's)."""
     from distributed import as_completed
 
-    key = setup_key(mesh, material, lights, engine)
-    [mesh_future] = client.scatter([mesh], broadcast=True, hash=False)
+    key = setup_key(mesh, material, lights, engine, surface)
+    [mesh_future, surface_future] = client.scatter([mesh, surface], broadcast=True, hash=False)
     ranges = split_chunks(n_photons)
     leaves, roots = {}, []
     try:
@@ -101,8 +109,8 @@ def walk_on_client(client, mesh, material, lights, n_photons: int, *, seed: int,
             level = []
             for i, chunks in enumerate(ranges):
                 f = client.submit(_walk_task, mesh_future, key, material, lights, engine, gi, n_photons, seed,
-                                  n_batches, pool, keep_beam, chunks, key=f"meshshade-mc-{key[:16]}-{seed}-{gi}-{i}",
-                                  pure=False)
+                                  n_batches, pool, keep_beam, chunks, surface_future,
+                                  key=f"meshshade-mc-{key[:16]}-{seed}-{gi}-{i}", pure=False)
                 leaves[f] = _photons_in(chunks, n_photons)
                 level.append(f)
             while len(level) > 1:   # a tree of fixed shape: the same sums in the same order for any workers

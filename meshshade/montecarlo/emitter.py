@@ -50,6 +50,10 @@ class Emitter:
         validated by their constructors; anything else raises LightError, see
         :func:`meshshade.light.sources.light_list`)
     scene : EmbreeScene or NumpyScene of the mesh; eta : float, relative index of the medium
+    bake_mesh : None, or ``(V, F, normals, areas, scene, walk_face, flipped)`` of the mesh the bake sees when the
+        photons enter a different surface (the walk surface of :mod:`meshshade.montecarlo.boundary`, whose first
+        vertices are that mesh's): which lights reach is then decided on that mesh, as the bake decides it, and
+        its faces map to the surface's by ``walk_face`` (-1: none), wound the other way where ``flipped``
 
     Raises
     ------
@@ -58,14 +62,19 @@ class Emitter:
         back of a face; no light reaching the mesh.
     """
 
-    def __init__(self, V, F, normals, areas, lights, scene, eta):
+    def __init__(self, V, F, normals, areas, lights, scene, eta, *, bake_mesh=None):
         self.V, self.F, self.N, self.A, self.scene, self.eta = V, F, normals, areas, scene, eta
         self.lights = light_list(lights)
         if not self.lights:
             raise LightError("Monte Carlo needs at least one light")
         # the bake's rule for what reaches the mesh (errors and warnings), on the same vertex normals and areas
         vn, va = _vertex_normals_areas(V, F, normals, areas)
-        reach = entry_samples(V, F, vn, va, self.lights, scene, eta)
+        if bake_mesh is None:
+            reach = entry_samples(V, F, vn, va, self.lights, scene, eta)
+        else:
+            bV, bF, bN, bA, b_scene, walk_face, flipped = bake_mesh
+            reach = entry_samples(bV, bF, *_vertex_normals_areas(bV, bF, bN, bA), self.lights, b_scene, eta)
+            reach = _on_surface(reach, walk_face, flipped)
         reached = np.bincount(reach.light_index, minlength=len(self.lights)) > 0
         self.parts = []
         power = []
@@ -289,6 +298,21 @@ def _vertex_normals_areas(V, F, face_normals, face_areas):
     return vn, np.bincount(idx, weights=w / 3.0, minlength=V.shape[0])
 
 
+def _on_surface(samples, walk_face, flipped):
+    """The bake's entry samples with their faces moved onto the walk surface (-1 where the face is not on it,
+    barycentrics reordered where it is wound the other way); vertices are the same (the surface's come first)."""
+    from dataclasses import replace
+
+    face = np.asarray(samples.face, dtype=np.int64)
+    on = face >= 0
+    wf = np.where(on, walk_face[np.maximum(face, 0)], -1)
+    bary = np.array(samples.bary, dtype=np.float64, copy=True)
+    flip = np.flatnonzero(wf >= 0)
+    flip = flip[flipped[wf[flip]]]
+    bary[flip] = bary[flip][:, [0, 2, 1]]
+    return replace(samples, face=wf, bary=bary)
+
+
 def _representative_entry(samples, i, o, d, F):
     """(face, bary) of light ``i``'s entry sample nearest its axis (a wide beam whose axis passes beside the
     mesh): the reference point of the beam's radial tallies."""
@@ -299,7 +323,10 @@ def _representative_entry(samples, i, o, d, F):
     if samples.face[j] >= 0:
         return int(samples.face[j]), samples.bary[j]
     v = int(samples.vertex[j])
-    f = int(np.flatnonzero(np.any(F == v, axis=1))[0])
+    around = np.flatnonzero(np.any(F == v, axis=1))
+    if around.size == 0:    # the vertex is on no face the photons enter (a transparent face's): any face
+        return 0, np.array([1.0, 0.0, 0.0])
+    f = int(around[0])
     return f, (F[f] == v).astype(np.float64)
 
 

@@ -18,26 +18,26 @@ B n {n . y < c} holds no surface point. A free path from x to e = x + s d with b
 cannot reach the surface and needs no ray (:func:`meshshade.montecarlo.loops.certified`). Embree still finds
 every boundary hit; the certificates only prove the absence of one, like the distance bound.
 
-Surfaces that do not bound a volume (``open_surface_warning``, emitted once when the grid is built): the walk
-has no notion of inside beyond "the next face hit from behind". At a hole (boundary edges) a photon simply flies
-through: there is no face to exit by, so it walks on beyond the hole as if the material continued, until it is
-absorbed (booked as absorbed), comes back in, or meets a face from the front (booked as lost, like a numerical
-leak); nothing is tallied as leaving through the hole. A face inside the material (at a non-manifold edge) stops
-photons like the surface: met from behind they reflect or leave through it (tallied as exitance of a face the
-camera cannot see), met from the front they are lost. A self-intersecting surface behaves the same way where its
-parts overlap; it is not detected (no cheap robust test: libigl's binding in use has none, trimesh neither).
+The walk runs in the walk surface of :mod:`meshshade.montecarlo.boundary` (the boundary of the bake's inside
+{w > 1/2}: holes closed by lids, faces inside or outside the medium left out), which is closed; the grid is built
+on it. Where the walk is the mesh's faces alone (``MCOptions(inside="faces")``, or a mesh enclosing no volume) and
+the surface does not bound a volume, :func:`open_surface_warning` says what the walk then does: at a hole
+(boundary edges) a photon simply flies through: there is no face to exit by, so it walks on beyond the hole as if
+the material continued, until it is absorbed (booked as absorbed), comes back in, or meets a face from the front
+(booked as lost, like a numerical leak); nothing is tallied as leaving through the hole. A face inside the material
+(at a non-manifold edge) stops photons like the surface: met from behind they reflect or leave through it, met
+from the front they are lost.
 """
 from __future__ import annotations
 
 import math
-import warnings
 
 import numba
 import numpy as np
 from numba import njit, prange
 from scipy.ndimage import binary_fill_holes, distance_transform_edt
 
-from meshshade.geometry.mesh import MeshDefectWarning, face_normals
+from meshshade.geometry.mesh import face_normals
 from meshshade.geometry.topology import edge_topology
 
 PLANE_K = 2
@@ -50,8 +50,9 @@ PLANE_MAX_FACES = 64
 
 
 def open_surface_warning(faces) -> str | None:
-    """One line saying what the walk does on this surface if it does not bound a volume (boundary or non-manifold
-    edges; see the module docstring), or None for a closed 2-manifold. ``faces``: (m, 3) int."""
+    """One line saying what the walk of the faces alone does on this surface if it does not bound a volume
+    (boundary or non-manifold edges; see the module docstring), or None for a closed 2-manifold. ``faces``: (m, 3)
+    int."""
     topo = edge_topology(np.asarray(faces, dtype=np.int64))
     n_open, n_fin = topo.n_boundary, topo.n_nonmanifold
     if not (n_open or n_fin):
@@ -71,16 +72,13 @@ def open_surface_warning(faces) -> str | None:
 class SafeDistanceGrid:
     """Lower bound of the distance to the mesh surface on a cubic voxel grid (mm).
 
-    vertices : (n, 3) float64 mm; faces : (m, 3) int; resolution : voxels along the largest extent. Building it
-    warns (``MeshDefectWarning``, :func:`open_surface_warning`) when the surface does not bound a volume.
+    vertices : (n, 3) float64 mm; faces : (m, 3) int (the walk surface); resolution : voxels along the largest
+    extent.
     """
 
     def __init__(self, vertices, faces, resolution: int = 96, mean_free_path: float | None = None):
         V = np.asarray(vertices, dtype=np.float64)
         F = np.asarray(faces, dtype=np.int64)
-        message = open_surface_warning(F)
-        if message:
-            warnings.warn(message, MeshDefectWarning, stacklevel=2)
         lo, hi = V.min(axis=0), V.max(axis=0)
         h = float((hi - lo).max()) / resolution
         pad = 2.0 * h

@@ -1,4 +1,8 @@
-"""Monte Carlo reference: a volumetric random walk inside the closed mesh that the diffusion models shade.
+"""Monte Carlo reference: a volumetric random walk inside the mesh that the diffusion models shade.
+
+The medium is the bake's inside, {w > 1/2} of the mesh's generalised winding number: the walk runs on its boundary
+(:mod:`meshshade.montecarlo.boundary`: holes closed by lids on the level surface w = 1/2, faces with the medium on
+both sides or neither left out, seams of overlapping parts followed), which for a closed mesh is the mesh itself.
 
 Physics (MCML conventions, Wang, Jacques & Zheng 1995, *Comput. Methods Programs Biomed.* 47:131):
 
@@ -54,9 +58,9 @@ from meshshade.geometry.geodesics.neighbourhoods import GeodesicNeighbourhoods
 from meshshade.light import BeamLight
 from meshshade.light.samples import check_exitance
 from meshshade.materials import Material
+from meshshade.montecarlo.boundary import WalkSurface, walk_surface
 from meshshade.montecarlo.distributed import walk_on_client
-from meshshade.montecarlo.emitter import Emitter
-from meshshade.montecarlo.walks import channel_groups, check_engine, prepare_walks, walk_group
+from meshshade.montecarlo.walks import channel_groups, check_engine, make_emitter, prepare_walks, walk_group
 from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
@@ -65,6 +69,8 @@ __all__ = ["DEFAULT_BATCHES", "TOTAL_KEYS", "MCOptions", "MCResult", "batch_stat
            "mc_options_from_keywords"]
 
 DEFAULT_BATCHES = 16
+#: MCOptions.inside: the medium {w > 1/2} of the winding number (the bake's), or every face a boundary
+INSIDE_CHOICES = ("winding", "faces")
 TOTAL_KEYS = ("specular_reflectance", "diffuse_reflectance", "transmittance", "absorbed")
 
 
@@ -82,6 +88,9 @@ class MCResult:
         first beam light (for radial profiles); beam_entry : (face, bary) of that beam, or None;
     boundary_tests : ray casts (Embree queries) made by the walk; seconds / cpu_seconds : wall-clock and process
         CPU time (all threads) of the walk, without the set-up (scene, safe-distance grid, emitter).
+    surface : the :class:`~meshshade.montecarlo.boundary.WalkSurface` walked in (the medium's boundary: the mesh
+        itself when closed, else its boundary faces and the lids of its holes); lid_power, lid_power_stderr : (3,)
+        W leaving through the lids (part of the diffuse and transmitted totals, on no vertex and no face).
     """
 
     material: Material
@@ -105,6 +114,9 @@ class MCResult:
     boundary_tests: int = 0
     cpu_seconds: float = 0.0
     photons_per_channel: np.ndarray | None = None
+    surface: WalkSurface | None = None
+    lid_power: np.ndarray | None = None
+    lid_power_stderr: np.ndarray | None = None
 
     @property
     def events_per_second(self) -> float:
@@ -240,6 +252,12 @@ class MCOptions:
         wavefront with an Embree query every step (the baseline: same distribution, different random streams)
     keep_beam_exits : keep the exit points of a beam's photons (``MCResult.beam_exits``)
     beam_distances : compute per-vertex geodesic distances from the first beam's entry point
+    inside : where the medium is. "winding" (default): the bake's inside {w > 1/2} of the mesh's generalised
+        winding number (:func:`meshshade.montecarlo.boundary.walk_surface`: holes closed by lids on w = 1/2 with
+        Fresnel as at a face, faces with the medium on both sides or neither passed through; a closed mesh is
+        walked as it is). "faces": every face a boundary with the medium behind it, no lid
+        (:meth:`WalkSurface.of_faces <meshshade.montecarlo.boundary.WalkSurface.of_faces>`: the walk before issue
+        47, in which a photon walks out through a hole; kept to measure against)
     """
 
     photons: int | None = 100_000
@@ -251,6 +269,7 @@ class MCOptions:
     fast_interior: bool = True
     keep_beam_exits: bool = True
     beam_distances: bool = True
+    inside: str = "winding"
 
     def __post_init__(self):
         engine = check_engine(self.engine, stacklevel=4)
@@ -263,6 +282,12 @@ class MCOptions:
         for name in ("fast_interior", "keep_beam_exits", "beam_distances"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise MeshshadeError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if self.inside not in INSIDE_CHOICES:
+            raise MeshshadeError(f"inside must be one of {', '.join(map(repr, INSIDE_CHOICES))}, got {self.inside!r}")
+
+
+#: fields of MCOptions that never were keywords of simulate (not accepted as deprecated ones)
+NEW_FIELDS = ("inside",)
 
 
 def mc_options_from_keywords(options: MCOptions | None, keywords: dict, where: str = "simulate",
@@ -275,7 +300,7 @@ def mc_options_from_keywords(options: MCOptions | None, keywords: dict, where: s
         raise MeshshadeError(f"{where}: options must be MCOptions or None, got {type(options).__name__}")
     if not keywords:
         return options
-    unknown = sorted(set(keywords) - set(MCOptions.__dataclass_fields__))
+    unknown = sorted(set(keywords) - (set(MCOptions.__dataclass_fields__) - set(NEW_FIELDS)))
     if unknown:
         raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}")
     warnings.warn(f"{where}({', '.join(f'{k}=' for k in keywords)}...) is deprecated; pass "
@@ -289,7 +314,9 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
 
     Parameters
     ----------
-    mesh : Mesh (closed, outward faces; vertices in mm)
+    mesh : Mesh (vertices in mm). The medium is the bake's inside {w > 1/2} of its generalised winding number
+        (:mod:`meshshade.montecarlo.boundary`; ``MCOptions.inside``): holes are closed by lids on the level surface
+        w = 1/2, faces with the medium on both sides or neither are passed through; a closed mesh is walked as it is
     material : Material (its medium's sigma_s, sigma_a, and eta, g)
     lights : light or sequence of BeamLight / DirectionalLight / PointLight
     options : MCOptions or None (the defaults: 1e5 photons per channel group, seed 0): photons, seed, time
@@ -340,16 +367,18 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
     bar = Progress(progress if isinstance(progress, str) else "mc",
                    None if photons is None else n_photons * len(groups), "photons", enabled=bool(progress))
     try:
+        # the medium's boundary (MCOptions.inside): the bake's inside {w > 1/2}, or the faces alone
+        surface = walk_surface(mesh) if o.inside == "winding" else WalkSurface.of_faces(mesh)
         if client is not None:
             # the lights are checked here, before any task (a beam that misses is one line, as in one process)
-            emitter = Emitter(mesh.vertices, mesh.faces, mesh.face_normals, mesh.face_areas, lights,
-                              make_scene(mesh.vertices, mesh.faces), material.eta)
+            emitter = make_emitter(mesh, surface, lights, material.eta, make_scene(surface.vertices, surface.faces))
             t0, c0 = time.perf_counter(), time.process_time()
             tallies = walk_on_client(client, mesh, material, lights, n_photons, seed=seed, n_batches=n_batches,
-                                     pool=pool, keep_beam=keep_beam_exits, engine=engine, progress=bar)
+                                     pool=pool, keep_beam=keep_beam_exits, engine=engine, progress=bar,
+                                     surface=surface)
         else:
             setup = prepare_walks(mesh, material, lights, engine=engine, fast_interior=fast_interior,
-                                  half_space_certificates=time_budget is None)
+                                  half_space_certificates=time_budget is None, surface=surface)
             emitter = setup.emitter
             children = np.random.SeedSequence(seed).spawn(len(groups))
             t0, c0 = time.perf_counter(), time.process_time()
@@ -365,8 +394,11 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
     finally:  # also on KeyboardInterrupt: the bar clears its line before the error message is printed
         bar.close()
     V, F = mesh.vertices, mesh.faces
+    n = V.shape[0]
     face_p = np.zeros((F.shape[0], 3)); face_se = np.zeros_like(face_p)
-    vert_p = np.zeros((V.shape[0], 3)); vert_se = np.zeros_like(vert_p)
+    vert_p = np.zeros((n, 3)); vert_se = np.zeros_like(vert_p)
+    lid_p = np.zeros(3); lid_se = np.zeros(3)
+    lid = surface.lid
     tot = np.zeros((7, 3)); tot_se = np.zeros((7, 3))
     frac = np.zeros((5, 3)); frac_se = np.zeros((5, 3))
     events = boundary = rays = 0
@@ -379,8 +411,12 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
         scale = n_photons / emitted if emitted else 1.0
         # photon weights were P/n_photons: each group's tallies are normalised by its own count (a time budget
         # stops each group's emission on its own)
-        fp, fse = batch_stats(walk.face * scale)
-        vp, vse = batch_stats(walk.face_vert * scale)
+        # on the mesh's faces and vertices, batch by batch (the walk surface's lids and parts of split faces)
+        face_t = walk.face if surface.identity else surface.mesh_face_tally(walk.face)
+        vert_t = walk.face_vert if surface.identity else surface.mesh_vertex_tally(walk.face_vert)
+        fp, fse = batch_stats(face_t * scale)
+        vp, vse = batch_stats(vert_t * scale)
+        lp, lse = batch_stats(walk.face[:, lid].sum(axis=1) * scale)
         tt, tse = batch_stats(walk.tot * scale)
         inc = walk.tot[:, 5]
         ratios = walk.tot[:, :5] / np.where(inc > 0, inc, np.nan)[:, None]          # (B, 5) per batch
@@ -392,15 +428,21 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
         if keep_beam_exits and walk.exits["face"]:
             group_exits = {k: np.concatenate(v) for k, v in walk.exits.items()}
             group_exits["weight"] = group_exits["weight"] * scale
+            # on the mesh's faces (exits through a lid are on none: left out of the beam's tallies)
+            group_exits["face"], group_exits["bary"] = surface.mesh_bary(group_exits["face"], group_exits["bary"])
+            on = group_exits["face"] >= 0
+            if not np.all(on):
+                group_exits = {k: v[on] for k, v in group_exits.items()}
         for c in chans:
             face_p[:, c], face_se[:, c], vert_p[:, c], vert_se[:, c] = fp, fse, vp, vse
+            lid_p[c], lid_se[c] = lp, lse
             tot[:, c], tot_se[:, c], frac[:, c], frac_se[:, c] = tt, tse, fr, fse_tot
             if group_exits is not None:
                 exits[c] = group_exits   # channels of one group share the (read-only) arrays
         events += walk.events
         boundary += walk.boundary
     seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
-    va = mesh.vertex_areas
+    va = mesh.vertex_areas if surface.identity else surface.vertex_areas()   # the boundary's, eq. (129)
     with np.errstate(divide="ignore", invalid="ignore"):
         radiance = np.where(va[:, None] > 0, vert_p / va[:, None], 0.0)
         radiance_se = np.where(va[:, None] > 0, vert_se / va[:, None], 0.0)
@@ -413,8 +455,11 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
     b = emitter.parts[next((i for i, lt in enumerate(emitter.lights) if isinstance(lt, BeamLight)), -1)] \
         if any(isinstance(lt, BeamLight) for lt in emitter.lights) else None
     if b is not None:
-        beam_entry = (int(b[1]), np.asarray(b[2]))
-        if beam_distances:
+        f_mesh, b_mesh = surface.mesh_bary(np.array([int(b[1])]), np.asarray(b[2]))
+        beam_entry = (int(f_mesh[0]), b_mesh[0]) if f_mesh[0] >= 0 else None   # None: the beam enters a lid
+        if beam_entry is not None and surface.identity:
+            beam_entry = (int(b[1]), np.asarray(b[2]))
+        if beam_entry is not None and beam_distances:
             beam_distance = GeodesicNeighbourhoods(V, F).distances_from(face=beam_entry[0], bary=beam_entry[1])
     check_exitance(radiance, lights)  # finite and >= 0, or a one-line error naming the lights' strengths
     return MCResult(material=material, face_power=face_p, face_power_stderr=face_se, vertex_power=vert_p,
@@ -424,5 +469,5 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
                     boundary_events=boundary, seconds=seconds, n_batches=n_batches, boundary_tests=rays,
                     cpu_seconds=cpu_seconds,
                     beam_exits=exits if keep_beam_exits else [], beam_entry=beam_entry,
-                    beam_distance=beam_distance)
+                    beam_distance=beam_distance, surface=surface, lid_power=lid_p, lid_power_stderr=lid_se)
 

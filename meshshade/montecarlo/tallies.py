@@ -121,7 +121,9 @@ def beam_radial_power(result: MCResult, mesh, edges_mm):
 
 # ------------------------------------------------------------------------------------------------ output
 def summary_dict(result: MCResult) -> dict:
-    """The JSON summary: totals (three values, or one for a grey material) with stderrs, photons, events, seconds."""
+    """The JSON summary: totals (three values, or one for a grey material) with stderrs, photons, events, seconds;
+    for a mesh whose walk surface is not the mesh itself, ``walk_surface``: the holes closed, rims left open, lid,
+    transparent and reversed faces, and the fraction of the incident power that left through the lids."""
     grey = result.material.is_grey
     out = {}
     for key, val in result.totals.items():
@@ -133,6 +135,14 @@ def summary_dict(result: MCResult) -> dict:
                seconds=float(result.seconds), cpu_seconds=float(result.cpu_seconds),
                events_per_second=float(result.events_per_second), n_batches=int(result.n_batches),
                material=result.material.to_dict())
+    surf = result.surface
+    if surf is not None and not surf.identity:   # what the walk did beyond the mesh's faces (boundary.py)
+        inc = np.where(result.incident_power > 0, result.incident_power, np.nan)
+        lid = result.lid_power / inc
+        out["walk_surface"] = {"holes_closed": int(surf.holes), "rims_left_open": int(surf.open_loops),
+                               "lid_faces": int(np.count_nonzero(surf.lid)),
+                               "transparent_faces": int(surf.transparent), "reversed_faces": int(surf.reversed),
+                               "lid_exit": float(lid[0]) if grey else [float(x) for x in lid]}
     return out
 
 

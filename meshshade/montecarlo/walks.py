@@ -18,6 +18,7 @@ import numpy as np
 from meshshade.errors import MeshshadeError
 from meshshade.geometry.mesh import MeshDefectWarning
 from meshshade.materials import Material
+from meshshade.montecarlo.boundary import WalkSurface, walk_surface
 from meshshade.montecarlo.emitter import Emitter
 from meshshade.montecarlo.engine import PoolWalk
 from meshshade.montecarlo.interior import SafeDistanceGrid, open_surface_warning
@@ -26,7 +27,8 @@ from meshshade.montecarlo.wavefront_oracle import WavefrontWalk
 from meshshade.raycast import make_scene
 from meshshade.raycast.embree_direct import DirectEmbreeScene
 
-__all__ = ["ENGINES", "WalkSetup", "GroupTally", "channel_groups", "check_engine", "prepare_walks", "walk_group"]
+__all__ = ["ENGINES", "WalkSetup", "GroupTally", "channel_groups", "check_engine", "make_emitter", "prepare_walks",
+           "walk_group"]
 
 #: the pooled engine's ways of calling Embree: "fused" (rtcIntersect1 from the numba threads, inside the walk),
 #: "batched" (one embreex call per round), "auto" (fused when the Embree library can be bound)
@@ -56,8 +58,10 @@ def channel_groups(material: Material) -> list[tuple[tuple[float, float], list[i
 
 @dataclass
 class WalkSetup:
-    """Everything the walks of one (mesh, lights, material) need besides the photons: the mesh arrays, the Embree
-    scene, the safe-distance grid (pooled engine), the direct Embree binding (or None) and the emitter."""
+    """Everything the walks of one (mesh, lights, material) need besides the photons: the walk surface's arrays
+    (:class:`~meshshade.montecarlo.boundary.WalkSurface`: the mesh's boundary faces and the lids of its holes; the
+    mesh itself when it is closed), its Embree scene, the safe-distance grid (pooled engine), the direct Embree
+    binding (or None) and the emitter."""
 
     V: np.ndarray
     F: np.ndarray
@@ -69,22 +73,45 @@ class WalkSetup:
     material: Material
     groups: list
     fast_interior: bool
+    surface: WalkSurface | None = None
+
+
+def surface_note(surface: WalkSurface) -> str | None:
+    """The one line a run on ``surface`` warns with: what the walk does beyond the mesh's faces (lids,
+    transparent faces), or, where the walk is the mesh's faces alone, what it does at an open edge (None for a
+    closed mesh)."""
+    return open_surface_warning(surface.faces) if surface.identity else surface.describe()
+
+
+def make_emitter(mesh, surface: WalkSurface, lights, eta, scene) -> Emitter:
+    """The emitter of a walk on ``surface`` (``scene`` its Embree scene): photons enter the walk surface (a lid
+    too), and which lights reach is decided on ``mesh`` as the bake decides it."""
+    bake_mesh = None
+    if not surface.identity:
+        bake_mesh = (mesh.vertices, mesh.faces, mesh.face_normals, mesh.face_areas,
+                     make_scene(mesh.vertices, mesh.faces), surface.walk_face, surface.flipped)
+    return Emitter(surface.vertices, surface.faces, surface.normals, surface.areas, lights, scene, eta,
+                   bake_mesh=bake_mesh)
 
 
 def prepare_walks(mesh, material: Material, lights, *, engine: str = "auto", fast_interior: bool = True,
-                  half_space_certificates: bool = True, stacklevel: int = 3) -> WalkSetup:
-    """Build the scene, grid and emitter of a run (the set-up :func:`simulate` does before its first photon).
+                  half_space_certificates: bool = True, stacklevel: int = 3,
+                  surface: WalkSurface | None = None) -> WalkSetup:
+    """Build the walk surface, scene, grid and emitter of a run (the set-up :func:`simulate` does before its first
+    photon).
 
     half_space_certificates : also certify free paths inside local half-spaces (a set-up cost that pays back
         except under a short time budget).
+    surface : the :class:`~meshshade.montecarlo.boundary.WalkSurface` to walk in (default
+        :func:`~meshshade.montecarlo.boundary.walk_surface` of ``mesh``: the bake's inside {w > 1/2}).
     """
     engine = check_engine(engine)
-    V, F = mesh.vertices, mesh.faces
-    normals, areas = mesh.face_normals, mesh.face_areas
+    surface = walk_surface(mesh) if surface is None else surface
+    if msg := surface_note(surface):
+        warnings.warn(msg, MeshDefectWarning, stacklevel=stacklevel)
+    V, F = surface.vertices, surface.faces
     scene = make_scene(V, F)
     grid = direct = None
-    if not fast_interior and (msg := open_surface_warning(F)):  # the fast engine says it when building its grid
-        warnings.warn(msg, MeshDefectWarning, stacklevel=stacklevel)
     if fast_interior:
         sigma_t_max = float(np.max(material.medium.sigma_s + material.medium.sigma_a))
         use_planes = sigma_t_max > 0 and half_space_certificates
@@ -95,8 +122,9 @@ def prepare_walks(mesh, material: Material, lights, *, engine: str = "auto", fas
             except (RuntimeError, OSError) as exc:
                 if engine == "fused":
                     raise MeshshadeError(f"engine='fused' is not available here ({exc}); use 'batched'") from exc
-    emitter = Emitter(V, F, normals, areas, lights, scene, material.eta)
-    return WalkSetup(V, F, normals, scene, grid, direct, emitter, material, channel_groups(material), fast_interior)
+    emitter = make_emitter(mesh, surface, lights, material.eta, scene)
+    return WalkSetup(V, F, surface.normals, scene, grid, direct, emitter, material, channel_groups(material),
+                     fast_interior, surface)
 
 
 @dataclass

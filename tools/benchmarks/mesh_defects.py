@@ -16,7 +16,8 @@ Guarantees of every generator
 * Deterministic: the same inputs and ``seed`` give the same output (``numpy.random.default_rng(seed)``).
 * Lengths (``points``, ``radius``, ``height``...) are in the units of ``vertices`` (mm in the benchmarks).
 
-Generators: :func:`punch_holes` (the faces of the 2-ring around k vertices removed), :func:`duplicate_faces`,
+Generators: :func:`punch_holes` (the faces of the 2-ring around k vertices removed), :func:`cut_discs` (the faces
+within a distance of given points removed: round holes of a chosen size), :func:`duplicate_faces`,
 :func:`add_part` / :func:`add_ball` (an overlapping extra part), :func:`add_fin` (faces sharing one edge: a
 non-manifold edge), :func:`add_stray_vertices` (unreferenced vertices), :func:`flip_faces` (reversed winding).
 """
@@ -30,8 +31,9 @@ from scipy.spatial import cKDTree
 
 from meshshade.geometry.procedural import icosphere
 
-__all__ = ["Defected", "punch_holes", "duplicate_faces", "add_part", "add_ball", "add_fin", "add_stray_vertices",
-           "flip_faces", "far_from", "relative_change", "vertex_faces", "ring_faces", "boundary_vertices"]
+__all__ = ["Defected", "punch_holes", "cut_discs", "duplicate_faces", "add_part", "add_ball", "add_fin",
+           "add_stray_vertices", "flip_faces", "far_from", "relative_change", "vertex_faces", "ring_faces",
+           "boundary_vertices"]
 
 
 class Defected(NamedTuple):
@@ -189,6 +191,23 @@ def punch_holes(vertices, faces, k: int, *, seed: int = 0, rings: int = 2, min_s
     return Defected(V.copy(), F2, V[chosen].copy(),
                     {"kind": "holes", "rings": int(rings), "centres": chosen, "removed_faces": removed.tolist(),
                      "unreferenced": np.flatnonzero(was & ~referenced).tolist()})
+
+
+def cut_discs(vertices, faces, centres, radius: float) -> Defected:
+    """Remove every face whose centroid lies within ``radius`` of one of ``centres`` (k, 3): round holes about
+    2 ``radius`` across on a mesh finer than that (their rims follow the faces' edges).
+
+    Returns :class:`Defected`; ``points``: the centres; ``details``: ``radius``, ``removed_faces`` (sorted ids of
+    the input's faces).
+    """
+    V, F = _arrays(vertices, faces)
+    if not radius > 0:
+        raise ValueError(f"radius must be > 0; got {radius}")
+    P = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    d, _ = cKDTree(P).query(_centroids(V, F), k=1)
+    removed = np.flatnonzero(d < radius)
+    return Defected(V.copy(), F[d >= radius], P.copy(),
+                    {"kind": "round holes", "radius": float(radius), "removed_faces": removed.tolist()})
 
 
 def duplicate_faces(vertices, faces, k: int, *, seed: int = 0, reverse: bool = False) -> Defected:
