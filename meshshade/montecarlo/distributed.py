@@ -21,6 +21,7 @@ import hashlib
 import threading
 import warnings
 from collections import OrderedDict
+from typing import NamedTuple
 
 import numpy as np
 
@@ -80,13 +81,22 @@ def _setup(key, mesh, material, lights, engine, surface=None):
     return setup
 
 
-def _walk_task(mesh, key, material, lights, engine, gi, n_photons, seed, n_batches, pool, keep_beam, chunks,
-               surface=None):
+class _Run(NamedTuple):
+    """What every task of one run shares (beside the mesh, the material and the lights)."""
+
+    n_photons: int
+    seed: int
+    n_batches: int
+    pool: object
+    keep_beam: bool
+
+
+def _walk_task(mesh, key, material, lights, engine, gi, run: _Run, chunks, surface=None):
     """One task: channel group ``gi``, entry chunks ``chunks`` (runs on a worker)."""
     task_threads()
     setup = _setup(key, mesh, material, lights, engine, surface)
-    return walk_group(setup, gi, n_photons, seed=seed, n_batches=n_batches, pool=pool, keep_beam=keep_beam,
-                      chunks=chunks)
+    return walk_group(setup, gi, run.n_photons, seed=run.seed, n_batches=run.n_batches, pool=run.pool,
+                      keep_beam=run.keep_beam, chunks=chunks)
 
 
 def _add(a: GroupTally, b: GroupTally) -> GroupTally:
@@ -103,13 +113,14 @@ def walk_on_client(client, mesh, material, lights, n_photons: int, *, seed: int,
     key = setup_key(mesh, material, lights, engine, surface)
     [mesh_future, surface_future] = client.scatter([mesh, surface], broadcast=True, hash=False)
     ranges = split_chunks(n_photons)
+    run = _Run(n_photons, seed, n_batches, pool, keep_beam)
     leaves, roots = {}, []
     try:
         for gi in range(len(channel_groups(material))):
             level = []
             for i, chunks in enumerate(ranges):
-                f = client.submit(_walk_task, mesh_future, key, material, lights, engine, gi, n_photons, seed,
-                                  n_batches, pool, keep_beam, chunks, surface_future,
+                f = client.submit(_walk_task, mesh_future, key, material, lights, engine, gi, run, chunks,
+                                  surface_future,
                                   key=f"meshshade-mc-{key[:16]}-{seed}-{gi}-{i}", pure=False)
                 leaves[f] = _photons_in(chunks, n_photons)
                 level.append(f)
