@@ -24,7 +24,6 @@ import multiprocessing
 import os
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -161,12 +160,19 @@ def run_demo(out_dir="meshshade-demo", *, small=False, log=print) -> dict:
     out = io.output_dir(out_dir)
     files = {}
     if (os.cpu_count() or 1) > 1:
-        with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
-            pebble = pool.submit(_pebble_part, out, small)
+        pool = multiprocessing.get_context("spawn").Pool(1)
+        try:
+            pebble = pool.apply_async(_pebble_part, (out, small))
             files.update(_figure1_part(out, small))
             files.update(_profiles_part(out, small))
             _warm_dipole_side()
-            pebble_files, st = pebble.result()
+            pebble_files, st = pebble.get()
+        except BaseException:   # an error or a signal here: the other process stops before anything is cleaned up
+            pool.terminate()
+            pool.join()
+            raise
+        pool.close()
+        pool.join()
     else:
         files.update(_figure1_part(out, small))
         files.update(_profiles_part(out, small))

@@ -213,7 +213,7 @@ def test_mc_on_an_open_mesh_says_what_the_walk_does(tmp_path, cli):
     assert rc == 0, err
     said = [line for line in err.splitlines() if "Monte Carlo" in line]
     assert len(said) == 1, err
-    for needle in ("boundary edges", "pass through it", "booked as absorbed", "booked as lost"):
+    for needle in ("boundary edges", "w > 1/2", "closed by lids", "Fresnel"):
         assert needle in said[0], said[0]
 
 
