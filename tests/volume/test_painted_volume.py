@@ -1,0 +1,67 @@
+"""Painted media in the volume transport (docs/physics.md §17, issue 49): a constant paint equal to a preset's own
+total diffuse reflectance reproduces the preset's bake; a uniform paint on a flat slab under a sun at normal
+incidence reflects its colour in the middle; the surface models refuse a painted material."""
+import numpy as np
+import pytest
+
+from meshshade.errors import MaterialError, ParameterError
+from meshshade.geometry.mesh import Mesh
+from meshshade.geometry.procedural import box, icosphere
+from meshshade.kernels.fresnel import fresnel_reflectance
+from meshshade.kernels.painted_reflectance import model_total_reflectance
+from meshshade.light import DirectionalLight
+from meshshade.materials import Material
+from meshshade.painted import PaintedMaterial
+from meshshade.transport.baking import bake
+from meshshade.transport.options import BakeOptions
+
+
+@pytest.fixture(scope="module")
+def ball():
+    V, F = icosphere(8.0, 3)
+    return Mesh.from_arrays(V, F)
+
+
+def test_a_constant_paint_of_a_presets_own_colour_reproduces_its_bake(ball):
+    base = Material.preset("skin1")
+    C = model_total_reflectance(base.albedo_prime, base.eta, base.g)      # the preset's own R_d, eq. (105)
+    painted = PaintedMaterial(base, colour=np.broadcast_to(C, (ball.n_vertices, 3)))
+    sun = DirectionalLight([0.3, -0.2, -1.0], 1.0)
+    ref = bake(ball, base, sun).radiance
+    got = bake(ball, painted, sun).radiance
+    lit = ref > 1e-3 * ref.max(axis=0)
+    rel = np.abs(got - ref)[lit] / ref[lit]
+    assert rel.max() < 1e-3
+
+
+def test_surface_models_refuse_a_painted_material(ball):
+    painted = PaintedMaterial(Material.preset("skin1"), colour=np.full((ball.n_vertices, 3), 0.4))
+    with pytest.raises(ParameterError, match="needs the volume model"):
+        bake(ball, painted, DirectionalLight([0, 0, -1.0], 1.0), BakeOptions(model="dipole"))
+
+
+@pytest.mark.parametrize("bad", [0.0, 1.0])
+def test_a_colour_no_medium_has_is_refused(ball, bad):
+    with pytest.raises(MaterialError, match="painted colour must lie in"):
+        PaintedMaterial(Material.preset("skin1"), colour=np.full((ball.n_vertices, 3), bad))
+
+
+def test_a_map_without_uvs_is_refused():
+    with pytest.raises(MaterialError, match="UVs"):
+        PaintedMaterial(Material.preset("skin1"), image=np.full((4, 4, 3), 0.5))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("C", [0.05, 0.2, 0.5, 0.8, 0.95])
+def test_a_uniformly_painted_slab_reflects_its_colour(C):
+    # box 100 x 100 x 20 mm, sun at normal incidence on its top: the exitance over the central 20 x 20 mm of the
+    # lit face per unit of entering irradiance (1 - F(0), Fresnel at normal incidence) is the painted colour
+    V, F = box((100.0, 100.0, 20.0), 25)
+    mesh = Mesh.from_arrays(V, F)
+    base = Material.preset("skin1")
+    painted = PaintedMaterial(base, colour=np.full((mesh.n_vertices, 3), C))
+    r = bake(mesh, painted, DirectionalLight([0, 0, -1.0], 1.0))
+    mid = (np.abs(mesh.vertices[:, 0]) <= 10) & (np.abs(mesh.vertices[:, 1]) <= 10) & (mesh.vertices[:, 2] > 9.99)
+    T0 = 1.0 - float(fresnel_reflectance(1.0, 1.0, base.eta))
+    got = r.radiance[mid].mean(axis=0) / T0
+    np.testing.assert_allclose(got, C, rtol=0.01)
