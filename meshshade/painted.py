@@ -11,28 +11,45 @@ sampled surface point (§17); the bake reads it there (:mod:`meshshade.volume.tr
 from __future__ import annotations
 
 import hashlib
+import warnings
 
 import numpy as np
 
-from meshshade.errors import MaterialError
-from meshshade.kernels.painted_reflectance import albedo_for_reflectance
-from meshshade.materials import Material
+from meshshade.errors import DiffusionValidityWarning, MaterialError
+from meshshade.kernels.painted_reflectance import albedo_for_reflectance, reflectance_range
+from meshshade.materials import LOW_ALBEDO_WARNING, Material
 
-__all__ = ["PaintedMaterial"]
+__all__ = ["PaintedMaterial", "CLAMP_MARGIN"]
+
+#: a clamped colour lies this fraction of the reachable range inside its ends (eq. (106) has a root there)
+CLAMP_MARGIN = 1e-3
 
 
 class PaintedMaterial:
     """``base`` (a :class:`~meshshade.materials.Material`) painted with ``colour`` (n_vertices, 3) per vertex, or
     ``image`` (H, W, 3) over the mesh's per-corner ``uv`` (m, 3, 2); colours linear, per channel in the range the
-    model reaches (a MaterialError naming it otherwise, :func:`albedo_for_reflectance`)."""
+    model reaches (a MaterialError naming it otherwise, :func:`albedo_for_reflectance`), or with ``clamp`` moved
+    into it (a stated clamp: ``clamped`` counts the values moved, ``clamp_range`` the range)."""
 
-    def __init__(self, base: Material, *, colour=None, image=None, uv=None, name: str | None = None):
+    def __init__(self, base: Material, *, colour=None, image=None, uv=None, name: str | None = None,
+                 clamp: bool = False):
         if not isinstance(base, Material):
             raise MaterialError(f"a painted material needs a base Material, got {type(base).__name__}")
         if (colour is None) == (image is None):
             raise MaterialError("a painted material takes either per-vertex colours or an image over the UVs")
         self.base = base
         self.name = name or f"{base.name} painted"
+        lo, hi = reflectance_range(base.eta, base.g)
+        self.clamp_range = (lo + CLAMP_MARGIN * (hi - lo), hi - CLAMP_MARGIN * (hi - lo))
+        self.clamped = 0
+        if clamp:
+            def clamp_(v):
+                v = np.asarray(v, dtype=np.float64)
+                out = np.clip(v, *self.clamp_range)
+                self.clamped += int(np.sum(out != v))
+                return out
+            colour = None if colour is None else clamp_(colour)
+            image = None if image is None else clamp_(image)
         if colour is not None:
             colour = np.asarray(colour, dtype=np.float64)
             if colour.ndim != 2 or colour.shape[1] != 3:
@@ -47,6 +64,11 @@ class PaintedMaterial:
                 raise MaterialError("a colour map needs the mesh's texture coordinates (UVs); the mesh has none")
             self._check(image)
             self.colour, self.image, self.uv = None, image, np.asarray(uv, dtype=np.float64)
+        low = self.albedo_range()[0] < LOW_ALBEDO_WARNING
+        if np.any(low):
+            warnings.warn(f"painted material {self.name!r}: the paint's darkest colours need a reduced albedo below "
+                          f"{LOW_ALBEDO_WARNING} in channel(s) {','.join(c for c, f in zip('rgb', low) if f)}, where "
+                          "diffusion theory is inaccurate", DiffusionValidityWarning, stacklevel=2)
         data = self.colour if self.colour is not None else self.image
         self._digest = hashlib.sha1(np.ascontiguousarray(data).tobytes()).hexdigest()[:12]
 
@@ -104,4 +126,6 @@ class PaintedMaterial:
         """A homogeneous Material of reduced albedo ``albedo_prime`` (3,) at the base's sigma_t', eta and g."""
         a = np.asarray(albedo_prime, dtype=np.float64)
         st = self.base.sigma_t_prime
-        return Material(a * st, (1.0 - a) * st, self.base.eta, self.base.g, name)
+        with warnings.catch_warnings():       # the paint's low albedos are said once, where it is made
+            warnings.simplefilter("ignore", DiffusionValidityWarning)
+            return Material(a * st, (1.0 - a) * st, self.base.eta, self.base.g, name)
