@@ -73,7 +73,9 @@ class PaintedMaterial:
         self._digest = hashlib.sha1(np.ascontiguousarray(data).tobytes()).hexdigest()[:12]
 
     def _check(self, colours):
-        albedo_for_reflectance(np.unique(colours.reshape(-1, 3), axis=0), self.base.eta, self.base.g)
+        """Every painted value's albedo (eq. (106); a MaterialError for one no medium has), kept as its range."""
+        alb = albedo_for_reflectance(colours.reshape(-1, 3), self.base.eta, self.base.g)
+        self._albedo_range = (alb.min(axis=0), alb.max(axis=0))
 
     # --- the base's constants -----------------------------------------------------------------------------
     @property
@@ -118,9 +120,7 @@ class PaintedMaterial:
     def albedo_range(self) -> tuple[np.ndarray, np.ndarray]:
         """((3,), (3,)): the least and the largest reduced albedo per channel over the whole paint (every vertex
         or texel)."""
-        data = self.colour if self.colour is not None else self.image.reshape(-1, 3)
-        alb = albedo_for_reflectance(np.unique(data, axis=0), self.base.eta, self.base.g)
-        return alb.min(axis=0), alb.max(axis=0)
+        return self._albedo_range
 
     def material_of(self, albedo_prime, name: str = "painted") -> Material:
         """A homogeneous Material of reduced albedo ``albedo_prime`` (3,) at the base's sigma_t', eta and g."""

@@ -17,7 +17,7 @@ channel. :func:`model_total_reflectance` evaluates it vectorised over alpha' (th
     R_d(alpha'; eta, g) = C,   alpha' in (0, ALBEDO_MAX]                                                 (106)
 
 per value by regula falsi (Illinois) in x = log10(1 - alpha') inside the bracket of a monotone table, all values
-at once (no Python loop over texels), to 2e-16 in R_d or 1e-15 in x. A colour at or below R_d(0) or at or above the largest reflectance the model reaches (alpha' = ALBEDO_MAX;
+at once (no Python loop over texels), to 1e-15 in R_d or in x (halving what stalls at rounding level). A colour at or below R_d(0) or at or above the largest reflectance the model reaches (alpha' = ALBEDO_MAX;
 :func:`reflectance_range`) is no medium's: a MaterialError.
 """
 from __future__ import annotations
@@ -40,8 +40,9 @@ __all__ = ["model_total_reflectance", "albedo_for_reflectance", "reflectance_ran
 ALBEDO_MAX = 1.0 - 1e-6
 #: nodes of the monotone table that brackets each root (uniform in x = log10(1 - alpha'), alpha' from 0)
 _TABLE_NODES = 1025
-#: the solve stops where |R_d - C| <= _R_TOL or the bracket is narrower than _X_TOL in x; at most _MAX_STEPS
-_R_TOL, _X_TOL, _MAX_STEPS = 2e-16, 1e-15, 100
+#: the solve stops where |R_d - C| <= _R_TOL (a few units in the last place of R_d's own rounding) or the bracket
+#: is narrower than _X_TOL in x; at most _MAX_STEPS of regula falsi, then as many halvings for what is left
+_R_TOL, _X_TOL, _MAX_STEPS = 1e-15, 1e-15, 60
 
 
 def _strengths_in_x(eta: float, g: float) -> np.ndarray:
@@ -142,6 +143,17 @@ def albedo_for_reflectance(reflectance, eta: float, g: float = 0.0) -> np.ndarra
         hi[todo] = np.where(left, h, xm)
         f_hi[todo] = np.where(left, np.where(last[todo] == 1, 0.5 * fh, fh), fm)
         last[todo] = np.where(left, 1, -1)
+        done = (np.abs(fm) <= _R_TOL) | (np.abs(hi[todo] - lo[todo]) <= _X_TOL)
+        todo = todo[~done]
+    for _ in range(_MAX_STEPS):                              # what regula falsi left (rounding-level stalls): halved
+        if todo.size == 0:
+            break
+        mid = 0.5 * (lo[todo] + hi[todo])
+        fm = model_total_reflectance(1.0 - 10.0 ** mid, eta, g) - values[todo]
+        x[todo] = mid
+        left = fm <= 0.0
+        lo[todo] = np.where(left, mid, lo[todo])
+        hi[todo] = np.where(left, hi[todo], mid)
         done = (np.abs(fm) <= _R_TOL) | (np.abs(hi[todo] - lo[todo]) <= _X_TOL)
         todo = todo[~done]
     if todo.size:

@@ -507,6 +507,22 @@ def _active_counts(ptr, other, distinct, newid, counts, r0, r1):
         counts[ni] = n
 
 
+@numba.njit(cache=True, nogil=True)
+def _scale_by_cube(start, cols, s_val, D, sig_a, scaled, mw, c0, c1):
+    """Cubes c0..c1: each stiffness triplet times its cube's D per channel (scaled[c]), each mass triplet's value
+    times its cube's sigma_a per channel (mw[c]; its stiffness columns 0)."""
+    for q in range(c0, c1):
+        for k in range(start[q], start[q + 1]):
+            v = s_val[k]
+            if cols[k] >= 0:
+                for c in range(3):
+                    scaled[c, k] = v * D[q, c]
+            else:
+                for c in range(3):
+                    scaled[c, k] = 0.0
+                    mw[c, k] = v * sig_a[q, c]
+
+
 #: cubes per chunk of the assembly (the unit of its partial sums)
 CHUNK = 4096
 
@@ -547,14 +563,15 @@ def assemble(lattice, *, ghost: float = GHOST, media=None) -> Assembly:
     passes = [(s_val, b_val)]
     m_media = None
     if media is not None:                      # a medium per cube: D_c S and sigma_a,c m per channel (eq. (107))
-        D, sig_a = (np.asarray(v, dtype=np.float64) for v in media)
-        cube = np.repeat(np.arange(n_cells), np.diff(start))
-        stiff = cols >= 0
-        scaled = [np.where(stiff, s_val * D[cube, c], 0.0) for c in range(3)]
-        m_media = np.stack([np.bincount(rows[mass], weights=s_val[mass] * sig_a[cube[mass], c], minlength=n_free)
-                            for c in range(3)], axis=1)
+        D, sig_a = (np.ascontiguousarray(v, dtype=np.float64) for v in media)
+        scaled = np.empty((3, size))
+        mw = np.zeros((3, size))
+        parallel_for(lambda a, b: _scale_by_cube(start, cols, s_val, D, sig_a, scaled, mw, a, b), n_cells,
+                     min_block=CHUNK)
+        at = rows[mass]
+        m_media = np.stack([np.bincount(at, weights=mw[c][mass], minlength=n_free) for c in range(3)], axis=1)
         passes = [(scaled[0], b_val), (scaled[1], scaled[2])]
-        del cube, stiff
+        del mw
     # the symmetric CSR: rows counted per block of triplets, filled in triplet order
     n_blocks = max(1, min(default_threads(), size // 65536))
     edges = _block_edges(size, n_blocks)
