@@ -160,20 +160,25 @@ class VolumeTransport:
             Mf, n = remainder_exitance(tab, src, rec, spacing_mm=self._mean_spacing())
             parts.append(Mf)
             pairs += n
+        return self._at_receiver_albedo(parts, self.sample_albedo), pairs
+
+    def _at_receiver_albedo(self, parts, albedo):
+        """(p, 3): the near fields ``parts`` (one (p, 3) per node of ``self._node_x``) interpolated at each
+        receiver's ``albedo`` (p, 3) per channel, linearly in log10(1 - alpha') (eq. (108))."""
         if len(parts) == 1:
-            return parts[0], pairs
-        x = np.log10(1.0 - self.sample_albedo)
+            return parts[0]
+        x = np.log10(1.0 - albedo)
         out = np.zeros_like(parts[0])
         nodes = self._node_x
+        index = np.arange(len(parts), dtype=np.float64)
         for c in range(3):
-            u = np.interp(x[:, c], nodes[:, c][::-1], np.arange(len(parts))[::-1].astype(float)) \
-                if nodes[0, c] > nodes[-1, c] else np.interp(x[:, c], nodes[:, c], np.arange(len(parts)).astype(float))
+            u = np.interp(x[:, c], nodes[:, c], index)          # the nodes increase in x (albedo falling)
             j = np.minimum(np.floor(u).astype(np.int64), len(parts) - 2)
             f = u - j
             stack = np.stack([P[:, c] for P in parts], axis=1)
             rows = np.arange(stack.shape[0])
             out[:, c] = (1.0 - f) * stack[rows, j] + f * stack[rows, j + 1]
-        return out, pairs
+        return out
 
     def _buried_vertices(self):
         """(n,) bool: the mesh's vertices buried in another of its parts (only a mesh of several parts has them),
@@ -327,8 +332,11 @@ class VolumeTransport:
                "area": np.zeros(len(index)), "cos_t": cos_t, "light": np.zeros(len(index), dtype=np.int64)}
         rec = {"pos": points, "normal": np.asarray(normals, dtype=np.float64), "radius": np.asarray(radius),
                "E": np.zeros((len(points), 1)), "cos_t": np.ones((len(points), 1))}
-        M, _ = remainder_exitance(self.tables, src, rec, coarse_far=False)
-        return M
+        if not self.painted:
+            M, _ = remainder_exitance(self.tables, src, rec, coarse_far=False)
+            return M
+        parts = [remainder_exitance(tab, src, rec, coarse_far=False)[0] for tab in self.tables_at]
+        return self._at_receiver_albedo(parts, self._medium_at(points)[0])
 
     def _read(self, phi, points, normals):
         """(M (p, 3) = phi / (2A) at ``points``, how many lay outside the lattice). A point farther outside the
