@@ -97,6 +97,15 @@ class PaintedMaterial:
     def to_dict(self) -> dict:
         return {**self.base.to_dict(), "name": self.name, "painted": self.describe()}
 
+    def check_mesh(self, mesh) -> None:
+        """MaterialError unless the paint fits ``mesh``: a colour per vertex, or a UV map per face."""
+        if self.colour is not None and self.colour.shape[0] != mesh.n_vertices:
+            raise MaterialError(f"the painted material has {self.colour.shape[0]} vertex colours for a mesh of "
+                                f"{mesh.n_vertices} vertices")
+        if self.uv is not None and self.uv.shape[:2] != (mesh.n_faces, 3):
+            raise MaterialError(f"the painted material's UV map is for {self.uv.shape[0]} faces, the mesh has "
+                                f"{mesh.n_faces}")
+
     # --- the paint ---------------------------------------------------------------------------------------------
     def colour_at(self, faces, faces_of_mesh, bary) -> np.ndarray:
         """(k, 3) the painted colour at points given by their input ``faces`` (k,), the mesh's face array

@@ -104,9 +104,11 @@ def bake(mesh, material: Material, lights, options: BakeOptions | None = None, *
         raise MeshshadeError(f"bake needs a meshshade Mesh (mm), got {type(mesh).__name__}")
     if not isinstance(material, (Material, PaintedMaterial)):
         raise MaterialError(f"bake needs a Material or a PaintedMaterial, got {type(material).__name__}")
-    if isinstance(material, PaintedMaterial) and options.model != "volume":
-        raise ParameterError(f"model {options.model!r} takes one medium; a painted material (a medium varying over "
-                             "the object) needs the volume model (docs/physics.md §17)")
+    if isinstance(material, PaintedMaterial):
+        if options.model != "volume":
+            raise ParameterError(f"model {options.model!r} takes one medium; a painted material (a medium varying "
+                                 "over the object) needs the volume model (docs/physics.md §17)")
+        material.check_mesh(mesh)
     _check_reuse(reuse, mesh, material, options.model)
     lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
     clock = Stopwatch()

@@ -101,3 +101,9 @@ def test_each_half_of_a_two_colour_ball_far_from_the_border_bakes_as_its_own_med
         assert sel.sum() >= 10
         rel = np.abs(got[sel] - ref[sel]) / ref[sel]
         assert np.all(np.median(rel, axis=0) < 0.01), (colour, np.median(rel, axis=0))
+
+
+def test_a_paint_for_another_mesh_is_refused(ball):
+    painted = PaintedMaterial(Material.preset("skin1"), colour=np.full((ball.n_vertices + 1, 3), 0.4))
+    with pytest.raises(MaterialError, match="vertex colours for a mesh of"):
+        bake(ball, painted, DirectionalLight([0, 0, -1.0], 1.0))
