@@ -41,6 +41,7 @@ import numpy as np
 from meshshade.errors import ParameterError
 from meshshade.geometry.refine import refined_location, refined_mesh
 from meshshade.geometry.uv import automatic_atlas, check_uv, dilate, rasterise_uv
+from meshshade.materials import Material
 from meshshade.names import DEFAULT_MODEL
 from meshshade.output.render import PixelGather
 from meshshade.output.tonemap import to_uint8, tonemap_linear
@@ -202,6 +203,9 @@ def bake_texture(mesh, material, lights, options: BakeOptions | None = None, *, 
                       f"{MAX_REFINED_VERTICES:,}): texels between vertices are coarser than the light's scale; "
                       "--texture-refine N asks for more (check --units: the mesh's mean edge is "
                       f"{mesh.mean_edge_length:.3g} mm)", stacklevel=2)
+    if n != 1 and not isinstance(material, Material):
+        raise ParameterError("a painted material is baked into a texture on the mesh as it is (--texture-refine 1; "
+                             "its paint lies on the mesh's own faces)")
     t0 = time.perf_counter()
     surface = refined_mesh(mesh, n)
     timings["texture refine"] = time.perf_counter() - t0

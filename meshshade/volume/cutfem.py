@@ -78,7 +78,7 @@ class Assembly:
 
     @property
     def n(self) -> int:
-        return int(self.m.size)
+        return int(self.m.shape[0])
 
     def to_nodes(self, x):
         """(N, k) values at every lattice node of the unknowns ``x`` (n, k) (hanging nodes interpolated; nodes of
@@ -507,6 +507,22 @@ def _active_counts(ptr, other, distinct, newid, counts, r0, r1):
         counts[ni] = n
 
 
+@numba.njit(cache=True, nogil=True)
+def _scale_by_cube(start, cols, s_val, D, sig_a, scaled, mw, c0, c1):
+    """Cubes c0..c1: each stiffness triplet times its cube's D per channel (scaled[c]), each mass triplet's value
+    times its cube's sigma_a per channel (mw[c]; its stiffness columns 0)."""
+    for q in range(c0, c1):
+        for k in range(start[q], start[q + 1]):
+            v = s_val[k]
+            if cols[k] >= 0:
+                for c in range(3):
+                    scaled[c, k] = v * D[q, c]
+            else:
+                for c in range(3):
+                    scaled[c, k] = 0.0
+                    mw[c, k] = v * sig_a[q, c]
+
+
 #: cubes per chunk of the assembly (the unit of its partial sums)
 CHUNK = 4096
 
@@ -515,11 +531,16 @@ def _block_edges(k: int, n: int):
     return [round(i * k / n) for i in range(n + 1)]
 
 
-def assemble(lattice, *, ghost: float = GHOST) -> Assembly:
+def assemble(lattice, *, ghost: float = GHOST, media=None) -> Assembly:
     """The matrices of eq. (99) on ``lattice`` (:class:`meshshade.volume.lattice.Lattice`): each cube's entries
     as triplets into its own slots (chunks of cubes on the worker threads), then the symmetric CSR: rows counted
     and filled per block of triplets (within a row the triplets keep their order, so the sums do not depend on
-    the number of threads), duplicates summed row by row, unknowns without inside dropped."""
+    the number of threads), duplicates summed row by row, unknowns without inside dropped.
+
+    ``media``: None (one medium: ``s_data`` (nnz,) and ``m`` (n,) shared by the channels), or (D (C, 3) mm,
+    sigma_a (C, 3) 1/mm) per cube of the lattice, a medium varying over the volume (docs/physics.md eq. (107)):
+    then ``s_data`` (nnz, 3) = sum over cubes of D_c S_cube and ``m`` (n, 3) = sum of sigma_a,c m_cube, per
+    channel (the boundary's B shared: eta does not vary)."""
     cptr, cidx, cw, n_free = constraint_map(lattice.n_nodes, lattice.hanging, lattice.parents)
     cell_nodes, depth = lattice.cell_nodes, lattice.depth
     n_cells = cell_nodes.shape[0]
@@ -539,6 +560,18 @@ def assemble(lattice, *, ghost: float = GHOST) -> Assembly:
     parallel_for(lambda a, b: _entries(*args, a * CHUNK, min(n_cells, b * CHUNK)), n_chunks, min_block=1)
     mass = (cols == -1) & (rows >= 0)
     m_free = np.bincount(rows[mass], weights=s_val[mass], minlength=n_free)
+    passes = [(s_val, b_val)]
+    m_media = None
+    if media is not None:                      # a medium per cube: D_c S and sigma_a,c m per channel (eq. (107))
+        D, sig_a = (np.ascontiguousarray(v, dtype=np.float64) for v in media)
+        scaled = np.empty((3, size))
+        mw = np.zeros((3, size))
+        parallel_for(lambda a, b: _scale_by_cube(start, cols, s_val, D, sig_a, scaled, mw, a, b), n_cells,
+                     min_block=CHUNK)
+        at = rows[mass]
+        m_media = np.stack([np.bincount(at, weights=mw[c][mass], minlength=n_free) for c in range(3)], axis=1)
+        passes = [(scaled[0], b_val), (scaled[1], scaled[2])]
+        del mw
     # the symmetric CSR: rows counted per block of triplets, filled in triplet order
     n_blocks = max(1, min(default_threads(), size // 65536))
     edges = _block_edges(size, n_blocks)
@@ -548,16 +581,22 @@ def assemble(lattice, *, ghost: float = GHOST) -> Assembly:
     per_row = counts.sum(axis=0)
     ptr = np.zeros(n_free + 1, dtype=np.int64)
     np.cumsum(per_row, out=ptr[1:])
-    pos = np.cumsum(counts, axis=0) - counts + ptr[:-1][None, :]         # where each block's entries of a row go
+    pos0 = np.cumsum(counts, axis=0) - counts + ptr[:-1][None, :]        # where each block's entries of a row go
     del counts
-    other = np.empty(int(ptr[-1]), dtype=np.int64)
-    sv = np.empty(int(ptr[-1]))
-    bv = np.empty(int(ptr[-1]))
-    parallel_for(lambda a, b: [_scatter(rows, cols, s_val, b_val, pos[t], other, sv, bv, edges[t], edges[t + 1])
-                               for t in range(a, b)], n_blocks, n_threads=n_blocks, min_block=1)
-    del rows, cols, s_val, b_val, pos
-    distinct = np.zeros(n_free, dtype=np.int64)
-    parallel_for(lambda a, b: _combine_rows(ptr, other, sv, bv, distinct, a, b), n_free, min_block=4096)
+    rows_out = []
+    for sv_in, bv_in in passes:                # the same pattern and order in every pass
+        pos = pos0.copy() if len(passes) > 1 else pos0
+        other = np.empty(int(ptr[-1]), dtype=np.int64)
+        sv = np.empty(int(ptr[-1]))
+        bv = np.empty(int(ptr[-1]))
+        parallel_for(lambda a, b: [_scatter(rows, cols, sv_in, bv_in, pos[t], other, sv, bv, edges[t], edges[t + 1])
+                                   for t in range(a, b)], n_blocks, n_threads=n_blocks, min_block=1)
+        del pos
+        distinct = np.zeros(n_free, dtype=np.int64)
+        parallel_for(lambda a, b: _combine_rows(ptr, other, sv, bv, distinct, a, b), n_free, min_block=4096)
+        rows_out.append((other, sv, bv, distinct))
+    del rows, cols, s_val, b_val, pos0, passes
+    other, sv, bv, distinct = rows_out[0]
     # unknowns: free nodes with something inside their support
     diag = np.empty(n_free)
     parallel_for(lambda a, b: _diagonal(ptr, other, sv, distinct, diag, a, b), n_free, min_block=4096)
@@ -571,11 +610,21 @@ def assemble(lattice, *, ghost: float = GHOST) -> Assembly:
     parallel_for(lambda a, b: _active_counts(ptr, other, distinct, newid, row_n, a, b), n_free, min_block=4096)
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(row_n, out=indptr[1:])
-    indices = np.empty(int(indptr[-1]), dtype=np.int64)
-    sd = np.empty(int(indptr[-1]))
-    bd = np.empty(int(indptr[-1]))
-    parallel_for(lambda a, b: _compact(ptr, other, sv, bv, distinct, newid, indptr, indices, sd, bd, a, b), n_free,
-                 min_block=4096)
+    data = []
+    for other, sv, bv, distinct in rows_out:
+        indices = np.empty(int(indptr[-1]), dtype=np.int64)
+        sd = np.empty(int(indptr[-1]))
+        bd = np.empty(int(indptr[-1]))
+        parallel_for(lambda a, b: _compact(ptr, other, sv, bv, distinct, newid, indptr, indices, sd, bd, a, b),
+                     n_free, min_block=4096)
+        data.append((sd, bd))
+    if m_media is None:
+        sd, bd = data[0]
+        m_out = m_free[active]
+    else:
+        sd = np.stack([data[0][0], data[1][0], data[1][1]], axis=1)
+        bd = data[0][1]
+        m_out = np.ascontiguousarray(m_media[active])
     # the constraint map in unknown numbering (free nodes that are not active drop out)
     cidx2 = newid[cidx]
     ok = cidx2 >= 0
@@ -585,5 +634,5 @@ def assemble(lattice, *, ghost: float = GHOST) -> Assembly:
     is_hanging[lattice.hanging] = True
     free_nodes = np.flatnonzero(~is_hanging)[active]
     vol, area = totals.sum(axis=0)
-    return Assembly(indptr, indices, sd, bd, m_free[active], free_nodes,
+    return Assembly(indptr, indices, sd, bd, m_out, free_nodes,
                     (cptr2.astype(np.int64), cidx2[ok], cw[ok]), float(vol), float(area))

@@ -57,24 +57,26 @@ def _sweep(kernel, n, *args):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _row3(indptr, indices, s_data, b_data, m, coef, x, i):
-    """(K_c x_c)_i for the 3 channels."""
+    """(K_c x_c)_i for the 3 channels. ``s_data`` (nnz, ks) and ``m`` (n, km): one column shared by the channels
+    (a homogeneous medium, D_c and sigma_a,c in ``coef``) or one per channel (a medium varying over the cells, its
+    D and sigma_a inside the matrices and 1 in ``coef``)."""
+    ks, km = s_data.shape[1] - 1, m.shape[1] - 1
+    k1, k2 = min(1, ks), ks
     s0 = s1 = s2 = 0.0
     b0 = b1 = b2 = 0.0
     for j in range(indptr[i], indptr[i + 1]):
         col = indices[j]
-        sv = s_data[j]
         bv = b_data[j]
         x0, x1, x2 = x[col, 0], x[col, 1], x[col, 2]
-        s0 += sv * x0
-        s1 += sv * x1
-        s2 += sv * x2
+        s0 += s_data[j, 0] * x0
+        s1 += s_data[j, k1] * x1
+        s2 += s_data[j, k2] * x2
         b0 += bv * x0
         b1 += bv * x1
         b2 += bv * x2
-    mi = m[i]
-    return (coef[0, 0] * s0 + coef[0, 1] * b0 + coef[0, 2] * mi * x[i, 0],
-            coef[1, 0] * s1 + coef[1, 1] * b1 + coef[1, 2] * mi * x[i, 1],
-            coef[2, 0] * s2 + coef[2, 1] * b2 + coef[2, 2] * mi * x[i, 2])
+    return (coef[0, 0] * s0 + coef[0, 1] * b0 + coef[0, 2] * m[i, 0] * x[i, 0],
+            coef[1, 0] * s1 + coef[1, 1] * b1 + coef[1, 2] * m[i, min(1, km)] * x[i, 1],
+            coef[2, 0] * s2 + coef[2, 1] * b2 + coef[2, 2] * m[i, km] * x[i, 2])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -192,13 +194,14 @@ def _diag_and_bound(indptr, indices, s_data, b_data, m, coef, diag, bound, r0, r
     """diag (n, k) of every channel's matrix, rows r0..r1; bound[chunk, c] >= the largest eigenvalue of
     diag^-1 K_c over the chunk's rows (Gershgorin)."""
     k = diag.shape[1]
+    ks, km = s_data.shape[1] - 1, m.shape[1] - 1
     for i in range(r0, r1):
         ch = i // CHUNK
         for c in range(k):
-            d = coef[c, 2] * m[i]
+            d = coef[c, 2] * m[i, min(c, km)]
             tot = 0.0
             for j in range(indptr[i], indptr[i + 1]):
-                v = coef[c, 0] * s_data[j] + coef[c, 1] * b_data[j]
+                v = coef[c, 0] * s_data[j, min(c, ks)] + coef[c, 1] * b_data[j]
                 if indices[j] == i:
                     d += v
                 else:
@@ -209,12 +212,21 @@ def _diag_and_bound(indptr, indices, s_data, b_data, m, coef, diag, bound, r0, r
                 bound[ch, c] = r
 
 
+def _columns(a):
+    """``a`` as a 2-d array: (k,) -> (k, 1) (a view), (k, 3) as it is."""
+    a = np.asarray(a, dtype=np.float64)
+    return a.reshape(-1, 1) if a.ndim == 1 else np.ascontiguousarray(a)
+
+
 class ChannelOperator:
     """K_c of 3 channels on one :class:`~meshshade.volume.cutfem.Assembly`: ``coef`` (3, 3) holds (D_c mm,
-    1/(2 A_c), sigma_a,c 1/mm)."""
+    1/(2 A_c), sigma_a,c 1/mm) for an assembly of one medium (``s_data`` (nnz,), ``m`` (n,)); for a medium that
+    varies over the cells (``s_data`` (nnz, 3) = D_c S, ``m`` (n, 3) = sigma_a,c m, docs/physics.md eq. (107)),
+    (1, 1/(2 A_c), 1)."""
 
     def __init__(self, assembly, coef):
         self.asm = assembly   # anything with indptr, indices, s_data, b_data, m and n
+        self._s, self._m = _columns(assembly.s_data), _columns(assembly.m)
         self.coef = np.ascontiguousarray(coef, dtype=np.float64)
         if self.coef.shape != (3, 3):
             raise MeshshadeError(f"the volume's operator takes 3 channels, got coefficients of shape {self.coef.shape}")
@@ -229,7 +241,7 @@ class ChannelOperator:
 
     def _run(self, kernel, *args):
         a = self.asm
-        _sweep(kernel, self.n, a.indptr, a.indices, a.s_data, a.b_data, a.m, self.coef, *args)
+        _sweep(kernel, self.n, a.indptr, a.indices, self._s, a.b_data, self._m, self.coef, *args)
 
     def __call__(self, x):
         out = np.empty((self.n, 3))
@@ -244,9 +256,10 @@ class ChannelOperator:
     def dense(self, c: int):
         """Channel ``c``'s matrix as a dense array (the coarsest level)."""
         a = self.asm
-        S = sp.csr_matrix((self.coef[c, 0] * a.s_data + self.coef[c, 1] * a.b_data, a.indices, a.indptr),
+        s, m = self._s[:, min(c, self._s.shape[1] - 1)], self._m[:, min(c, self._m.shape[1] - 1)]
+        S = sp.csr_matrix((self.coef[c, 0] * s + self.coef[c, 1] * a.b_data, a.indices, a.indptr),
                           shape=(self.n, self.n)).toarray()
-        S[np.diag_indices(self.n)] += self.coef[c, 2] * a.m
+        S[np.diag_indices(self.n)] += self.coef[c, 2] * m
         return S
 
 
@@ -358,15 +371,16 @@ def _spgemm_count(a_ptr, a_idx, b_ptr, b_idx, n_cols, counts, r0, r1):
 
 @numba.njit(cache=True, nogil=True)
 def _spgemm_fill(a_ptr, a_idx, a_val, b_ptr, b_idx, b_val, n_cols, c_ptr, c_idx, c_val, r0, r1):
-    """Row i of C = A B for rows r0..r1, columns sorted; A and B carry two value columns, multiplied column by
+    """Row i of C = A B for rows r0..r1, columns sorted; A and B carry kv value columns, multiplied column by
     column (c_val[:, v] = sum a_val[:, v] b_val[:, v])."""
+    kv = a_val.shape[1]
     slot = np.full(n_cols, -1, np.int64)
+    tmp = np.empty(kv)
     for i in range(r0, r1):
         start = c_ptr[i]
         k_end = start
         for p in range(a_ptr[i], a_ptr[i + 1]):
             k = a_idx[p]
-            a0, a1 = a_val[p, 0], a_val[p, 1]
             for q in range(b_ptr[k], b_ptr[k + 1]):
                 j = b_idx[q]
                 s = slot[j]
@@ -374,30 +388,36 @@ def _spgemm_fill(a_ptr, a_idx, a_val, b_ptr, b_idx, b_val, n_cols, c_ptr, c_idx,
                     s = k_end
                     slot[j] = s
                     c_idx[s] = j
-                    c_val[s, 0] = 0.0
-                    c_val[s, 1] = 0.0
+                    for v in range(kv):
+                        c_val[s, v] = 0.0
                     k_end += 1
-                c_val[s, 0] += a0 * b_val[q, 0]
-                c_val[s, 1] += a1 * b_val[q, 1]
+                for v in range(kv):
+                    c_val[s, v] += a_val[p, v] * b_val[q, v]
         # insertion sort of the row's columns (a row holds a few dozen)
         for t in range(start + 1, k_end):
-            x, v0, v1 = c_idx[t], c_val[t, 0], c_val[t, 1]
+            x = c_idx[t]
+            for v in range(kv):
+                tmp[v] = c_val[t, v]
             u = t - 1
             while u >= start and c_idx[u] > x:
-                c_idx[u + 1], c_val[u + 1, 0], c_val[u + 1, 1] = c_idx[u], c_val[u, 0], c_val[u, 1]
+                c_idx[u + 1] = c_idx[u]
+                for v in range(kv):
+                    c_val[u + 1, v] = c_val[u, v]
                 u -= 1
-            c_idx[u + 1], c_val[u + 1, 0], c_val[u + 1, 1] = x, v0, v1
+            c_idx[u + 1] = x
+            for v in range(kv):
+                c_val[u + 1, v] = tmp[v]
 
 
 def _spgemm(a_ptr, a_idx, a_val, b_ptr, b_idx, b_val, n_rows, n_cols):
-    """(ptr, idx, val (nnz, 2)) of C = A B (two value columns, multiplied column by column), rows in blocks on
+    """(ptr, idx, val (nnz, kv)) of C = A B (kv value columns, multiplied column by column), rows in blocks on
     the worker threads."""
     counts = np.zeros(n_rows, dtype=np.int64)
     parallel_for(lambda a, b: _spgemm_count(a_ptr, a_idx, b_ptr, b_idx, n_cols, counts, a, b), n_rows,
                  min_block=4096)
     c_ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     c_idx = np.empty(int(c_ptr[-1]), dtype=np.int64)
-    c_val = np.empty((int(c_ptr[-1]), 2))
+    c_val = np.empty((int(c_ptr[-1]), a_val.shape[1]))
     parallel_for(lambda a, b: _spgemm_fill(a_ptr, a_idx, a_val, b_ptr, b_idx, b_val, n_cols, c_ptr, c_idx, c_val,
                                            a, b), n_rows, min_block=4096)
     return c_ptr, c_idx, c_val
@@ -409,28 +429,34 @@ class _Level:
 
     def __init__(self, indptr, indices, s_data, b_data, m):
         self.indptr, self.indices, self.s_data, self.b_data, self.m = indptr, indices, s_data, b_data, m
-        self.n = int(m.size)
+        self.n = int(m.shape[0])
 
 
 def galerkin(P, fine, Pt=None) -> _Level:
     """The coarse level P^T S P, P^T B P (one pattern) and P^T m of the level ``fine`` (anything with indptr,
     indices, s_data, b_data, m, n) under the prolongation ``P`` (CSR, (n_fine, n_coarse)): two sparse products,
-    S P and B P together, then P^T times both."""
+    S P and B P together, then P^T times both. A level of a varying medium (``s_data`` (nnz, 3), ``m`` (n, 3),
+    one per channel) keeps one per channel."""
     P = P.tocsr()
     Pt = P.T.tocsr() if Pt is None else Pt
     n_f, n_c = P.shape
+    s_cols = _columns(fine.s_data)                      # (nnz, 1) or, for a varying medium, (nnz, 3)
+    kv = s_cols.shape[1] + 1
     pi, pj = P.indptr.astype(np.int64), P.indices.astype(np.int64)
-    pv = np.repeat(P.data[:, None], 2, axis=1)
+    pv = np.repeat(P.data[:, None], kv, axis=1)
     ti, tj = Pt.indptr.astype(np.int64), Pt.indices.astype(np.int64)
-    tv = np.repeat(Pt.data[:, None], 2, axis=1)
-    fv = np.stack([fine.s_data, fine.b_data], axis=1)
+    tv = np.repeat(Pt.data[:, None], kv, axis=1)
+    fv = np.ascontiguousarray(np.concatenate([s_cols, np.asarray(fine.b_data)[:, None]], axis=1))
     ap_ptr, ap_idx, ap_val = _spgemm(fine.indptr, fine.indices, fv, pi, pj, pv, n_f, n_c)
     c_ptr, c_idx, c_val = _spgemm(ti, tj, tv, ap_ptr, ap_idx, ap_val, n_c, n_c)
     m = np.zeros((n_c, 3))
-    m_fine = np.repeat(np.asarray(fine.m, dtype=np.float64)[:, None], 3, axis=1)
+    fm = np.asarray(fine.m, dtype=np.float64)
+    m_fine = np.ascontiguousarray(np.repeat(fm[:, None], 3, axis=1) if fm.ndim == 1 else fm)
     parallel_for(lambda a, b: _spmv(ti, tj, Pt.data, m_fine, m, False, a, b), n_c)
-    return _Level(c_ptr, c_idx, np.ascontiguousarray(c_val[:, 0]), np.ascontiguousarray(c_val[:, 1]),
-                  np.ascontiguousarray(m[:, 0]))
+    if kv == 2:                                          # one medium: the matrices shared by the channels
+        return _Level(c_ptr, c_idx, np.ascontiguousarray(c_val[:, 0]), np.ascontiguousarray(c_val[:, 1]),
+                      np.ascontiguousarray(m[:, 0]))
+    return _Level(c_ptr, c_idx, np.ascontiguousarray(c_val[:, :3]), np.ascontiguousarray(c_val[:, 3]), m)
 
 
 @numba.njit(cache=True)
