@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshValidationError
 from meshshade.io._messages import _one_line
-from meshshade.io.images import _oiio
+from meshshade.io.images import UnreadableImage, read_pixels
 from meshshade.io.ply import _parse_ply_header, _ply_data
 
 __all__ = ["read_colour_map", "mtl_colour_map", "read_vertex_colours", "srgb_to_linear", "LINEAR_FORMATS"]
@@ -40,19 +40,11 @@ def read_colour_map(path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise MeshValidationError(f"{path}: colour map not found")
-    oiio = _oiio()
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise MeshValidationError(f"{path}: cannot read the colour map: {_one_line(oiio.geterror()) or 'unknown format'}")
     try:
-        spec = inp.spec()
-        px = inp.read_image(0, 0, 0, spec.nchannels, "float")
-        err = inp.geterror()
-    finally:
-        inp.close()
-    if px is None:
-        raise MeshValidationError(f"{path}: cannot read the colour map: {_one_line(err)}")
-    px = np.asarray(px, dtype=np.float64).reshape(spec.height, spec.width, spec.nchannels)
+        px, spec = read_pixels(path)
+    except UnreadableImage as exc:
+        raise MeshValidationError(f"{path}: cannot read the colour map: {_one_line(str(exc))}") from None
+    px = px.astype(np.float64)
     if spec.nchannels < 3:
         px = np.repeat(px[:, :, :1], 3, axis=2)
     px = px[:, :, :3]

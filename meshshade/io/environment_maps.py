@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from meshshade.errors import LightError
-from meshshade.io.images import _oiio
+from meshshade.io.images import UnreadableImage, read_pixels
 
 __all__ = ["read_environment_map"]
 
@@ -38,18 +38,10 @@ def read_environment_map(path) -> np.ndarray:
         raise LightError(f"{what} does not exist")
     if path.is_dir():
         raise LightError(f"{what} is a folder, not an image")
-    oiio = _oiio()
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise LightError(f"{what} cannot be read as an image: {_first_line(oiio.geterror())}")
     try:
-        spec = inp.spec()
-        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
-        err = inp.geterror()
-    finally:
-        inp.close()
-    if pixels is None:
-        raise LightError(f"{what} cannot be read as an image: {_first_line(err or 'no pixels')}")
+        pixels, spec = read_pixels(path)
+    except UnreadableImage as exc:
+        raise LightError(f"{what} cannot be read as an image: {_first_line(str(exc))}") from None
     h, w, c = spec.height, spec.width, spec.nchannels
     if w != 2 * h:
         raise LightError(f"{what} is {w}x{h} pixels: an equirectangular map is twice as wide as it is high "

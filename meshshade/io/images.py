@@ -15,7 +15,7 @@ from meshshade.io._messages import _one_line
 from meshshade.io.transactions import _no_space_hint, atomic_write, check_output_path
 from meshshade.io.writers import _check_float32
 
-__all__ = ["write_exr", "write_png", "read_exr"]
+__all__ = ["write_exr", "write_png", "read_exr", "read_pixels", "UnreadableImage"]
 
 
 def _oiio():
@@ -75,17 +75,35 @@ def write_png(path, rgba_uint8) -> Path:
     return _write_image(path, arr, "uint8")
 
 
-def read_exr(path) -> tuple[np.ndarray, dict]:
-    """Read an image through OpenImageIO: ((H, W, C) float32 pixels, {key: value} of ``meshshade:*`` attributes)."""
+class UnreadableImage(Exception):
+    """An image OpenImageIO cannot open or read; the message is OpenImageIO's (each reader words its user's
+    error)."""
+
+
+def read_pixels(path):
+    """((H, W, C) float32 pixels, OpenImageIO's spec) of the image at ``path``; :class:`UnreadableImage` where it
+    cannot be opened or read."""
     oiio = _oiio()
-    path = Path(path)
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        raise MeshValidationError(f"{path}: cannot read image: {oiio.geterror()}")
+        raise UnreadableImage(oiio.geterror() or "unknown format")
     try:
         spec = inp.spec()
         pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
-        meta = {a.name.split(":", 1)[1]: a.value for a in spec.extra_attribs if a.name.startswith("meshshade:")}
+        err = inp.geterror()
     finally:
         inp.close()
-    return np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels), meta
+    if pixels is None:
+        raise UnreadableImage(err or "no pixels")
+    return np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels), spec
+
+
+def read_exr(path) -> tuple[np.ndarray, dict]:
+    """Read an image through OpenImageIO: ((H, W, C) float32 pixels, {key: value} of ``meshshade:*`` attributes)."""
+    path = Path(path)
+    try:
+        pixels, spec = read_pixels(path)
+    except UnreadableImage as exc:
+        raise MeshValidationError(f"{path}: cannot read image: {exc}") from None
+    meta = {a.name.split(":", 1)[1]: a.value for a in spec.extra_attribs if a.name.startswith("meshshade:")}
+    return pixels, meta

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -55,8 +56,15 @@ def main(argv=None) -> int:
             f"{meta['load_average_before'][0]:.2f} before, {meta['load_average_after'][0]:.2f} after (other jobs "
             "ran on the machine, so absolute times are pessimistic; compare rows of one run). Every row, knob "
             "and the Pareto plot are in the output folder (`accuracy_vs_time.csv`, `pareto.png`, "
-            "`metadata.json`; not committed). Definitions: `meshshade/bench/` and "
+            "`metadata.json`; the plot is copied below). Definitions: `meshshade/bench/` and "
             "`meshshade/bench/references.py`.\n\n")
+    # the Pareto figure (every model's error against its time, per scene: the default volume among them) beside
+    # the page, in docs/images/
+    figure = Path(args.doc).parent / "images" / "accuracy_vs_time_pareto.png"
+    figure.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(out / FILES["plot"], figure)
+    head += (f"![Mean error against wall time per scene; the Pareto front of each scene marked]"
+             f"(images/{figure.name})\n\n")
     io.write_text(args.doc, head + table)
     print(f"wrote {args.doc}", file=sys.stderr)
     return 0
