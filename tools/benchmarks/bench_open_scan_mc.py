@@ -205,16 +205,25 @@ def _errors(M, R, sel, signed: bool = False):
     return out
 
 
-def hand_row(reference_photons: int, photons: int) -> dict:
+def hand_with_holes():
+    """(mesh, skin1, the sun) of the hand at 190 mm with six holes (mesh_defects' ``holes6``), or None without the
+    shared meshes."""
     got = bench.scene_arrays("hand190")
     if got is None:
-        return {"row": "open_scan_mc", "skipped": f"{bench.SHARED} not found"}
+        return None
     V, F, sun = got
     d = bench.defective("holes6", V, F, sun)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         mesh = Mesh.from_arrays(d.vertices, d.faces)
-    mat, light = Material.preset("skin1"), DirectionalLight(sun, 1.0)
+    return mesh, Material.preset("skin1"), DirectionalLight(sun, 1.0)
+
+
+def hand_row(reference_photons: int, photons: int) -> dict:
+    got = hand_with_holes()
+    if got is None:
+        return {"row": "open_scan_mc", "skipped": f"{bench.SHARED} not found"}
+    mesh, mat, light = got
     t = time.perf_counter()
     res = bake(mesh, mat, [light])
     t_bake = time.perf_counter() - t

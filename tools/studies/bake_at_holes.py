@@ -21,10 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshshade.geometry.mesh import Mesh
-from meshshade.light import DirectionalLight
 from meshshade.light.samples import entry_samples
-from meshshade.materials import Material
 from meshshade.montecarlo import MCOptions, simulate
 from meshshade.raycast import make_scene
 from meshshade.transport import bake
@@ -59,16 +56,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--photons", type=float, default=2e6)
     args = ap.parse_args(argv)
-    got = bench.scene_arrays("hand190")
+    got = open_scan.hand_with_holes()
     if got is None:
         print(json.dumps({"row": "bake_at_holes", "skipped": f"{bench.SHARED} not found"}))
         return 0
-    V, F, sun = got
-    d = bench.defective("holes6", V, F, sun)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        mesh = Mesh.from_arrays(d.vertices, d.faces)
-    mat, light = Material.preset("skin1"), DirectionalLight(sun, 1.0)
+    mesh, mat, light = got
     B = np.asarray(bake(mesh, mat, [light]).patch_averaged())
     o = MCOptions(photons=int(args.photons), seed=5, beam_distances=False)
     import meshshade.montecarlo.simulation as simulation
