@@ -89,16 +89,21 @@ def _unpack(key):
     return np.stack([(key >> (2 * _BITS)) & m, (key >> _BITS) & m, key & m], axis=-1) - _OFF
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _corner(glo, ijk, scale, stride, c, k):
+    """The grid index of corner k of item c (as :func:`_mark_corners` describes the items)."""
+    s = scale[c]
+    return ((ijk[c, 0] + stride * (k & 1)) * s - glo[0], (ijk[c, 1] + stride * ((k >> 1) & 1)) * s - glo[1],
+            (ijk[c, 2] + stride * ((k >> 2) & 1)) * s - glo[2])
+
+
 @numba.njit(cache=True, nogil=True)
 def _mark_corners(grid, glo, ijk, scale, stride, c0, c1):
     """grid[corner - glo] = 0 at the 8 corners of items c0..c1: item c's cube has side ``scale[c]`` (in grid
     units) and ijk[c] in units of it; its corners lie ``stride`` sides apart (1: the cube's own corners)."""
     for c in range(c0, c1):
-        s = scale[c]
         for k in range(8):
-            x = (ijk[c, 0] + stride * (k & 1)) * s - glo[0]
-            y = (ijk[c, 1] + stride * ((k >> 1) & 1)) * s - glo[1]
-            z = (ijk[c, 2] + stride * ((k >> 2) & 1)) * s - glo[2]
+            x, y, z = _corner(glo, ijk, scale, stride, c, k)
             grid[x, y, z] = 0
 
 
@@ -133,11 +138,8 @@ def _number_slabs(grid, start, glo, coords, i0, i1):
 def _corner_ids(grid, glo, ijk, scale, stride, out, c0, c1):
     """out[c, k] = the number of corner k of item c (as :func:`_mark_corners`)."""
     for c in range(c0, c1):
-        s = scale[c]
         for k in range(8):
-            x = (ijk[c, 0] + stride * (k & 1)) * s - glo[0]
-            y = (ijk[c, 1] + stride * ((k >> 1) & 1)) * s - glo[1]
-            z = (ijk[c, 2] + stride * ((k >> 2) & 1)) * s - glo[2]
+            x, y, z = _corner(glo, ijk, scale, stride, c, k)
             out[c, k] = grid[x, y, z]
 
 

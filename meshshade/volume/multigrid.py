@@ -162,12 +162,7 @@ def _cg_step(x, r, p, q, alpha, part, r0, r1):
         for c in range(3):
             x[i, c] += alpha[c] * p[i, c]
             r[i, c] -= alpha[c] * q[i, c]
-    for ch in range(r0 // CHUNK, (r1 + CHUNK - 1) // CHUNK):
-        for c in range(3):
-            acc = 0.0
-            for i in range(ch * CHUNK, min(r1, (ch + 1) * CHUNK)):
-                acc += r[i, c] * r[i, c]
-            part[ch, c] = acc
+    _dot(r, r, part, r0, r1)
 
 
 @numba.njit(cache=True, nogil=True)
