@@ -232,6 +232,7 @@ def _write_sum(job, folder):
 
 
 # ------------------------------------------------------------------------------------------------ on Dask
+@pytest.mark.slow   # 25-35 s; the other Dask tests here (a killed worker, Ctrl-C) keep the cluster in CI
 def test_sweep_on_two_workers_equals_the_commands_run_one_by_one_and_a_rerun_skips_all(scene, tmp_path, cli,
                                                                                      dask_client):
     jobs = read_jobs(scene / "jobs.toml")
