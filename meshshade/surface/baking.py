@@ -3,7 +3,7 @@ transport of the vertex samples (hierarchical.py) where it holds, else the direc
 split, the auto plan, the zones, the gather per zone, the clustered far field), and the direct sum of the beams'
 point samples.
 
-:func:`meshshade.transport.bake` calls :func:`surface_bake` for the models ``dipole``, ``curved``,
+:func:`meshshade.transport.bake` runs :class:`SurfaceModel` (:func:`surface_bake`) for the models ``dipole``, ``curved``,
 ``exact-sphere``, ``fitted`` and ``auto`` (and for the volume's fallback on a mesh that encloses nothing) and
 makes its result of what this returns (:class:`SurfaceBake`).
 """
@@ -30,7 +30,7 @@ from meshshade.surface.source_factors import near_field_factors
 
 log = logging.getLogger("meshshade")
 
-__all__ = ["SurfaceBake", "surface_bake"]
+__all__ = ["SurfaceModel", "SurfaceBake", "surface_bake"]
 
 
 class SurfaceBake(NamedTuple):
@@ -45,6 +45,20 @@ class SurfaceBake(NamedTuple):
     cutoff_mm: np.ndarray
     stats: dict
     plan: object
+
+
+class SurfaceModel:
+    """The surface models as a model of :func:`meshshade.transport.bake`: ``name`` one of "dipole", "curved",
+    "exact-sphere", "fitted", "auto" (module docstring)."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def run(self, mesh, material, lights, options, clock, reuse=None):
+        """``(SurfaceBake, None)``: :func:`surface_bake` with the bake's ``options``
+        (:class:`~meshshade.transport.options.BakeOptions`: its ``surface`` record, backend and progress)."""
+        return surface_bake(mesh, material, lights, self.name, options.surface, clock, backend=options.backend,
+                            progress=options.progress, reuse=reuse), None
 
 
 def surface_bake(mesh, material, lights, model: str, options: SurfaceOptions, clock, *, backend: str = "embree",

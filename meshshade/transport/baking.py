@@ -12,27 +12,30 @@ import logging
 import warnings
 from dataclasses import replace
 
-from meshshade import memo
-from meshshade.errors import MaterialError, MeshshadeError, NoVolumeError, ParameterError
+from meshshade.errors import MaterialError, MeshshadeError, ParameterError
 from meshshade.geometry.mesh import Mesh
-from meshshade.light import entry_samples
 from meshshade.light.samples import check_exitance
 from meshshade.light.sources import light_list
 from meshshade.materials import Material
 from meshshade.painted import PaintedMaterial
-from meshshade.progress import Progress, Stopwatch
-from meshshade.raycast import make_scene
-from meshshade.surface.baking import surface_bake
+from meshshade.names import MODELS
+from meshshade.progress import Stopwatch
+from meshshade.surface.baking import SurfaceModel
 from meshshade.surface.hierarchical import SurfaceTransport
 from meshshade.surface.options import (FAR_FIELD_METHODS, GEODESIC_METHODS, RTOL_RANGE,  # noqa: F401 (re-exported)
                                        TRANSPORTS)
 from meshshade.transport.options import BakeOptions, bake_options_from_keywords
 from meshshade.transport.result import BakeResult, describe_result, describe_scale, mesh_note  # noqa: F401
+from meshshade.volume.baking import VOLUME_STAGES, VolumeBake, VolumeModel  # noqa: F401 (VOLUME_STAGES re-exported)
 from meshshade.volume.transport import VolumeTransport
 
 log = logging.getLogger("meshshade")
 
-__all__ = ["bake", "check_bake_options", "VOLUME_STAGES"]
+__all__ = ["bake", "check_bake_options", "VOLUME_STAGES", "MODELS_BY_NAME"]
+
+#: each model's name -> the model :func:`bake` runs (``run(mesh, material, lights, options, clock, reuse)``): the
+#: volume (:mod:`meshshade.volume.baking`) or a surface model (:mod:`meshshade.surface.baking`)
+MODELS_BY_NAME = {"volume": VolumeModel(), **{m: SurfaceModel(m) for m in MODELS if m != "volume"}}
 
 
 def bake(mesh, material: Material, lights, options: BakeOptions | None = None, *, reuse=None,
@@ -112,25 +115,23 @@ def bake(mesh, material: Material, lights, options: BakeOptions | None = None, *
     _check_reuse(reuse, mesh, material, options.model)
     lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
     clock = Stopwatch()
-    volume_why = None
-    if options.model == "volume":
-        result, volume_why = _volume_bake(mesh, material, lights, options, reuse, clock)
-        if result is not None:
-            return result
+    model = MODELS_BY_NAME[options.model]
+    part, why = model.run(mesh, material, lights, options, clock, reuse)
+    if part is None:                       # the volume, on a mesh that encloses nothing it resolves
         if isinstance(material, PaintedMaterial):
-            raise MeshshadeError(f"{volume_why}; a painted material needs the volume model")
-        log.warning("%s; using the surface transport (model auto, beam source model)", volume_why)
-    model = "auto" if options.model == "volume" else options.model
-    surface = replace(options.surface, source_model="beam") if options.model == "volume" else options.surface
-    part = surface_bake(mesh, material, lights, model, surface, clock, backend=options.backend,
-                        progress=options.progress, reuse=reuse if isinstance(reuse, SurfaceTransport) else None)
-    stats = part.stats
-    if volume_why:
-        stats["transport"] += f" [volume transport not used: {volume_why}]"
-    M, curv = part.radiance, part.curvature
-    _close_stats(stats, M, mesh, part.samples, lights)
-    return BakeResult(M, curv.k1, curv.k2, curv.d1, curv.d2, part.samples, part.beam_distance, part.cutoff_mm, model,
-                      material, clock.timings, stats, part.plan)
+            raise MeshshadeError(f"{why}; a painted material needs the volume model")
+        log.warning("%s; using the surface transport (model auto, beam source model)", why)
+        model = MODELS_BY_NAME["auto"]
+        options = replace(options, surface=replace(options.surface, source_model="beam"))
+        part, _ = model.run(mesh, material, lights, options, clock)
+        part.stats["transport"] += f" [volume transport not used: {why}]"
+    _close_stats(part.stats, part.radiance, mesh, part.samples, lights)
+    if isinstance(part, VolumeBake):
+        return BakeResult(part.radiance, None, None, None, None, part.samples, None, part.cutoff_mm, model.name,
+                          material, clock.timings, part.stats, None, part.transport, part.sample_radiance)
+    curv = part.curvature
+    return BakeResult(part.radiance, curv.k1, curv.k2, curv.d1, curv.d2, part.samples, part.beam_distance,
+                      part.cutoff_mm, model.name, material, clock.timings, part.stats, part.plan)
 
 
 def _options(options, reuse, deprecated: dict):
@@ -169,88 +170,6 @@ def _close_stats(stats, M, mesh, samples, lights):
     stats["exitant_power"] = (M * mesh.vertex_areas[:, None]).sum(axis=0).tolist()
     stats["entering_power"] = float(samples.power.sum())
     check_exitance(M, lights)
-
-
-# ------------------------------------------------------------------------------------------------ the volume's
-#: the volume bake's stages in order, with their rough shares of its time (the progress bar's units)
-VOLUME_STAGES = {"volume sampling": 1, "near-field tables": 1, "rays": 1, "volume lattice": 3, "volume operator": 2,
-                 "volume multigrid": 2, "volume sources": 1, "volume solve": 3, "near field": 3}
-
-
-def _volume_progress(progress):
-    """(Progress or None, on_stage callback or None) of a volume bake: a bar over its stages, named as they run."""
-    if not progress:
-        return None, None
-    bar = Progress(progress if isinstance(progress, str) else "bake", sum(VOLUME_STAGES.values()), "")
-    order = list(VOLUME_STAGES)
-    bar.set_stage(order[0])
-
-    def on_stage(name):                                   # ``name`` has ended: the next one runs now
-        if name in order and order.index(name) + 1 < len(order):
-            bar.set_stage(order[order.index(name) + 1])
-        bar.update(VOLUME_STAGES.get(name, 0))
-    return bar, on_stage
-
-
-def _volume_bake(mesh, material, lights, options: BakeOptions, reuse, clock):
-    """``(BakeResult or None, why not)`` by the volume transport: the one reused, kept for this mesh, material
-    and options inside :func:`meshshade.memo.reuse`, or a new one (its stages charged to ``clock``); the lights'
-    entry samples on the surface it samples, then its exitance; no curvature (the volume needs none). None where
-    the mesh encloses no volume the lattice can resolve (a flat sheet: :class:`~meshshade.errors.NoVolumeError`,
-    at the build or at the first light)."""
-    bar, on_stage = _volume_progress(options.progress)
-    try:
-        vt, why = (reuse, None) if reuse is not None else _volume_transport(mesh, material, options, clock, on_stage)
-        if vt is None:
-            return None, why
-        vt.on_stage = on_stage
-        try:
-            return _volume_exitance(vt, mesh, material, lights, options.backend, clock, on_stage), None
-        except NoVolumeError as e:     # found when the lattice is built for the light: nothing inside
-            return None, f"the volume transport cannot be built ({str(e).splitlines()[0]})"
-        finally:
-            vt.on_stage = None
-    finally:
-        if bar is not None:
-            bar.close()
-
-
-def _volume_transport(mesh, material, options: BakeOptions, clock, on_stage=None):
-    """``(VolumeTransport or None, why not)``: kept for this mesh, material and volume options inside
-    :func:`meshshade.memo.reuse`, or a new one."""
-    built = []
-
-    def build():
-        built.append(True)
-        try:
-            return VolumeTransport.build(mesh, material, options.volume, on_stage=on_stage), None
-        except NoVolumeError as e:
-            return None, f"the volume transport cannot be built ({str(e).splitlines()[0]})"
-
-    vt, why = memo.cached("volume", (id(mesh), material.describe(), options.volume), build, pins=(mesh,))
-    if vt is not None and built:
-        clock.charge(vt.timings)
-    return vt, why
-
-
-def _volume_exitance(vt, mesh, material, lights, backend, clock, on_stage=None) -> BakeResult:
-    """The bake's result by the volume transport ``vt``."""
-    S = vt.surface.samples
-    scene = memo.cached("scene", (id(S), backend), lambda: make_scene(S.vertices, S.faces, backend=backend),
-                        pins=(S,))
-    samples = entry_samples(S.vertices, S.faces, S.vertex_normals, S.vertex_areas, lights, scene=scene,
-                            eta=material.eta)
-    clock.lap("rays")
-    if on_stage is not None:
-        on_stage("rays")
-    Ms, vstats = vt.sample_exitance(samples)
-    M = vt.to_vertices(Ms)
-    clock.charge(vstats.pop("timings"))
-    stats = {"entry_samples": len(samples), "cutoff_mm": vt.tables.radius_mm.tolist(), **samples.stats,
-             **vt.stats, **vstats, "transport": "volume", "near_field": "beam"}
-    _close_stats(stats, M, mesh, samples, lights)
-    return BakeResult(M, None, None, None, None, samples, None, vt.tables.radius_mm.copy(), "volume", material,
-                      clock.timings, stats, None, vt, Ms)
 
 
 # ------------------------------------------------------------------------------------------------ deprecated
