@@ -16,14 +16,16 @@ from __future__ import annotations
 import math
 import sys
 import traceback
+from dataclasses import replace
+from pathlib import Path
 
 import bpy
 import numpy as np
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from meshshade.blender.convert import (BlenderLight, BlenderWorld, colour_groups, convert_lights,
-                                       mm_per_blender_unit, world_faces, world_vertices_mm)
+from meshshade.blender.convert import (BlenderLight, BlenderWorld, PrincipledSlot, colour_groups, convert_lights,
+                                       mm_per_blender_unit, principled_medium, world_faces, world_vertices_mm)
 from meshshade.blender.job import BakeJob, BakeSettings
 from meshshade import io
 from meshshade.errors import MeshshadeError
@@ -55,7 +57,10 @@ _MODEL_ITEMS = [("volume", "volume", "diffusion inside the object's volume with 
             "exact-sphere": "exact diffusion solution of the sphere of the local mean curvature",
             "fitted": "curvature model fitted to Monte Carlo beyond first order"}.get(m, m))
     for m in MODELS if m not in ("auto", "volume")]
-_PRESET_ITEMS = [("CUSTOM", "Custom coefficients", "sigma_s' and sigma_a in 1/mm")] + [
+_PRESET_ITEMS = [("MATERIAL", "From the object's material",
+                  "the Principled BSDF of the object's material: Subsurface Radius x Scale as the mean free path, the "
+                  "Base Color (a colour or an Image Texture) as the diffuse reflectance (docs/blender.md)"),
+                 ("CUSTOM", "Custom coefficients", "sigma_s' and sigma_a in 1/mm")] + [
     (name, name, f"{source}: sigma_s' {', '.join(f'{x:g}' for x in s)} /mm, sigma_a "
                  f"{', '.join(f'{x:g}' for x in a)} /mm, eta {eta:g}")
     for name, (s, a, eta, source) in PRESETS.items()]
@@ -97,7 +102,7 @@ class _BakeProperties:
                                             f"{RADIANCE_ATTRIBUTE} -> Emission) and make it the object's active one")
 
     def bake_settings(self) -> BakeSettings:
-        custom = self.material == "CUSTOM"
+        custom = self.material in ("CUSTOM", "MATERIAL")   # MATERIAL: prepare() sets the medium from the slot
         return BakeSettings(preset=None if custom else self.material, sigma_s_prime=tuple(self.sigma_s_prime),
                             sigma_a=tuple(self.sigma_a), eta=float(self.eta), model=self.model,
                             cutoff_tol=float(self.cutoff_tol), geodesic=self.geodesic, transport=self.transport)
@@ -223,6 +228,71 @@ def corner_uv(ob) -> np.ndarray:
     return uv.reshape(-1, 2).astype(np.float64)[loops].reshape(-1, 3, 2)
 
 
+def _input(node, *names):
+    for name in names:
+        inp = node.inputs.get(name)
+        if inp is not None:
+            return inp
+    return None
+
+
+def principled_slot(mat) -> PrincipledSlot:
+    """The Principled BSDF of material ``mat`` (the one feeding its output's Surface, else the first) as a
+    :class:`~meshshade.blender.convert.PrincipledSlot`; MeshshadeError (naming the material) where it has none, or
+    a Base Color fed by anything but an Image Texture of a file."""
+    if mat is None:
+        raise MeshshadeError("an empty material slot: give every slot a material with a Principled BSDF")
+    nodes = mat.node_tree.nodes if getattr(mat, "node_tree", None) else []
+    bsdfs = [n for n in nodes if n.type == "BSDF_PRINCIPLED"]
+    outs = [n for n in nodes if n.type == "OUTPUT_MATERIAL" and n.inputs["Surface"].is_linked]
+    fed = [ln.from_node for o in outs for ln in o.inputs["Surface"].links if ln.from_node.type == "BSDF_PRINCIPLED"]
+    node = (fed or bsdfs or [None])[0]
+    if node is None:
+        raise MeshshadeError(f"material {mat.name!r}: no Principled BSDF to read the medium from (use one, or pick "
+                             "a preset)")
+    base = node.inputs["Base Color"]
+    colour, image = None, None
+    if base.is_linked:
+        src = base.links[0].from_node
+        if src.type != "TEX_IMAGE" or src.image is None:
+            raise MeshshadeError(f"material {mat.name!r}: its Base Color comes from a {src.type} node; meshshade "
+                                 "reads a constant colour or an Image Texture")
+        img = src.image
+        image = bpy.path.abspath(img.filepath, library=img.library)
+        if img.packed_file is not None or not image or not Path(image).is_file():
+            raise MeshshadeError(f"material {mat.name!r}: the image {img.name!r} is not a file on disk (unpack or "
+                                 "save it)")
+    else:
+        colour = tuple(float(x) for x in base.default_value[:3])
+    radius = tuple(float(x) for x in node.inputs["Subsurface Radius"].default_value[:3])
+    scale_in = _input(node, "Subsurface Scale")
+    weight_in = _input(node, "Subsurface Weight", "Subsurface")
+    return PrincipledSlot(mat.name, colour, image, radius, float(scale_in.default_value) if scale_in else 1.0,
+                          float(_input(node, "IOR").default_value),
+                          float(weight_in.default_value) if weight_in else 1.0)
+
+
+def material_settings(ob, settings: BakeSettings, mm_per_unit: float) -> tuple[BakeSettings, list[str]]:
+    """``settings`` with the medium of ``ob``'s material (the add-on's "From the object's material"): the
+    Principled BSDF of the one slot its faces use (:func:`principled_slot`,
+    :func:`meshshade.blender.convert.principled_medium`), and notes."""
+    me = ob.data
+    me.calc_loop_triangles()
+    index = np.empty(len(me.loop_triangles), dtype=np.int32)
+    me.loop_triangles.foreach_get("material_index", index)
+    slots = [s.material for s in ob.material_slots]
+    used = sorted(set(np.clip(index, 0, max(len(slots) - 1, 0)).tolist())) if slots else []
+    if not used:
+        raise MeshshadeError(f"{ob.name}: no material to read the medium from (add one, or pick a preset)")
+    media = [principled_medium(principled_slot(slots[k]), mm_per_unit) for k in used]
+    if any(m != media[0][0] for m, _ in media[1:]):
+        raise MeshshadeError(f"{ob.name}: its faces use {len(used)} materials of different media; bake them as one "
+                             "material, or one object per material")
+    medium, notes = media[0]
+    return replace(settings, preset=None, sigma_s_prime=medium["sigma_s_prime"], sigma_a=medium["sigma_a"],
+                   eta=medium["eta"], albedo_map=medium["albedo_map"]), notes
+
+
 def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJob, list[str]]:
     """The job for ``ob`` and notes to report (lights left out, modifiers ignored); MeshshadeError on bad
     input."""
@@ -239,13 +309,17 @@ def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJo
     mods = [m.name for m in ob.modifiers if m.show_render]
     if mods:
         notes.append(f"{ob.name}: baked on the base mesh; modifiers ({', '.join(mods)}) interpolate the result")
+    bake_settings = settings.bake_settings()
+    if settings.material == "MATERIAL":
+        bake_settings, more = material_settings(ob, bake_settings, mpu)
+        notes += more
     uv = None
-    if settings.texture:
+    if settings.texture or bake_settings.albedo_map:
         uv = corner_uv(ob)
         if np.linalg.det(M[:3, :3]) < 0.0:   # world_faces flips the winding of a mirrored object: so its corners
             uv = uv[:, [0, 2, 1]]
     job = BakeJob(world_vertices_mm(local, M, mpu), world_faces(tris, M), colour_groups(lights),
-                  settings.bake_settings(), python=python or bake_python(context),
+                  bake_settings, python=python or bake_python(context),
                   log=io.temp_path(LOG_NAME), uv=uv,
                   texture_size=int(settings.texture_size) if settings.texture else None)
     job.object_name, job.n_vertices = ob.name, len(ob.data.vertices)

@@ -34,6 +34,16 @@ Area
     the object's scale applied: meshshade's :class:`~meshshade.light.sources.AreaLight` with the local Y axis as its
     ``up`` (:func:`area_light`). A spread below 180 degrees (a narrower beam) is not modelled: noted.
 
+Material (a slot's Principled BSDF)
+    Cycles' subsurface takes a per-channel *Subsurface Radius* times a *Subsurface Scale* (a length in scene units)
+    and the *Base Color*. meshshade reads them as the medium's transport mean free path and its painted colour
+    (docs/physics.md §17): 1/sigma_t' = radius x scale x mm per unit, the base colour the diffuse reflectance the
+    medium must have, inverted per channel into the reduced albedo with the model's own total reflectance
+    (:func:`meshshade.kernels.painted_reflectance.albedo_for_reflectance`) at the slot's *IOR* as eta
+    (:func:`principled_medium`). A Base Color fed by an Image Texture is a colour map over the UVs
+    (``--albedo-map``); its medium's own albedo is then the map's, per point. A Subsurface Weight of 0 is an opaque
+    slot (refused); a weight below 1 is noted (meshshade bakes the subsurface part alone).
+
 World
     The World's Background shader emits radiance ``strength x colour`` W/(m² sr) from every direction. Fed by an
     Environment Texture (equirectangular), that is the image's pixel values times the strength: meshshade's
@@ -50,13 +60,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshshade.errors import LightError, UnitsError
+from meshshade.errors import LightError, MaterialError, UnitsError
 from meshshade.light.sources import AreaLight, DirectionalLight, EnvironmentLight, PointLight, Spot
 from meshshade.light.spec import parse_light_spec
 
 __all__ = ["BlenderLight", "BlenderWorld", "mm_per_blender_unit", "world_vertices_mm", "world_faces",
            "light_direction", "sun_irradiance", "point_intensity", "area_light", "convert_world", "convert_lights",
-           "colour_groups", "RADIANCE_PER_W_PER_M2_SR"]
+           "colour_groups", "RADIANCE_PER_W_PER_M2_SR", "PrincipledSlot", "principled_medium"]
 
 #: W/mm² per W/m²
 W_PER_MM2_PER_W_PER_M2 = 1e-6
@@ -266,3 +276,50 @@ def colour_groups(converted) -> list[tuple[np.ndarray, list]]:
         else:
             groups.append((np.asarray(colour, dtype=np.float64), [light]))
     return groups
+
+
+@dataclass
+class PrincipledSlot:
+    """A material slot's Principled BSDF as the add-on reads it: ``name`` (the material's), ``base_colour`` (3,)
+    linear RGB (None when an image feeds it), ``image`` (the Image Texture's file, absolute, or None), ``radius``
+    (3,) Subsurface Radius, ``scale`` Subsurface Scale (scene units), ``ior`` and ``weight`` (Subsurface Weight)."""
+
+    name: str
+    base_colour: tuple | None
+    image: str | None
+    radius: tuple
+    scale: float
+    ior: float
+    weight: float = 1.0
+
+
+def principled_medium(slot: PrincipledSlot, mm_per_unit: float) -> tuple[dict, list[str]]:
+    """(medium, notes): ``slot``'s medium in meshshade's terms (module docstring, "Material"): ``sigma_s_prime`` and
+    ``sigma_a`` (3,) 1/mm, ``eta``, and ``albedo_map`` (the image's path, or None). With an image the painted colour
+    sets the albedo per point and only sigma_t' = sigma_s' + sigma_a matters: the base is given the albedo 1/2.
+    MaterialError (naming the slot) for an opaque slot, a radius x scale that is not positive and finite, or a
+    colour no medium of that index reflects."""
+    where = f"material {slot.name!r}"
+    if not slot.weight > 0.0:
+        raise MaterialError(f"{where}: Subsurface Weight is 0 (an opaque material): nothing to bake; raise it or "
+                            "choose a preset")
+    ell = np.asarray(slot.radius, dtype=np.float64) * float(slot.scale) * float(mm_per_unit)
+    if ell.shape != (3,) or not np.all(np.isfinite(ell) & (ell > 0.0)):
+        raise MaterialError(f"{where}: Subsurface Radius x Scale must be positive in every channel, got "
+                            f"{np.round(ell, 6).tolist()} mm")
+    eta = float(slot.ior)
+    notes = []
+    if slot.weight < 1.0:
+        notes.append(f"{where}: Subsurface Weight {slot.weight:g}: meshshade bakes the subsurface part alone")
+    if slot.image is not None:
+        albedo = np.full(3, 0.5)
+    else:
+        from meshshade.kernels.painted_reflectance import albedo_for_reflectance
+        colour = np.asarray(slot.base_colour, dtype=np.float64)[:3]
+        try:
+            albedo = albedo_for_reflectance(colour, eta)
+        except MaterialError as e:
+            raise MaterialError(f"{where}: Base Color {np.round(colour, 4).tolist()}: {e}") from None
+    st = 1.0 / ell
+    return {"sigma_s_prime": tuple(float(x) for x in albedo * st),
+            "sigma_a": tuple(float(x) for x in (1.0 - albedo) * st), "eta": eta, "albedo_map": slot.image}, notes

@@ -83,7 +83,9 @@ def light_spec(light) -> str:
 @dataclass
 class BakeSettings:
     """The bake's options (the add-on panel's settings): a ``preset`` name, or ``sigma_s_prime`` and ``sigma_a``
-    (RGB, 1/mm) with ``eta``; ``model``, ``cutoff_tol``, ``geodesic``, ``transport`` as ``meshshade bake``."""
+    (RGB, 1/mm) with ``eta``; ``model``, ``cutoff_tol``, ``geodesic``, ``transport`` as ``meshshade bake``;
+    ``albedo_map``: a colour map over the mesh's UVs painting the medium (``--albedo-map``; the job then needs
+    ``uv``)."""
 
     preset: str | None = "skin1"
     sigma_s_prime: tuple = (1.0, 1.0, 1.0)
@@ -93,6 +95,7 @@ class BakeSettings:
     cutoff_tol: float = 1e-4
     geodesic: str = "exact"
     transport: str = "auto"
+    albedo_map: str | None = None
 
     def cli_args(self) -> list[str]:
         """The options of ``meshshade bake`` these settings stand for."""
@@ -101,6 +104,8 @@ class BakeSettings:
         else:
             material = ["--sigma-s-prime", _vec(self.sigma_s_prime), "--sigma-a", _vec(self.sigma_a),
                         "--eta", _num(self.eta)]
+        if self.albedo_map:
+            material += ["--albedo-map", str(self.albedo_map)]
         return material + ["--model", self.model, "--cutoff-tol", _num(self.cutoff_tol), "--geodesic",
                            self.geodesic, "--transport", self.transport]
 
@@ -142,8 +147,10 @@ class BakeJob:
         self.radiance: np.ndarray | None = None
         self.uv = None if uv is None else np.asarray(uv, dtype=np.float64)
         self.texture_size, self.padding = texture_size, int(padding)
-        if texture_size is not None and (self.uv is None or self.uv.shape != (self.faces.shape[0], 3, 2)):
-            raise BakeJobError("a texture bake needs a UV map: one (u, v) per face corner")
+        needs_uv = texture_size is not None or settings.albedo_map
+        if needs_uv and (self.uv is None or self.uv.shape != (self.faces.shape[0], 3, 2)):
+            raise BakeJobError(("a texture bake" if texture_size is not None else "a colour map (albedo map)")
+                               + " needs a UV map: one (u, v) per face corner")
         self.texture: np.ndarray | None = None
         self._texture_sum: np.ndarray | None = None
         self.warnings: list[str] = []
@@ -162,7 +169,8 @@ class BakeJob:
             raise BakeJobError(f"the Python for bakes does not exist: {self.python}")
         self._dir = io.scratch_folder("meshshade-blender-")
         textured = self.texture_size is not None
-        mesh = io.write_obj(self._dir / "mesh.obj", self.vertices, self.faces, uv=self.uv if textured else None,
+        with_uv = textured or bool(self.settings.albedo_map)
+        mesh = io.write_obj(self._dir / "mesh.obj", self.vertices, self.faces, uv=self.uv if with_uv else None,
                             comment="meshshade: world-space mesh in mm, written by the Blender add-on")
         for k, (colour, lights) in enumerate(self.groups):
             npz = self._dir / f"group{k}.npz"

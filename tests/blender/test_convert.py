@@ -181,3 +181,42 @@ def test_light_specs_of_the_new_lights_read_back_as_the_same_lights(tmp_path):
         assert parse_light_spec(light_spec(light)) == light
     with pytest.raises(Exception, match="no --light spec"):
         light_spec(EnvironmentLight(np.arange(1.0, 9.0).reshape(2, 4)))
+
+
+# --- a material slot's Principled BSDF -------------------------------------------------------------------------
+def test_principled_medium_mean_free_path_and_colour():
+    """radius x scale x mm per unit is 1/sigma_t' (docs/physics.md §17); the base colour is the medium's diffuse
+    reflectance: the medium made from skin1's own reflectance and mean free path is skin1 (reference: the preset's
+    coefficients, Jensen et al. 2001 Table 2, and its reflectance by the model's total of eq. (106))."""
+    from meshshade.blender.convert import PrincipledSlot, principled_medium
+    from meshshade.kernels.painted_reflectance import model_total_reflectance
+    from meshshade.materials import Material
+
+    skin = Material.preset("skin1")
+    colour = model_total_reflectance(skin.albedo_prime, skin.eta, 0.0)
+    mpu = 10.0                                              # 1 unit = 1 cm
+    radius = 1.0 / (skin.sigma_t_prime * 0.05 * mpu)        # so that radius x 0.05 x 10 = 1/sigma_t'
+    medium, notes = principled_medium(PrincipledSlot("Skin", tuple(colour), None, tuple(radius), 0.05, 1.3), mpu)
+    np.testing.assert_allclose(medium["sigma_s_prime"], skin.sigma_s_prime, rtol=1e-6)
+    np.testing.assert_allclose(medium["sigma_a"], skin.sigma_a, rtol=1e-5)
+    assert medium["eta"] == 1.3 and medium["albedo_map"] is None and notes == []
+    # twice the scale: half sigma_t', the same albedo
+    twice, _ = principled_medium(PrincipledSlot("Skin", tuple(colour), None, tuple(radius), 0.1, 1.3), mpu)
+    np.testing.assert_allclose(np.add(twice["sigma_s_prime"], twice["sigma_a"]), 0.5 * skin.sigma_t_prime, rtol=1e-12)
+
+
+def test_principled_medium_image_weight_and_bad_slots():
+    from meshshade.blender.convert import PrincipledSlot, principled_medium
+    from meshshade.errors import MaterialError
+
+    medium, notes = principled_medium(PrincipledSlot("Spot", None, "/x/spot.png", (1.0, 0.5, 0.25), 2.0, 1.4, 0.5),
+                                      1.0)
+    assert medium["albedo_map"] == "/x/spot.png"
+    np.testing.assert_allclose(np.add(medium["sigma_s_prime"], medium["sigma_a"]), [0.5, 1.0, 2.0], rtol=1e-12)
+    assert len(notes) == 1 and "Subsurface Weight 0.5" in notes[0]
+    with pytest.raises(MaterialError, match="'Rock'.*Subsurface Weight is 0"):
+        principled_medium(PrincipledSlot("Rock", (0.5, 0.5, 0.5), None, (1, 1, 1), 1.0, 1.3, 0.0), 1.0)
+    with pytest.raises(MaterialError, match="'Flat'.*positive in every channel"):
+        principled_medium(PrincipledSlot("Flat", (0.5, 0.5, 0.5), None, (1, 0, 1), 1.0, 1.3), 1.0)
+    with pytest.raises(MaterialError, match="'White'.*Base Color.*must lie in"):
+        principled_medium(PrincipledSlot("White", (1.0, 0.5, 0.5), None, (1, 1, 1), 1.0, 1.3), 1.0)
