@@ -97,6 +97,10 @@ class _BakeProperties:
                                       "the surface: sharper than the vertices)")
     texture_size: IntProperty(name="Texture size", default=2048, min=8, max=16384,
                               description="texels per side of the baked image")
+    albedo_clamp: BoolProperty(name="Clamp painted colours", default=True,
+                               description="a Base Color image's texels that no medium reflects (pure white or "
+                                           "black in a channel) are moved into the range the model reaches, with a "
+                                           "note (off: such an image is an error)")
     make_material: BoolProperty(name="Assign display material", default=False,
                                 description=f"create or update the material '{MATERIAL_NAME}' (Attribute "
                                             f"{RADIANCE_ATTRIBUTE} -> Emission) and make it the object's active one")
@@ -105,11 +109,12 @@ class _BakeProperties:
         custom = self.material in ("CUSTOM", "MATERIAL")   # MATERIAL: prepare() sets the medium from the slot
         return BakeSettings(preset=None if custom else self.material, sigma_s_prime=tuple(self.sigma_s_prime),
                             sigma_a=tuple(self.sigma_a), eta=float(self.eta), model=self.model,
-                            cutoff_tol=float(self.cutoff_tol), geodesic=self.geodesic, transport=self.transport)
+                            cutoff_tol=float(self.cutoff_tol), geodesic=self.geodesic, transport=self.transport,
+                            albedo_clamp=bool(self.albedo_clamp))
 
 
-_SETTING_NAMES = ("material", "sigma_s_prime", "sigma_a", "eta", "model", "cutoff_tol", "geodesic", "transport",
-                  "texture", "texture_size", "make_material")
+_SETTING_NAMES = ("material", "sigma_s_prime", "sigma_a", "eta", "albedo_clamp", "model", "cutoff_tol", "geodesic",
+                  "transport", "texture", "texture_size", "make_material")
 
 
 class MESHSHADE_PG_settings(_BakeProperties, bpy.types.PropertyGroup):
@@ -544,6 +549,8 @@ class MESHSHADE_PT_panel(bpy.types.Panel):
             col.prop(s, "sigma_s_prime")
             col.prop(s, "sigma_a")
             col.prop(s, "eta")
+        elif s.material == "MATERIAL":
+            layout.prop(s, "albedo_clamp")
         layout.prop(s, "model")
         col = layout.column(align=True)
         col.prop(s, "cutoff_tol")

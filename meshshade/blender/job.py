@@ -85,7 +85,8 @@ class BakeSettings:
     """The bake's options (the add-on panel's settings): a ``preset`` name, or ``sigma_s_prime`` and ``sigma_a``
     (RGB, 1/mm) with ``eta``; ``model``, ``cutoff_tol``, ``geodesic``, ``transport`` as ``meshshade bake``;
     ``albedo_map``: a colour map over the mesh's UVs painting the medium (``--albedo-map``; the job then needs
-    ``uv``)."""
+    ``uv``), its colours that no medium reflects moved into the reachable range with ``albedo_clamp``
+    (``--albedo-clamp``, noted)."""
 
     preset: str | None = "skin1"
     sigma_s_prime: tuple = (1.0, 1.0, 1.0)
@@ -96,6 +97,7 @@ class BakeSettings:
     geodesic: str = "exact"
     transport: str = "auto"
     albedo_map: str | None = None
+    albedo_clamp: bool = True
 
     def cli_args(self) -> list[str]:
         """The options of ``meshshade bake`` these settings stand for."""
@@ -105,7 +107,7 @@ class BakeSettings:
             material = ["--sigma-s-prime", _vec(self.sigma_s_prime), "--sigma-a", _vec(self.sigma_a),
                         "--eta", _num(self.eta)]
         if self.albedo_map:
-            material += ["--albedo-map", str(self.albedo_map)]
+            material += ["--albedo-map", str(self.albedo_map)] + (["--albedo-clamp"] if self.albedo_clamp else [])
         return material + ["--model", self.model, "--cutoff-tol", _num(self.cutoff_tol), "--geodesic",
                            self.geodesic, "--transport", self.transport]
 

@@ -417,3 +417,60 @@ def test_world_and_area_light_bake_equals_the_cli_bake_with_the_same_exr(registe
     expected = cli_bake(tmp_path, obj, specs, "sky")
     assert np.all(expected.max(axis=0) > 0)
     np.testing.assert_allclose(got[:, :3], expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())
+
+
+def test_spot_textured_from_its_material_bakes_as_the_cli(registered, tmp_path, shared_meshes):
+    """Issue 49: spot_textured imported by Blender's OBJ importer (its MTL's map_Kd becomes the Principled BSDF's Base
+    Color image), baked "From the object's material", equals the command-line bake of the same world-space mesh
+    and UVs with --albedo-map of that image and the mean free path the test converts by hand (radius x scale x mm
+    per unit = 1/sigma_t', docs/blender.md)."""
+    from meshshade.materials import Material
+
+    bpy.context.scene.world = None
+    bpy.context.scene.unit_settings.scale_length = 0.001               # 1 unit = 1 mm
+    bpy.ops.wm.obj_import(filepath=str(shared_meshes / "spot_textured.obj"))
+    ob = bpy.context.selected_objects[0]
+    bpy.context.view_layer.objects.active = ob
+    ob.scale = (40.0, 40.0, 40.0)
+    new_light("Sun", "SUN", 1000.0, rotation=(0.6, 0.2, 0.3))
+    bpy.context.view_layer.update()
+    mat = ob.material_slots[0].material
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    image = bsdf.inputs["Base Color"].links[0].from_node.image
+    skin = Material.preset("skin1")
+    bsdf.inputs["Subsurface Weight"].default_value = 1.0
+    bsdf.inputs["Subsurface Scale"].default_value = 0.5
+    bsdf.inputs["Subsurface Radius"].default_value = tuple(2.0 / skin.sigma_t_prime)   # x 0.5 x 1 mm: 1/sigma_t'
+    bsdf.inputs["IOR"].default_value = 1.3
+    assert bpy.ops.object.meshshade_bake(material="MATERIAL") == {"FINISHED"}
+    got = attribute(ob.data, "meshshade_radiance")[:, :3]
+
+    me = ob.data
+    M = np.array(ob.matrix_world)
+    co = np.array([v.co for v in me.vertices], dtype=np.float64)
+    mm_per_unit = 1000.0 * bpy.context.scene.unit_settings.scale_length     # 0.001 as Blender's float32
+    V = (co @ M[:3, :3].T + M[:3, 3]) * mm_per_unit
+    me.calc_loop_triangles()
+    F = np.array([t.vertices[:] for t in me.loop_triangles])
+    loops = np.array([t.loops[:] for t in me.loop_triangles])
+    uv = np.array([d.uv[:] for d in me.uv_layers.active.data])[loops]
+    obj = tmp_path / "world.obj"
+    with open(obj, "w") as fh:
+        fh.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in V)
+        fh.writelines(f"vt {u!r} {v!r}\n" for u, v in uv.reshape(-1, 2))
+        fh.writelines(f"f {a + 1}/{3 * i + 1} {b + 1}/{3 * i + 2} {c + 1}/{3 * i + 3}\n"
+                      for i, (a, b, c) in enumerate(F))
+    sun_dir = -np.array(bpy.data.objects["Sun"].matrix_world)[:3, 2]
+    vec = lambda v: ",".join(repr(float(x)) for x in v)   # noqa: E731
+    ell = np.array(bsdf.inputs["Subsurface Radius"].default_value) * 0.5 * mm_per_unit   # Blender's float32 values
+    st = 1.0 / ell
+    path = bpy.path.abspath(image.filepath, library=image.library)
+    cmd = [sys.executable, "-m", "meshshade.cli", "bake", str(obj), "--units", "mm", "--sigma-s-prime",
+           vec(0.5 * st), "--sigma-a", vec(0.5 * st), "--eta", "1.3", "--albedo-map", path, "--albedo-clamp", "--quiet",
+           "--out", str(tmp_path / "cli.ply"), "--npz", str(tmp_path / "cli.npz"),
+           "--light", f"directional:{vec(sun_dir)}:{1000 * 1e-6!r}"]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    with np.load(tmp_path / "cli.npz") as z:
+        expected = np.asarray(z["radiance"])
+    assert expected.max() > 0 and len(np.unique(np.round(got[:, 0] / got[:, 0].max(), 3))) > 50   # painted, lit
+    np.testing.assert_allclose(got, expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())

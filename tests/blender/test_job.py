@@ -66,6 +66,33 @@ def test_custom_coefficients_are_passed_exactly():
     np.testing.assert_allclose(radiance, expected, rtol=1e-12)
 
 
+def test_a_slot_painted_by_an_image_bakes_as_the_api_does(tmp_path):
+    """The add-on's "From the object's material" with an Image Texture: the job's CLI bake (--albedo-map over the
+    UVs it writes) equals the API's bake of the PaintedMaterial of the same image (rtol 1e-12)."""
+    from meshshade.blender.convert import PrincipledSlot, principled_medium
+    from meshshade.geometry.procedural import spherical_uv
+    from meshshade.io import write_exr
+    from meshshade.painted import PaintedMaterial
+
+    V, F = icosphere(8.0, 2)
+    uv = spherical_uv(V, F)
+    yy, xx = np.mgrid[0:16, 0:32]
+    image = np.where(((xx // 4 + yy // 4) % 2 == 0)[..., None], [0.45, 0.3, 0.2], [0.6, 0.5, 0.4])
+    path = tmp_path / "paint.exr"
+    write_exr(path, image.astype(np.float32))
+    medium, _ = principled_medium(PrincipledSlot("Paint", None, str(path), (1.2, 0.6, 0.3), 1.0, 1.3), 1.0)
+    settings = BakeSettings(preset=None, sigma_s_prime=medium["sigma_s_prime"], sigma_a=medium["sigma_a"],
+                            eta=medium["eta"], albedo_map=medium["albedo_map"])
+    sun = DirectionalLight((0.3, 0.1, -1.0), 1e-3)
+    radiance = BakeJob(V, F, [(np.ones(3), [sun])], settings, uv=uv).wait()
+    base = Material(medium["sigma_s_prime"], medium["sigma_a"], medium["eta"])
+    expected = bake(Mesh.from_arrays(V, F), PaintedMaterial(base, image=image.astype(np.float32).astype(np.float64),
+                                                            uv=uv), [sun]).radiance
+    np.testing.assert_allclose(radiance, expected, rtol=1e-12)
+    with pytest.raises(BakeJobError, match="colour map.*needs a UV map"):
+        BakeJob(V, F, [(np.ones(3), [sun])], settings)
+
+
 def test_a_mistake_is_the_commands_one_line_error(tmp_path):
     V, F, groups = scene()
     job = BakeJob(V, F, groups, BakeSettings(preset="no-such-medium"), log=tmp_path / "log.txt")
