@@ -333,9 +333,9 @@ class VolumeTransport:
         rec = {"pos": points, "normal": np.asarray(normals, dtype=np.float64), "radius": np.asarray(radius),
                "E": np.zeros((len(points), 1)), "cos_t": np.ones((len(points), 1))}
         if not self.painted:
-            M, _ = remainder_exitance(self.tables, src, rec, coarse_far=False)
+            M, _ = remainder_exitance(self.tables, src, rec)
             return M
-        parts = [remainder_exitance(tab, src, rec, coarse_far=False)[0] for tab in self.tables_at]
+        parts = [remainder_exitance(tab, src, rec)[0] for tab in self.tables_at]
         return self._at_receiver_albedo(parts, self._medium_at(points)[0])
 
     def _read(self, phi, points, normals):
