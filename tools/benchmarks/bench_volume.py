@@ -81,6 +81,15 @@ def scene(name):
     return _scaled(f, size), Material.preset(mat), DirectionalLight(SUN, 1.0)
 
 
+def lit_vertices(mesh, mat, lights) -> np.ndarray:
+    """(n,) bool: the vertices with an unshadowed entry sample of positive power (the *lit* ones of :func:`errors`)."""
+    es = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, list(lights),
+                       make_scene(mesh.vertices, mesh.faces), mat.eta)
+    lit = np.zeros(mesh.n_vertices, dtype=bool)
+    lit[es.vertex[(es.vertex >= 0) & (es.power > 0)]] = True
+    return lit
+
+
 def errors(M, ref, lit):
     peak = ref.max(axis=0)
     out = {"lit": [], "unlit": [], "unlit_count": []}
@@ -109,10 +118,7 @@ def accuracy(name, args):
     if got is None:
         return {"row": "accuracy", "scene": name, "skipped": f"{SHARED} not found"}
     mesh, mat, light = got
-    es = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, [light],
-                       make_scene(mesh.vertices, mesh.faces), mat.eta)
-    lit = np.zeros(mesh.n_vertices, dtype=bool)
-    lit[es.vertex[(es.vertex >= 0) & (es.power > 0)]] = True
+    lit = lit_vertices(mesh, mat, [light])
     small = Mesh.from_arrays(*icosphere(5.0, 1))                    # compile both outside the timings
     bake(small, mat, [light])
     simulate(small, mat, [light], MCOptions(photons=4096, seed=1, beam_distances=False))
