@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]
 LIT = np.array([True, True, True, False, False, False])
 AREAS = np.arange(1.0, 7.0)                       # sum 21
 REF = np.ones((6, 3))
-MC = np.repeat(np.array([1.05, 0.95, 1.05, 1.05, 0.95, 1.05])[:, None], 3, axis=1)      # lit 5 %, unlit 5 %
+MC = np.repeat(np.array([1.05, 0.95, 1.05, 1.08, 0.92, 1.08])[:, None], 3, axis=1)      # lit 5 %, unlit 8 %
 BAKE_A = np.repeat(np.array([1.02, 0.98, 1.02, 1.10, 0.90, 1.10])[:, None], 3, axis=1)  # lit 2 %, unlit 10 %
 BAKE_B = np.repeat(np.array([1.01, 0.99, 1.01, 1.02, 0.98, 1.02])[:, None], 3, axis=1)  # lit 1 %, unlit 2 %
 
@@ -41,15 +41,15 @@ def _row(scene, bake):
 def test_pair_metrics_errors_ratios_power_and_targets_by_hand():
     a = bs.pair_metrics(BAKE_A, MC, REF, LIT, AREAS)
     assert a["bake"]["lit"] == pytest.approx([0.02] * 3) and a["bake"]["unlit"] == pytest.approx([0.10] * 3)
-    assert a["mc"]["lit"] == pytest.approx([0.05] * 3) and a["mc"]["unlit"] == pytest.approx([0.05] * 3)
-    assert a["ratio"]["lit"] == pytest.approx([0.4] * 3) and a["ratio"]["unlit"] == pytest.approx([2.0] * 3)
+    assert a["mc"]["lit"] == pytest.approx([0.05] * 3) and a["mc"]["unlit"] == pytest.approx([0.08] * 3)
+    assert a["ratio"]["lit"] == pytest.approx([0.4] * 3) and a["ratio"]["unlit"] == pytest.approx([1.25] * 3)
     # power: sum(a_v f_v) / sum(a_v) - 1 = (1.02 + 1.96 + 3.06 + 4.4 + 4.5 + 6.6) / 21 - 1 = 0.54 / 21
     assert a["bake"]["power"] == pytest.approx([0.54 / 21] * 3, abs=1e-4)
-    assert a["mc"]["power"] == pytest.approx([0.35 / 21] * 3, abs=1e-4)  # 21.35 / 21 - 1
+    assert a["mc"]["power"] == pytest.approx([0.5 / 21] * 3, abs=1e-4)  # (1.05 + 1.9 + 3.15 + 4.32 + 4.6 + 6.48) / 21
     assert a["targets"] == {"lit<=0.8": True, "unlit<=1.2": False, "power<=1%": False}
     assert a["meets_targets"] is False
     b = bs.pair_metrics(BAKE_B, MC, REF, LIT, AREAS)
-    assert b["ratio"]["lit"] == pytest.approx([0.2] * 3) and b["ratio"]["unlit"] == pytest.approx([0.4] * 3)
+    assert b["ratio"]["lit"] == pytest.approx([0.2] * 3) and b["ratio"]["unlit"] == pytest.approx([0.25] * 3)
     assert b["bake"]["power"] == pytest.approx([0.12 / 21] * 3, abs=1e-4)  # 21.12 / 21 - 1: within 1 %
     assert b["meets_targets"] is True
 
@@ -59,7 +59,8 @@ def test_summary_pools_pairs_and_channels_by_hand():
     assert s["pairs"] == 2
     assert s["means"]["bake_lit"] == pytest.approx([0.015] * 3)
     assert s["means"]["bake_unlit"] == pytest.approx([0.06] * 3)
-    assert s["lit_ratio_of_means"] == pytest.approx(0.3)          # 0.015 / 0.05
+    assert s["means"]["mc_unlit"] == pytest.approx([0.08] * 3)
+    assert s["lit_ratio_of_means"] == pytest.approx(0.3)          # 0.015 / 0.05 (the unlit ones: 0.06 / 0.08)
     assert s["mean_of_pair_lit_ratios"] == pytest.approx(0.3)     # (0.4 + 0.2) / 2
     assert s["lit_sweep<=0.6"] is True
     assert s["pairs_meeting_targets"] == ["head200:skin1"]
@@ -136,13 +137,14 @@ def test_device_mode_needs_neither_trimesh_nor_libigl(tmp_path):
     assert sorted(p.name for p in runs.iterdir()) == ["spot50_ketchup_1000_202.npz", "spot50_ketchup_2000_101.npz"]
 
 
-def test_bad_input_is_one_line_and_exit_2(capsys):
+def test_bad_input_is_one_line_and_exit_2(capsys, monkeypatch):
+    monkeypatch.setenv("MESHSHADE_ASSET_CACHE", "off")   # with --cached-only: a check let through runs nothing
     for argv, says in ((["--pairs", "spot50:jelly"], "unknown material 'jelly'"),
                        (["--scenes", "moon"], "unknown scene 'moon'"),
                        (["--seed", "101"], "the reference's"),
                        (["--references-only"], "needs --out")):
         with pytest.raises(SystemExit) as exc:
-            bs.main(argv)
+            bs.main([*argv, "--cached-only", "-q"])
         assert exc.value.code == 2
         err = capsys.readouterr().err.strip()
         assert says in err and len(err.splitlines()) == 1
