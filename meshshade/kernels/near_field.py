@@ -12,7 +12,8 @@ trilinearly. The model is linear in them, so that interpolates the fitted models
 source's dipole at a known depth, so a curvature kernel or an exact shape solution for a source at depth a can be
 summed over the same sources.
 
-Domain of the fit: alpha' in [0.5, 0.999], eta in [1, 2.5], g in [0, 0.9]. Outside it the nearest node's sources
+Domain of the fit: alpha' in [0.018, 0.999] (below 0.5 since issue 47's sweep: ketchup's green and blue took alpha' =
+0.5's sources and came out 3-12 times too bright), eta in [1, 2.5], g in [0, 0.9]. Outside it the nearest node's sources
 are used (:func:`near_field_sources` says when it clamps). Within it the fit is good for eta <= 1.6 (held-out
 media within 3.4 % of Monte Carlo) and poorer at eta >= 2 and at low albedo with g >= 0.7
 (``near_field_table.FIT_ERROR``, docs/validation.md "Near the light").

@@ -96,8 +96,9 @@ def model_total_reflectance(albedo_prime, eta: float, g: float = 0.0) -> np.ndar
 
 def reflectance_range(eta: float, g: float = 0.0) -> tuple[float, float]:
     """(R_d at alpha' = 0, R_d at ALBEDO_MAX): the colours a painted medium of index ``eta`` and anisotropy ``g``
-    can have. The lower end is not 0: below alpha' = 0.5 the fitted sources are those of the grid's last node
-    (eq. (76), clamped), which return some light whatever the albedo (0.023 at eta 1.3)."""
+    can have. The lower end is not quite 0: below the grid's last node (alpha' = 0.018) the fitted sources are that
+    node's (eq. (76), clamped), which return some light whatever the albedo (2e-5 at eta 1.3; 0.023 before the
+    table reached below alpha' = 0.5)."""
     lo, hi = model_total_reflectance(np.array([0.0, ALBEDO_MAX]), eta, g)
     return float(lo), float(hi)
 

@@ -79,9 +79,16 @@ def test_near_field_table_arrays():
     t = near_field_table
     assert all(_ascending(a) for a in (t.X_NODES, t.ETA_NODES, t.G_NODES, t.DEPTHS))
     grid = (len(t.X_NODES), len(t.ETA_NODES), len(t.G_NODES))
-    assert grid == (12, 6, 4) and t.WEIGHTS.shape == (*grid, len(t.DEPTHS)) and t.FIT_ERROR.shape == grid
-    assert np.all(np.isfinite(t.WEIGHTS)) and np.all(t.WEIGHTS >= 0) and np.all(t.WEIGHTS.sum(axis=-1) > 0)
-    assert np.all(np.isfinite(t.FIT_ERROR)) and np.all((t.FIT_ERROR > 0) & (t.FIT_ERROR < 1))
+    assert grid == (18, 6, 4) and t.WEIGHTS.shape == (*grid, len(t.DEPTHS)) and t.FIT_ERROR.shape == grid
+    assert np.all(np.isfinite(t.WEIGHTS)) and np.all(t.WEIGHTS >= 0)
+    high = t.X_NODES <= -0.3          # alpha' >= 0.5: orders >= 2 are a large part of the light, every medium fitted
+    assert np.all(t.WEIGHTS[high].sum(axis=-1) > 0)
+    assert np.all(np.isfinite(t.FIT_ERROR[high])) and np.all((t.FIT_ERROR[high] > 0) & (t.FIT_ERROR[high] < 1))
+    # below alpha' = 0.5 the orders >= 2 may be too faint for a ring within 5 % (fit_error NaN: 11 media, g >= 0.7 or
+    # eta >= 1.4 at alpha' <= 0.09) or for any source (one medium, eta 1, g 0, alpha' 0.018: single scattering alone)
+    low = t.FIT_ERROR[~high]
+    assert np.all(np.isnan(low) | ((low > 0) & (low < 1))) and np.isnan(low).sum() <= 12
+    assert (t.WEIGHTS[~high].sum(axis=-1) == 0).sum() <= 2
 
 
 def test_incidence_table_arrays():

@@ -21,6 +21,8 @@ photons, seeds and grid, meshshade's version, commit and date). Prints one JSON 
     python tools/tables/make_incidence_table.py [--photons 200000] [--seed 4242]
         [--out meshshade/kernels/data/incidence.csv]
     python tools/tables/make_incidence_table.py --rows run.jsonl    # the table again from a run's printed lines
+    python tools/tables/make_incidence_table.py --from-table meshshade/kernels/data/incidence.csv
+        # an earlier table's rows kept, after the near-field table gained rows this grid does not read
 
 About 40 min on 2 cores with the defaults.
 """
@@ -129,9 +131,14 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(DATA / "incidence.csv"))
     ap.add_argument("--rows", help="rebuild the table from the JSON lines a previous run printed (no Monte Carlo; "
                                    "RHO recomputed from their gains)")
+    ap.add_argument("--from-table", help="keep an earlier incidence table's Monte Carlo gains and RHO verbatim "
+                                         "(after the near-field table gained rows this grid does not read)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     rows = []
+    if args.from_table:
+        rows, seconds, note = _rows_of_table(Path(args.from_table))
+        return _finish(args, argv, rows, seconds, note)
     if args.rows:
         seconds = 0.0
         for line in Path(args.rows).read_text().splitlines():
@@ -157,7 +164,28 @@ def main(argv=None) -> int:
     return _finish(args, argv, rows, time.perf_counter() - t0)
 
 
-def _finish(args, argv, rows, seconds) -> int:
+def _rows_of_table(path: Path):
+    """(rows, Monte Carlo seconds, note) of an earlier table of this grid, its gains, their errors and RHO kept
+    verbatim: for a near-field table that changed only where this grid does not read it (rows at x > -0.3, which
+    ``make_near_field_table.py --extend`` adds without touching the others; say so in the commit)."""
+    from meshshade.kernels.table_files import floats, read_table
+
+    header, cols = read_table(path.name, path.parent)
+    for key, want in (("x_nodes", X_NODES), ("eta_nodes", ETA_NODES), ("g_nodes", G_NODES), ("angles_deg", ANGLES)):
+        if tuple(floats(header[key])) != tuple(want):
+            raise SystemExit(f"{path}: its {key} are not this grid's")
+    rho, gain, err = (floats(cols[c]).reshape(-1, len(ANGLES)) for c in ("rho", "gain", "gain_stderr"))
+    index = [(i, j, k) for i in range(len(X_NODES)) for j in range(len(ETA_NODES)) for k in range(len(G_NODES))]
+    rows = [{"index": ix, "rho": rho[n].tolist(), "gain": gain[n].tolist(), "gain_stderr": err[n].tolist()}
+            for n, ix in enumerate(index)]
+    note = (f"Monte Carlo gains and RHO kept verbatim from {path.name} of {header.get('date', '?')}, commit "
+            f"{header.get('commit', '?')}, command {header.get('command', '?')!r} (--from-table): the near-field "
+            "table recorded under inputs differs from that run's only by its rows at x > -0.3 (alpha' < 0.5, added "
+            "by make_near_field_table.py --extend), which this grid (x <= -0.3) does not read")
+    return rows, float(header.get("monte carlo seconds", "0")), note
+
+
+def _finish(args, argv, rows, seconds, note=None) -> int:
     given = [a for a in (sys.argv[1:] if argv is None else argv)]
     if args.rows:   # the Monte Carlo run's own options, not the file its lines were kept in
         i = given.index("--rows") if "--rows" in given else -1
@@ -168,7 +196,7 @@ def _finish(args, argv, rows, seconds) -> int:
         i, j, k = r["index"]
         R[i, j, k], G[i, j, k], E[i, j, k] = r["rho"], r["gain"], r["gain_stderr"]
     meta = {"provenance": run_provenance(Path(__file__), given), "photons": args.photons, "seed": args.seed,
-            "seconds": seconds, "rebuilt": bool(args.rows)}
+            "seconds": seconds, "rebuilt": bool(args.rows), "note": note}
     write_data(Path(args.out), R, G, E, meta)
     print(json.dumps({"wrote": args.out, "media": len(rows), "seconds": round(meta["seconds"], 1)}))
     return 0

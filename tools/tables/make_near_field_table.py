@@ -12,9 +12,12 @@ provenance header of tools/tables/_tablefile.py (this script's sha256, the comma
 meshshade's version, commit and date), and prints one JSON line per medium.
 
     python tools/tables/make_near_field_table.py [--photons 400000] [--seed 2026]
-        [--out meshshade/kernels/data/near_field.csv]
+        [--out meshshade/kernels/data/near_field.csv] [--extend meshshade/kernels/data/near_field.csv]
 
-About 20 min on 2 cores with the defaults.
+About 20 min on 2 cores with the defaults. ``--extend FILE`` keeps FILE's rows for the nodes it has and runs only
+the others (the seeds those rows would have in a whole run; its header's note says which rows came from where):
+how the low-albedo nodes (x > -0.3, alpha' < 0.5; issue 47: ketchup's green and blue, alpha' 0.067 and 0.020, took
+alpha' = 0.5's sources and came out 3-12 times too bright) were added.
 """
 from __future__ import annotations
 
@@ -35,7 +38,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # tools/ is not a pack
 from _tablefile import DATA, nodes, run_provenance, write_table  # noqa: E402
 
 #: the grid: x = log10(1 - alpha'), eta, g
-X_NODES = (-3.0, -2.5, -2.0, -1.6, -1.4, -1.2, -1.05, -0.9, -0.75, -0.6, -0.45, -0.3)
+X_NODES = (-3.0, -2.5, -2.0, -1.6, -1.4, -1.2, -1.05, -0.9, -0.75, -0.6, -0.45, -0.3,
+           -0.2, -0.12, -0.07, -0.04, -0.02, -0.008)
 #: below this x (high albedo) the runs are long; above it they get LOW_ALBEDO_FACTOR times the photons (cheap, and
 #: their profiles fall steeply, so the far rings need them)
 X_LONG_RUNS = -1.5
@@ -108,17 +112,42 @@ def write_data(path: Path, W: np.ndarray, E: np.ndarray, meta: dict) -> None:
                     "against its Monte Carlo rings (those with stderr < 5 %).")
 
 
+def _kept_rows(path: Path) -> tuple[dict, str]:
+    """({(x, eta, g): row}, note) of an earlier table: its rows for this grid's nodes, and the header note saying
+    which rows it gives (with its own date, commit and note)."""
+    from meshshade.kernels.table_files import floats, read_table
+
+    header, cols = read_table(path.name, path.parent)
+    depths = floats(header["depths"])
+    if tuple(depths) != DEPTHS:
+        raise SystemExit(f"{path}: its depths {tuple(depths)} are not this grid's {DEPTHS}")
+    W = np.stack([floats(cols[f"weight({float(t)!r})"]) for t in depths], axis=1)
+    keys = zip(floats(cols["x"]), floats(cols["eta"]), floats(cols["g"]))
+    kept = {key: {"weights": W[n].tolist(), "max_abs_rel_error": float(cols["fit_error"][n])}
+            for n, key in enumerate(keys) if key[0] in X_NODES and key[1] in ETA_NODES and key[2] in G_NODES}
+    xs = sorted({k[0] for k in kept})
+    earlier = f" (its note: {header['note']})" if header.get("note") else ""
+    note = (f"rows x in {nodes(xs)} kept from {path.name} of {header.get('date', '?')}, commit "
+            f"{header.get('commit', '?')}, command {header.get('command', '?')!r}{earlier}; the other rows run now")
+    return kept, note
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--photons", type=int, default=400_000)
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--out", default=str(DATA / "near_field.csv"))
+    ap.add_argument("--extend", default=None, help="a table of this grid's eta and g nodes whose rows are kept")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     rows = []
+    kept, note = _kept_rows(Path(args.extend)) if args.extend else ({}, None)
     for i, x in enumerate(X_NODES):
         for j, eta in enumerate(ETA_NODES):
             for k, g in enumerate(G_NODES):
+                if (x, eta, g) in kept:
+                    rows.append({**kept[x, eta, g], "index": (i, j, k)})
+                    continue
                 photons = args.photons if x <= X_LONG_RUNS else int(LOW_ALBEDO_FACTOR * args.photons)
                 row = fit_medium(1.0 - 10.0 ** x, eta, g, photons, args.seed + 1000 * i + 10 * j + k)
                 row["index"] = (i, j, k)
@@ -131,11 +160,11 @@ def main(argv=None) -> int:
         W[r["index"]] = r["weights"]
         E[r["index"]] = r["max_abs_rel_error"]
     meta = {"provenance": run_provenance(Path(__file__), sys.argv[1:] if argv is None else argv),
-            "photons": args.photons, "seed": args.seed, "seconds": time.perf_counter() - t0}
+            "photons": args.photons, "seed": args.seed, "seconds": time.perf_counter() - t0, "note": note}
     write_data(Path(args.out), W, E, meta)
     print(json.dumps({"wrote": args.out, "media": len(rows), "seconds": round(meta["seconds"], 1),
                       "worst_fit_error": max(r["max_abs_rel_error"] for r in rows),
-                      "worst_total_error": max(abs(r["total_rel_error"]) for r in rows)}))
+                      "worst_total_error": max(abs(r.get("total_rel_error", 0.0)) for r in rows)}))
     return 0
 
 
