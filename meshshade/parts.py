@@ -23,6 +23,7 @@ import numpy as np
 
 from meshshade.errors import MaterialError
 from meshshade.materials import Material
+from meshshade.volume.triangle_tree import TriangleTree
 
 __all__ = ["PartedMaterial"]
 
@@ -103,8 +104,6 @@ class PartedMaterial:
     def part_at(self, vertices, faces, points) -> np.ndarray:
         """(p,) int: the part owning each of ``points`` (p, 3) mm on the mesh of ``vertices`` and ``faces`` (the
         innermost of the parts whose own winding number there is above 1/2 in magnitude), or -1 where none is."""
-        from meshshade.volume.triangle_tree import TriangleTree
-
         P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         out = np.full(P.shape[0], -1, dtype=np.int64)
         if self._trees is None or self._trees[0] is not faces:

@@ -272,11 +272,12 @@ def painted_field(material: PaintedMaterial, mesh, c: int, tree: TriangleTree | 
     nodes, alb, start, (c0, inv), err = albedo_table(lo, hi, eta, g)
     tree = TriangleTree(mesh.vertices, mesh.faces) if tree is None else tree
     image = material.image is not None
-    col = np.zeros(0) if image else np.ascontiguousarray(data, dtype=np.float64)
-    img = np.ascontiguousarray(data, dtype=np.float64) if image else np.zeros((0, 0))
-    uv = np.ascontiguousarray(material.uv, dtype=np.float64) if image else np.zeros((0, 3, 2))
+    # writable copies: a read-only array is another type to numba, which would compile the walk once more
+    col = np.zeros(0) if image else np.array(data, dtype=np.float64)
+    img = np.array(data, dtype=np.float64) if image else np.zeros((0, 0))
+    uv = np.array(material.uv, dtype=np.float64) if image else np.zeros((0, 3, 2))
     paint = (tree.A, tree.B, tree.C, tree.lo, tree.hi, tree.child, tree.box, tree.order,
-             np.ascontiguousarray(mesh.faces, dtype=np.int64), col, uv, img, nodes, alb, start)
+             np.array(mesh.faces, dtype=np.int64), col, uv, img, nodes, alb, start)
     if g == 0.0:
         majorant, constant = st_p, True
     else:      # sigma_t = sigma_t' (1 + alpha' g / (1 - g)): largest at the largest alpha' for g > 0

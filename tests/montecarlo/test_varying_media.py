@@ -265,6 +265,7 @@ def _numpy_core_sphere_walk(n, R, r, shell, core, seed):
     return frac, np.sqrt(frac * (1 - frac) / n)
 
 
+@pytest.mark.slow
 def test_core_sphere_against_an_independent_numpy_walk():
     R, r = 5.0, 2.5
     shell, core = (1.0, 0.02), (0.3, 1.5)      # the core absorbs, and its sigma_t is 1.76x the shell's
