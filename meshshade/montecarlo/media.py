@@ -17,8 +17,9 @@ most ``TABLE_TOLERANCE`` relative); then, with the base's sigma_t', eta and g, s
 sigma_a = (1 - alpha') sigma_t'. With g = 0, sigma_t = sigma_t' everywhere: only the albedo varies.
 
 *Parts* (:class:`~meshshade.parts.PartedMaterial`): the medium of the part owning the point, the innermost part whose
-own winding number there is above 1/2 in magnitude (:meth:`PartedMaterial.part_at <meshshade.parts.PartedMaterial.part_at>`: the
-same trees, the same expansion, ``WINDING_BETA``; a point that numerically lies in no part, next to the boundary,
+own winding number there is above 1/2 in magnitude
+(:meth:`PartedMaterial.part_at <meshshade.parts.PartedMaterial.part_at>`: the same trees, the same expansion,
+``WINDING_BETA``; a point that numerically lies in no part, next to the boundary,
 takes the part of the largest winding number in magnitude). The acceleration is exact: a voxel grid of labels
 (:func:`part_label_grid`) whose voxel holds the owner of its centre only where that owner is provably the owner of
 every point of the medium in the voxel, and -1 (the winding numbers are evaluated) elsewhere. The proof: every part

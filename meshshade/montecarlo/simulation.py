@@ -90,8 +90,9 @@ class MCResult:
     beam_exits : per channel, dict of arrays ``face``, ``bary``, ``weight`` (W), ``batch`` for photons of the
         first beam light (for radial profiles); beam_entry : (face, bary) of that beam, or None;
     boundary_tests : ray casts (Embree queries) made by the walk; null_collisions : tentative collisions of a walk
-        in a varying medium that were null (delta tracking, :mod:`meshshade.montecarlo.varying_walk`); seconds / cpu_seconds : wall-clock and process
-        CPU time (all threads) of the walk, without the set-up (scene, safe-distance grid, emitter).
+        in a varying medium that were null (delta tracking, :mod:`meshshade.montecarlo.varying_walk`);
+        seconds / cpu_seconds : wall-clock and process CPU time (all threads) of the walk, without the set-up
+        (scene, safe-distance grid, emitter).
     surface : the :class:`~meshshade.montecarlo.boundary.WalkSurface` walked in (the medium's boundary: the mesh
         itself when closed, else its boundary faces and the lids of its holes); lid_power, lid_power_stderr : (3,)
         W leaving through the lids (part of the diffuse and transmitted totals, on no vertex and no face).

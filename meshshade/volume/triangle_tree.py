@@ -18,8 +18,9 @@ run on worker threads.
 
 *Distance*: the unsigned distance from q to the nearest triangle within a bound (Ericson's closest point on a
 triangle), nodes whose box lies farther than the best distance so far skipped. *Closest point*: the same search
-returning the nearest triangle (its input index) and the barycentrics of its nearest point (:meth:`TriangleTree.closest`;
-:func:`closest_on` for one point inside compiled code, as the Monte Carlo's painted medium reads it).
+returning the nearest triangle (its input index) and the barycentrics of its nearest point
+(:meth:`TriangleTree.closest`; :func:`closest_on` for one point inside compiled code, as the Monte Carlo's painted
+medium reads it).
 
 Pure array work (numba); no I/O.
 """
