@@ -61,9 +61,9 @@ from meshshade.materials import Material
 from meshshade.montecarlo.boundary import WalkSurface, walk_surface
 from meshshade.montecarlo.distributed import walk_on_client
 from meshshade.montecarlo.media import is_varying, painted_groups, part_groups, walk_mesh
-from meshshade.painted import PaintedMaterial
 from meshshade.montecarlo.varying_walk import prepare_varying_walks, walk_varying_group
 from meshshade.montecarlo.walks import channel_groups, check_engine, make_emitter, prepare_walks, walk_group
+from meshshade.painted import PaintedMaterial
 from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
