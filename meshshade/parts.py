@@ -1,10 +1,13 @@
 """Parts of different media: a mesh whose faces belong to named parts, each part its own material
 (docs/physics.md §17).
 
-A part is the region where the generalised winding number of its own faces is above 1/2 (Jacobson, Kavan &
+A part is the region where the generalised winding number of its own faces is above 1/2 in magnitude (Jacobson, Kavan &
 Sorkine-Hornung 2013): a closed part is its inside, an open one the inside its winding number says. Where parts
 nest or overlap, the innermost owns a point: of the parts whose winding number there is above 1/2, the one that
-encloses the least volume (:meth:`PartedMaterial.part_at`). The interfaces between parts are index-matched: light
+encloses the least volume (:meth:`PartedMaterial.part_at`). The winding number's magnitude is what counts: a
+closed part nested in another is a cavity to the mesh's orientation repair
+(:func:`meshshade.geometry.mesh.validate_mesh` turns it inward, so its own winding number is -1 inside it), and it is
+still that part. The interfaces between parts are index-matched: light
 crosses them unrefracted and unreflected; only the object's boundary (the boundary of the union of the parts) has a
 Fresnel interface, with the index of the part inside it there.
 
@@ -20,6 +23,7 @@ import numpy as np
 
 from meshshade.errors import MaterialError
 from meshshade.materials import Material
+from meshshade.volume.triangle_tree import TriangleTree
 
 __all__ = ["PartedMaterial"]
 
@@ -84,11 +88,22 @@ class PartedMaterial:
         det = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])) / 6.0
         return np.abs(np.bincount(self.face_part, weights=det, minlength=self.n_parts))
 
+    def outward_faces(self, vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+        """((m, 3) faces, (m,) bool turned): ``faces`` with each part wound so that its own signed enclosed volume
+        is >= 0 (a nested part that the mesh's orientation repair turned inward as a cavity, turned back), so that
+        the winding number of all the faces is above 1/2 in the union of the parts (the medium the Monte Carlo
+        walks in) and the faces between parts have it on both sides."""
+        V = np.asarray(vertices, dtype=np.float64)
+        F = np.array(faces, dtype=np.int64, copy=True)
+        det = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]]))
+        signed = np.bincount(self.face_part, weights=det, minlength=self.n_parts)
+        turned = signed[self.face_part] < 0
+        F[turned] = F[turned][:, [0, 2, 1]]
+        return F, turned
+
     def part_at(self, vertices, faces, points) -> np.ndarray:
         """(p,) int: the part owning each of ``points`` (p, 3) mm on the mesh of ``vertices`` and ``faces`` (the
-        innermost of the parts whose own winding number there is above 1/2), or -1 where none is."""
-        from meshshade.volume.triangle_tree import TriangleTree
-
+        innermost of the parts whose own winding number there is above 1/2 in magnitude), or -1 where none is."""
         P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         out = np.full(P.shape[0], -1, dtype=np.int64)
         if self._trees is None or self._trees[0] is not faces:
@@ -97,7 +112,7 @@ class PartedMaterial:
         _, trees, vol = self._trees
         best = np.full(P.shape[0], np.inf)
         for k in np.argsort(vol, kind="stable")[::-1]:      # largest first: an inner part overwrites
-            inside = trees[k].winding(P) > 0.5
+            inside = np.abs(trees[k].winding(P)) > 0.5     # a nested part may be wound inward (below)
             take = inside & (vol[k] <= best)
             out[take] = k
             best[take] = vol[k]

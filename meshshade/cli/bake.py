@@ -31,7 +31,7 @@ def painted_material(args, mesh, material) -> PaintedMaterial:
     """``material`` painted as ``--albedo-map`` says (a file over the UVs, the OBJ's map_Kd, the PLY's vertex
     colours); a one-line error for a map that cannot be read, a mesh without UVs or a colour no medium has (unless
     ``--albedo-clamp``, which says how many it moved)."""
-    if args.model != "volume":
+    if getattr(args, "model", "volume") != "volume":   # meshshade mc has no model: its walk takes any medium
         raise ParameterError(f"--albedo-map needs the volume model (model {args.model!r} takes one medium)")
     kind = args.albedo_map
     clamp = bool(args.albedo_clamp)

@@ -60,7 +60,10 @@ from meshshade.light.samples import check_exitance
 from meshshade.materials import Material
 from meshshade.montecarlo.boundary import WalkSurface, walk_surface
 from meshshade.montecarlo.distributed import walk_on_client
+from meshshade.montecarlo.media import is_varying, painted_groups, part_groups, walk_mesh
+from meshshade.montecarlo.varying_walk import prepare_varying_walks, walk_varying_group
 from meshshade.montecarlo.walks import channel_groups, check_engine, make_emitter, prepare_walks, walk_group
+from meshshade.painted import PaintedMaterial
 from meshshade.preview import mesh_preview
 from meshshade.progress import Progress
 from meshshade.raycast import make_scene
@@ -86,8 +89,10 @@ class MCResult:
         the hard time limit of a ``time_budget`` run, normally 0;
     beam_exits : per channel, dict of arrays ``face``, ``bary``, ``weight`` (W), ``batch`` for photons of the
         first beam light (for radial profiles); beam_entry : (face, bary) of that beam, or None;
-    boundary_tests : ray casts (Embree queries) made by the walk; seconds / cpu_seconds : wall-clock and process
-        CPU time (all threads) of the walk, without the set-up (scene, safe-distance grid, emitter).
+    boundary_tests : ray casts (Embree queries) made by the walk; null_collisions : tentative collisions of a walk
+        in a varying medium that were null (delta tracking, :mod:`meshshade.montecarlo.varying_walk`);
+        seconds / cpu_seconds : wall-clock and process CPU time (all threads) of the walk, without the set-up
+        (scene, safe-distance grid, emitter).
     surface : the :class:`~meshshade.montecarlo.boundary.WalkSurface` walked in (the medium's boundary: the mesh
         itself when closed, else its boundary faces and the lids of its holes); lid_power, lid_power_stderr : (3,)
         W leaving through the lids (part of the diffuse and transmitted totals, on no vertex and no face).
@@ -117,6 +122,7 @@ class MCResult:
     surface: WalkSurface | None = None
     lid_power: np.ndarray | None = None
     lid_power_stderr: np.ndarray | None = None
+    null_collisions: int = 0
 
     @property
     def events_per_second(self) -> float:
@@ -317,7 +323,11 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
     mesh : Mesh (vertices in mm). The medium is the bake's inside {w > 1/2} of its generalised winding number
         (:mod:`meshshade.montecarlo.boundary`; ``MCOptions.inside``): holes are closed by lids on the level surface
         w = 1/2, faces with the medium on both sides or neither are passed through; a closed mesh is walked as it is
-    material : Material (its medium's sigma_s, sigma_a, and eta, g)
+    material : Material (its medium's sigma_s, sigma_a, and eta, g), or a varying medium: a
+        :class:`~meshshade.painted.PaintedMaterial` (each point the medium of the nearest surface point, its colour
+        the diffuse reflectance there, §17) or a :class:`~meshshade.parts.PartedMaterial` (each point the medium of
+        the innermost part owning it), walked by delta tracking (:mod:`meshshade.montecarlo.varying_walk`; the
+        pooled engine's fused mode, in this process: no client, no ``fast_interior=False``)
     lights : light or sequence of BeamLight / DirectionalLight / PointLight
     options : MCOptions or None (the defaults: 1e5 photons per channel group, seed 0): photons, seed, time
         budget, batches, pool, engine (:class:`MCOptions`). Its former keyword arguments (``photons=``,
@@ -345,10 +355,19 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
         No light, a beam that misses, no light reaching the mesh (as the bake: :class:`Emitter`).
     """
     options = mc_options_from_keywords(options, deprecated, "simulate", stacklevel=3)
-    if not isinstance(material, Material):
-        raise MaterialError(f"Monte Carlo needs a Material, got {type(material).__name__}")
-    groups = channel_groups(material)
+    varying = is_varying(material)
+    if not varying and not isinstance(material, Material):
+        raise MaterialError(f"Monte Carlo needs a Material, PaintedMaterial or PartedMaterial, got "
+                            f"{type(material).__name__}")
     o = options
+    if varying:
+        material.check_mesh(mesh)
+        groups = painted_groups(material) if isinstance(material, PaintedMaterial) else part_groups(material)
+        if client is not None or not o.fast_interior:
+            raise MeshshadeError("a painted or parted material walks in the pooled engine in this process only: "
+                                 "no Dask client, no fast_interior=False")
+    else:
+        groups = channel_groups(material)
     photons, seed, time_budget, n_batches, pool = check_mc_options(   # the run's estimate needs the groups
         o.photons, seed=o.seed, time_budget=o.time_budget, n_batches=o.n_batches, pool=o.pool, engine=o.engine,
         groups=len(groups))
@@ -368,7 +387,9 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
                    None if photons is None else n_photons * len(groups), "photons", enabled=bool(progress))
     try:
         # the medium's boundary (MCOptions.inside): the bake's inside {w > 1/2}, or the faces alone
-        surface = walk_surface(mesh) if o.inside == "winding" else WalkSurface.of_faces(mesh)
+        # (parts: each part wound outward, so that a nested part is medium, not a cavity)
+        wmesh = walk_mesh(material, mesh) if varying else mesh
+        surface = walk_surface(wmesh) if o.inside == "winding" else WalkSurface.of_faces(wmesh)
         if client is not None:
             # the lights are checked here, before any task (a beam that misses is one line, as in one process)
             emitter = make_emitter(mesh, surface, lights, material.eta, make_scene(surface.vertices, surface.faces))
@@ -377,8 +398,12 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
                                      pool=pool, keep_beam=keep_beam_exits, engine=engine, progress=bar,
                                      surface=surface)
         else:
-            setup = prepare_walks(mesh, material, lights, engine=engine, fast_interior=fast_interior,
-                                  half_space_certificates=time_budget is None, surface=surface)
+            if varying:
+                setup = prepare_varying_walks(wmesh, material, lights, surface, engine=engine,
+                                              half_space_certificates=time_budget is None)
+            else:
+                setup = prepare_walks(mesh, material, lights, engine=engine, fast_interior=fast_interior,
+                                      half_space_certificates=time_budget is None, surface=surface)
             emitter = setup.emitter
             children = np.random.SeedSequence(seed).spawn(len(groups))
             t0, c0 = time.perf_counter(), time.process_time()
@@ -388,6 +413,11 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
                 if time_budget is not None:  # what is left, shared by the remaining groups, never below a floor
                     left = max(time_budget - (time.perf_counter() - t_start), 0.0) / (len(groups) - gi)
                     budget = max(left, MIN_GROUP_SHARE * time_budget / len(groups))
+                if varying:
+                    tallies.append(walk_varying_group(setup, gi, n_photons, seed=seed, n_batches=n_batches,
+                                                      pool=pool, keep_beam=keep_beam_exits, time_budget=budget,
+                                                      progress=bar))
+                    continue
                 tallies.append(walk_group(setup, gi, n_photons, seed=seed, n_batches=n_batches, pool=pool,
                                           keep_beam=keep_beam_exits, time_budget=budget, progress=bar,
                                           rng=np.random.default_rng(children[gi])))
@@ -404,7 +434,7 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
     events = boundary = rays = 0
     per_channel = np.zeros(3, dtype=np.int64)
     exits = [None] * 3
-    for ((_ss, _sa), chans), walk in zip(groups, tallies):
+    for (_key, chans), walk in zip(groups, tallies):
         emitted = walk.emitted
         rays += walk.rays
         per_channel[chans] = emitted
@@ -469,5 +499,6 @@ def simulate(mesh, material: Material, lights, options: MCOptions | None = None,
                     boundary_events=boundary, seconds=seconds, n_batches=n_batches, boundary_tests=rays,
                     cpu_seconds=cpu_seconds,
                     beam_exits=exits if keep_beam_exits else [], beam_entry=beam_entry,
-                    beam_distance=beam_distance, surface=surface, lid_power=lid_p, lid_power_stderr=lid_se)
+                    beam_distance=beam_distance, surface=surface, lid_power=lid_p, lid_power_stderr=lid_se,
+                    null_collisions=int(sum(getattr(t, "nulls", 0) for t in tallies)))
 

@@ -121,10 +121,11 @@ def beam_radial_power(result: MCResult, mesh, edges_mm):
 
 # ------------------------------------------------------------------------------------------------ output
 def summary_dict(result: MCResult) -> dict:
-    """The JSON summary: totals (three values, or one for a grey material) with stderrs, photons, events, seconds;
+    """The JSON summary: totals (three values, or one for a grey material) with stderrs, photons, events, seconds
+    (and the null collisions of a walk in a varying medium);
     for a mesh whose walk surface is not the mesh itself, ``walk_surface``: the holes closed, rims left open, lid,
     transparent and reversed faces, and the fraction of the incident power that left through the lids."""
-    grey = result.material.is_grey
+    grey = bool(getattr(result.material, "is_grey", False))   # a painted or parted material: three values
     out = {}
     for key, val in result.totals.items():
         out[key] = float(val[0]) if grey else [float(x) for x in val]
@@ -135,6 +136,8 @@ def summary_dict(result: MCResult) -> dict:
                seconds=float(result.seconds), cpu_seconds=float(result.cpu_seconds),
                events_per_second=float(result.events_per_second), n_batches=int(result.n_batches),
                material=result.material.to_dict())
+    if result.null_collisions:      # a varying medium's delta tracking (montecarlo/varying_walk.py)
+        out["null_collisions"] = int(result.null_collisions)
     surf = result.surface
     if surf is not None and not surf.identity:   # what the walk did beyond the mesh's faces (boundary.py)
         inc = np.where(result.incident_power > 0, result.incident_power, np.nan)

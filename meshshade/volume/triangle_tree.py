@@ -17,7 +17,10 @@ order 2, the same accuracy at the same beta) as a compiled loop that releases th
 run on worker threads.
 
 *Distance*: the unsigned distance from q to the nearest triangle within a bound (Ericson's closest point on a
-triangle), nodes whose box lies farther than the best distance so far skipped.
+triangle), nodes whose box lies farther than the best distance so far skipped. *Closest point*: the same search
+returning the nearest triangle (its input index) and the barycentrics of its nearest point
+(:meth:`TriangleTree.closest`; :func:`closest_on` for one point inside compiled code, as the Monte Carlo's painted
+medium reads it).
 
 Pure array work (numba); no I/O.
 """
@@ -30,7 +33,7 @@ import numpy as np
 
 from meshshade.pacing import run_in_blocks
 
-__all__ = ["TriangleTree", "LEAF", "morton_order", "prefix_tree"]
+__all__ = ["TriangleTree", "LEAF", "morton_order", "prefix_tree", "winding_at", "closest_on"]
 
 #: triangles per leaf
 LEAF = 8
@@ -255,33 +258,39 @@ def _solid_angle(ax, ay, az, bx, by, bz, cx, cy, cz):
     return 2.0 * math.atan2(det, den)
 
 
+@numba.njit(cache=True, inline="always")
+def winding_at(x, y, z, root, A, B, C, lo, hi, child, N, M, S, p, rad, beta, stack):
+    """The winding number at (x, y, z) of the tree whose root is node ``root`` (module docstring; ``stack`` an
+    int64 work array of 256; trees packed one after another keep their own roots)."""
+    w = 0.0
+    top = 1
+    stack[0] = root
+    while top > 0:
+        top -= 1
+        nd = stack[top]
+        rx, ry, rz = p[nd, 0] - x, p[nd, 1] - y, p[nd, 2] - z
+        r2 = rx * rx + ry * ry + rz * rz
+        if r2 > (beta * rad[nd]) ** 2:
+            w += _far_solid_angle(N, M, S, nd, rx, ry, rz)
+            continue
+        c0 = child[nd]
+        if c0 < 0:
+            for t in range(lo[nd], hi[nd]):
+                w += _solid_angle(A[t, 0] - x, A[t, 1] - y, A[t, 2] - z, B[t, 0] - x, B[t, 1] - y, B[t, 2] - z,
+                                  C[t, 0] - x, C[t, 1] - y, C[t, 2] - z)
+            continue
+        stack[top] = c0
+        stack[top + 1] = c0 + 1
+        top += 2
+    return w * _INV_4PI
+
+
 @numba.njit(cache=True, nogil=True)
 def _winding(P, A, B, C, lo, hi, child, N, M, S, p, rad, beta, out, q0, q1):
     """out[q] = the winding number at P[q] for q in q0..q1 (module docstring); node 0 is the root."""
     stack = np.empty(256, np.int64)
     for q in range(q0, q1):
-        x, y, z = P[q, 0], P[q, 1], P[q, 2]
-        w = 0.0
-        top = 1
-        stack[0] = 0
-        while top > 0:
-            top -= 1
-            nd = stack[top]
-            rx, ry, rz = p[nd, 0] - x, p[nd, 1] - y, p[nd, 2] - z
-            r2 = rx * rx + ry * ry + rz * rz
-            if r2 > (beta * rad[nd]) ** 2:
-                w += _far_solid_angle(N, M, S, nd, rx, ry, rz)
-                continue
-            c0 = child[nd]
-            if c0 < 0:
-                for t in range(lo[nd], hi[nd]):
-                    w += _solid_angle(A[t, 0] - x, A[t, 1] - y, A[t, 2] - z, B[t, 0] - x, B[t, 1] - y, B[t, 2] - z,
-                                      C[t, 0] - x, C[t, 1] - y, C[t, 2] - z)
-                continue
-            stack[top] = c0
-            stack[top + 1] = c0 + 1
-            top += 2
-        out[q] = w * _INV_4PI
+        out[q] = winding_at(P[q, 0], P[q, 1], P[q, 2], 0, A, B, C, lo, hi, child, N, M, S, p, rad, beta, stack)
 
 
 @numba.njit(cache=True, inline="always")
@@ -370,7 +379,9 @@ class TriangleTree:
             order, codes = morton_order(V[F].mean(axis=1))
             F = F[order]
         else:
-            codes = np.zeros(0, dtype=np.uint64)
+            order, codes = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.uint64)
+        #: (t,) the input index of each of the tree's triangles (they are kept in Morton order)
+        self.order = np.ascontiguousarray(order, dtype=np.int64)
         self.A, self.B, self.C = (np.ascontiguousarray(V[F[:, k]]) for k in range(3))
         self.lo, self.hi, self.child = prefix_tree(codes, LEAF)
         n = self.lo.size
@@ -405,3 +416,116 @@ class TriangleTree:
         args = (P, self.A, self.B, self.C, self.lo, self.hi, self.child, self.box, float(bound), out)
         run_in_blocks(lambda a, b: _distance(*args, a, b), P.shape[0], n_threads=self.n_threads, min_block=512)
         return out
+
+    def closest(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The nearest point of the triangles to each of ``points`` (p, 3) mm: ((p,) input triangle index, (p, 3)
+        its barycentrics, (p,) distance mm); exact (:func:`closest_on`; ties go to the triangle met first)."""
+        P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        face = np.full(P.shape[0], -1, dtype=np.int64)
+        bary = np.zeros((P.shape[0], 3))
+        dist = np.full(P.shape[0], np.inf)
+        if self.n_tri == 0 or P.shape[0] == 0:
+            return face, bary, dist
+        args = (P, self.A, self.B, self.C, self.lo, self.hi, self.child, self.box, self.order, face, bary, dist)
+        run_in_blocks(lambda a, b: _closest(*args, a, b), P.shape[0], n_threads=self.n_threads, min_block=512)
+        return face, bary, dist
+
+
+@numba.njit(cache=True, inline="always")
+def closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """(squared distance, v, w): the point of the triangle abc nearest to p, a + v (b - a) + w (c - a) (Ericson,
+    Real-Time Collision Detection, 5.1.5, with its barycentrics)."""
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    v = w = 0.0
+    if d1 <= 0.0 and d2 <= 0.0:
+        pass
+    else:
+        bpx, bpy, bpz = px - bx, py - by, pz - bz
+        d3 = abx * bpx + aby * bpy + abz * bpz
+        d4 = acx * bpx + acy * bpy + acz * bpz
+        cpx, cpy, cpz = px - cx, py - cy, pz - cz
+        d5 = abx * cpx + aby * cpy + abz * cpz
+        d6 = acx * cpx + acy * cpy + acz * cpz
+        vc = d1 * d4 - d3 * d2
+        vb = d5 * d2 - d1 * d6
+        va = d3 * d6 - d5 * d4
+        if d3 >= 0.0 and d4 <= d3:
+            v = 1.0
+        elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+            v = d1 / (d1 - d3)
+        elif d6 >= 0.0 and d5 <= d6:
+            w = 1.0
+        elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+            w = d2 / (d2 - d6)
+        elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            v = 1.0 - w
+        else:
+            den = 1.0 / (va + vb + vc)
+            v = vb * den
+            w = vc * den
+    qx = apx - v * abx - w * acx
+    qy = apy - v * aby - w * acy
+    qz = apz - v * abz - w * acz
+    return qx * qx + qy * qy + qz * qz, v, w
+
+
+@numba.njit(cache=True, inline="always")
+def closest_on(x, y, z, A, B, C, lo, hi, child, box, stack):
+    """(tree triangle t, v, w, squared distance): the triangle nearest to (x, y, z) and the barycentrics (1 - v - w,
+    v, w) of its nearest point; nodes whose box is no nearer than the best so far skipped, the nearer child first
+    (``stack``: an int64 work array of 256)."""
+    best = np.inf
+    bt = -1
+    bv = bw = 0.0
+    top = 1
+    stack[0] = 0
+    while top > 0:
+        top -= 1
+        nd = stack[top]
+        dx = max(box[nd, 0] - x, 0.0, x - box[nd, 3])
+        dy = max(box[nd, 1] - y, 0.0, y - box[nd, 4])
+        dz = max(box[nd, 2] - z, 0.0, z - box[nd, 5])
+        if dx * dx + dy * dy + dz * dz >= best:
+            continue
+        c0 = child[nd]
+        if c0 < 0:
+            for t in range(lo[nd], hi[nd]):
+                d2, v, w = closest_on_triangle(x, y, z, A[t, 0], A[t, 1], A[t, 2], B[t, 0], B[t, 1], B[t, 2],
+                                               C[t, 0], C[t, 1], C[t, 2])
+                if d2 < best:
+                    best, bt, bv, bw = d2, t, v, w
+            continue
+        # the child whose box is nearer is popped first
+        e0 = _box_d2(box, c0, x, y, z)
+        e1 = _box_d2(box, c0 + 1, x, y, z)
+        if e0 <= e1:
+            stack[top] = c0 + 1
+            stack[top + 1] = c0
+        else:
+            stack[top] = c0
+            stack[top + 1] = c0 + 1
+        top += 2
+    return bt, bv, bw, best
+
+
+@numba.njit(cache=True, inline="always")
+def _box_d2(box, nd, x, y, z):
+    dx = max(box[nd, 0] - x, 0.0, x - box[nd, 3])
+    dy = max(box[nd, 1] - y, 0.0, y - box[nd, 4])
+    dz = max(box[nd, 2] - z, 0.0, z - box[nd, 5])
+    return dx * dx + dy * dy + dz * dz
+
+
+@numba.njit(cache=True, nogil=True)
+def _closest(P, A, B, C, lo, hi, child, box, order, face, bary, dist, q0, q1):
+    stack = np.empty(256, np.int64)
+    for q in range(q0, q1):
+        t, v, w, d2 = closest_on(P[q, 0], P[q, 1], P[q, 2], A, B, C, lo, hi, child, box, stack)
+        face[q] = order[t]
+        bary[q, 0], bary[q, 1], bary[q, 2] = 1.0 - v - w, v, w
+        dist[q] = math.sqrt(d2)

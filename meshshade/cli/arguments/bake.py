@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from meshshade.cli.arguments.common import (add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args,
+from meshshade.cli.arguments.common import (add_albedo_map_args, add_far_field_arg, add_geodesic_arg, add_light_arg, add_material_args,
                                           add_mesh_args, add_model_arg, add_source_model_arg, add_transport_arg, number)
 
 HELP = "per-vertex radiance of a translucent mesh, written as a coloured PLY, glTF/GLB or USD"
@@ -12,14 +12,7 @@ HELP = "per-vertex radiance of a translucent mesh, written as a coloured PLY, gl
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_mesh_args(p)
     add_material_args(p)
-    p.add_argument("--albedo-map", metavar="FILE|mtl|vertex",
-                   help="paint the material: the colour (diffuse reflectance) per point of the surface, over the "
-                        "mesh's UVs from FILE (EXR linear; PNG, JPEG... sRGB), the OBJ's MTL map_Kd (mtl) or the "
-                        "PLY's vertex colours (vertex); each channel's albedo is found so that the model reflects "
-                        "that colour, the material's mean free path kept (docs/physics.md §17; volume model only)")
-    p.add_argument("--albedo-clamp", action="store_true",
-                   help="move painted colours outside the range the model reaches (a 0 or a 1) just inside it, "
-                        "saying how many (default: refuse them)")
+    add_albedo_map_args(p, note="; volume model only")
     add_light_arg(p)
     add_model_arg(p)
     p.add_argument("--cutoff-tol", type=number, default=1e-4,

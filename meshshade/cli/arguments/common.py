@@ -60,6 +60,19 @@ def integer(minimum: int | None = None):
 
 
 # --- material ---------------------------------------------------------------------------------------------
+def add_albedo_map_args(p: argparse.ArgumentParser, *, note: str = "") -> None:
+    """``--albedo-map FILE|mtl|vertex`` and ``--albedo-clamp`` (a painted material, docs/physics.md §17), as
+    ``meshshade bake`` and ``meshshade mc`` read them (:func:`meshshade.cli.bake.painted_material`)."""
+    p.add_argument("--albedo-map", metavar="FILE|mtl|vertex",
+                   help="paint the material: the colour (diffuse reflectance) per point of the surface, over the "
+                        "mesh's UVs from FILE (EXR linear; PNG, JPEG... sRGB), the OBJ's MTL map_Kd (mtl) or the "
+                        "PLY's vertex colours (vertex); each channel's albedo is found so that the model reflects "
+                        "that colour, the material's mean free path kept (docs/physics.md §17" + note + ")")
+    p.add_argument("--albedo-clamp", action="store_true",
+                   help="move painted colours outside the range the model reaches (a 0 or a 1) just inside it, "
+                        "saying how many (default: refuse them)")
+
+
 def add_material_args(p: argparse.ArgumentParser, *, with_g: bool = False) -> None:
     g = p.add_argument_group("material (a preset, or coefficients in 1/mm)")
     g.add_argument("--material", metavar="NAME",

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from meshshade.cli.arguments.common import (add_cluster_args, add_light_arg, add_material_args, add_mesh_args, integer,
+from meshshade.cli.arguments.common import (add_albedo_map_args, add_cluster_args, add_light_arg, add_material_args, add_mesh_args, integer,
                                           number)
 
 HELP = "Monte Carlo reference: random walk inside the mesh, exitance with standard errors"
@@ -12,6 +12,7 @@ HELP = "Monte Carlo reference: random walk inside the mesh, exitance with standa
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_mesh_args(p)
     add_material_args(p, with_g=True)
+    add_albedo_map_args(p, note="; the walk takes at each collision the medium of the nearest surface point")
     add_light_arg(p)
     p.add_argument("--photons", type=integer(16), default=None, metavar="N",
                    help="photons per channel (default 100000; 1e5 or 100_000 notation accepted)")
