@@ -60,6 +60,11 @@ class VaryingMedium:
     def resolution_material(self):
         raise NotImplementedError
 
+    def edge_reach(self, points):
+        """(p,) mm: how far around each edge of light at ``points`` the lattice is refined, or None: the
+        resolution's one ``refine_radius`` (:mod:`meshshade.volume.resolution`)."""
+        return None
+
     def attach(self, mesh, surface, spread: float):
         """Read the medium at the sampling ``surface`` of ``mesh`` and tabulate the near field at the lattice's ``spread``;
         returns the first table (the stats' radius)."""
@@ -208,6 +213,18 @@ class PartsMedium(VaryingMedium):
         # every medium's decay: the fastest sets the spacing and the grading's bands, the slowest the depth
         kappa = np.concatenate([np.asarray(m.medium.kappa, dtype=np.float64) for m in self.media])
         return SimpleNamespace(medium=SimpleNamespace(kappa=kappa))
+
+    def edge_reach(self, points):
+        """(p,) mm: how far around each edge of light at ``points`` the lattice is refined: REFINE_EFOLDS decay
+        lengths of the fastest channel of the medium there (its nearest sampling vertex's), as that medium alone
+        would have it (the fastest medium's reach everywhere under-resolves a slower one's edges: its half of a
+        skin1 | marble sphere 3-7 % off)."""
+        if len(self.media) == 1:
+            return None
+        from meshshade.volume.resolution import REFINE_EFOLDS
+        reach = np.array([REFINE_EFOLDS / float(np.max(m.medium.kappa)) for m in self.media])
+        _, i = self._tree.query(np.asarray(points, dtype=np.float64))
+        return reach[self.sample_medium[i]]
 
     def attach(self, mesh, surface, spread):
         surf = surface

@@ -167,13 +167,24 @@ class VolumeTransport:
         t = time.perf_counter()
         reach = self.resolution.refine_radius
         refine = None
-        if len(pts):
+        reaches = self.medium.edge_reach(pts) if self.medium is not None and len(pts) else None
+        if len(pts) and reaches is None:
             tree = cKDTree(pts)
             r1 = 0.5 * math.sqrt(3.0) * h1
 
             def refine(centres):
                 d, _ = tree.query(centres, distance_upper_bound=reach + r1)
                 return np.isfinite(d)
+        elif len(pts):                         # a varying medium: each edge its own medium's reach
+            groups = [(cKDTree(pts[reaches == r]), float(r)) for r in np.unique(reaches)]
+            r1 = 0.5 * math.sqrt(3.0) * h1
+
+            def refine(centres):
+                out = np.zeros(len(centres), dtype=bool)
+                for tree_r, r in groups:
+                    d, _ = tree_r.query(centres, distance_upper_bound=r + r1)
+                    out |= np.isfinite(d)
+                return out
         lo, hi = self.mesh.bbox
         lattice = build_lattice(self.inside.depth, lo, hi, self.resolution.grading, refine=refine)
         _lap(timings, "volume lattice", t, on_stage)
