@@ -19,7 +19,10 @@ import hashlib
 import numpy as np
 
 from meshshade.errors import MaterialError
+from meshshade.geometry.mesh import Mesh
 from meshshade.materials import Material
+from meshshade.volume.inside import WINDING_EXACT, WINDING_FAST, WINDING_MARGIN
+from meshshade.volume.triangle_tree import TriangleTree
 
 __all__ = ["PartedMaterial"]
 
@@ -129,8 +132,6 @@ class PartedMaterial:
         (:func:`meshshade.geometry.topology.orient_outward`) counts a closed surface inside another as a cavity's
         wall and turns it inward (and two parts touching along a face, each inside the other there, both).
         The same Mesh where nothing turns; kept per mesh, so a bake of it is reused."""
-        from meshshade.geometry.mesh import Mesh
-
         self.check_mesh(mesh)
         if self._oriented is not None and self._oriented[0] is mesh:
             return self._oriented[1]
@@ -163,9 +164,6 @@ class PartedMaterial:
         number is asked only inside its faces' bounding box (outside it a surface subtends less than a half
         sphere: |w| < 1/2), quickly first and exactly where that is near 1/2 (as the volume's inside,
         :meth:`meshshade.volume.inside.SurfaceVolume.winding`)."""
-        from meshshade.volume.inside import WINDING_EXACT, WINDING_FAST, WINDING_MARGIN
-        from meshshade.volume.triangle_tree import TriangleTree
-
         P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         out = np.full(P.shape[0], -1, dtype=np.int64)
         if self._trees is None or self._trees[0] is not faces:

@@ -13,10 +13,11 @@ from dataclasses import dataclass
 from meshshade.cli.arguments.common import LIGHT_HELP
 from meshshade.errors import LightError, MeshshadeError, ParameterError
 from meshshade.geometry.mesh import Mesh
-from meshshade.io import load_mesh
+from meshshade.io import load_mesh, read_face_names
 from meshshade.light import AreaLight, EnvironmentLight, parse_light_spec
 from meshshade.materials import Material, material_from_options
 from meshshade.output.render import Camera, parse_camera
+from meshshade.parts import PartedMaterial
 from meshshade.transport import BakeOptions, SurfaceOptions, describe_scale
 from meshshade.units import mm_per_unit
 
@@ -86,9 +87,6 @@ def parted_material(args, mesh, default):
     _, parts = _material_specs(args)
     if not parts:
         return default
-    from meshshade.io.part_names import read_face_names
-    from meshshade.parts import PartedMaterial
-
     names = read_face_names(args.mesh, mesh.n_faces)
     assigned = [(name, material_from_options(preset, eta=args.eta, g=getattr(args, "g", 0.0) or 0.0))
                 for name, preset in parts]

@@ -29,9 +29,9 @@ from scipy.spatial import cKDTree
 
 from meshshade.kernels.painted_reflectance import albedo_for_reflectance
 from meshshade.painted import PaintedMaterial
-from meshshade.parts import PartedMaterial
 from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
 from meshshade.volume.remainder import RemainderTables, remainder_exitance
+from meshshade.volume.resolution import REFINE_EFOLDS
 
 __all__ = ["VaryingMedium", "PaintedMedium", "PartsMedium", "varying_medium", "NEAR_FIELD_NODES"]
 
@@ -44,7 +44,9 @@ def varying_medium(material):
     """The :class:`VaryingMedium` of ``material``, or None for a homogeneous Material (the transport's own path)."""
     if isinstance(material, PaintedMaterial):
         return PaintedMedium(material)
-    if isinstance(material, PartedMaterial):
+    if hasattr(material, "face_part") and hasattr(material, "part_at"):
+        # a meshshade.parts.PartedMaterial (recognised by its record, not imported: parts reads the volume's
+        # winding numbers, so the volume importing parts would be a cycle between the stages)
         return PartsMedium(material)
     return None
 
@@ -189,7 +191,7 @@ class PartsMedium(VaryingMedium):
     is tabulated in the receiver's medium. One index for all parts (MaterialError otherwise): the internal
     interfaces are index-matched."""
 
-    def __init__(self, material: PartedMaterial):
+    def __init__(self, material):
         self.material = material
         material.check_one_index()
         keys, self.media, index = {}, [], []
@@ -221,7 +223,6 @@ class PartsMedium(VaryingMedium):
         skin1 | marble sphere 3-7 % off)."""
         if len(self.media) == 1:
             return None
-        from meshshade.volume.resolution import REFINE_EFOLDS
         reach = np.array([REFINE_EFOLDS / float(np.max(m.medium.kappa)) for m in self.media])
         _, i = self._tree.query(np.asarray(points, dtype=np.float64))
         return reach[self.sample_medium[i]]
