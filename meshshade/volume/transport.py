@@ -193,6 +193,8 @@ class VolumeTransport:
         if self.medium is not None:          # each cube's medium at its centre (eq. (107); §17)
             centres = (lattice.ijk + 0.5) * lattice.cell_size[:, None]
             media = self.medium.cube_media(centres)
+            _lap(timings, "volume media", t, None)
+            t = time.perf_counter()
         asm = assemble(lattice, media=media)
         op = ChannelOperator(asm, self.coef)
         _lap(timings, "volume operator", t, on_stage)

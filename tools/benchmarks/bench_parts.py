@@ -13,11 +13,13 @@ Per scene:
 
 * ``time``: the default bake of the parts and of the same (part-oriented) mesh in skin1 alone, each once to warm
   (compiled kernels loaded) and then ``--repeats`` times (the least kept), in the same process: ``ratio`` =
-  parts / one (issue 49's target: <= 1.5).
+  parts / one (issue 49's target: <= 1.5), ``ratio_to_marble`` = parts / the same mesh all marble (whose edges of
+  light the lattice refines as far as a marble part's), and each bake's lattice unknowns.
 * ``checks`` (independent of any reference): ``same_as_one``, the largest |M - M_one| / max M_one over vertices
   and channels of the parts all skin1 against skin1 alone (the parts' code path reduced to one medium);
   ``cubes_same_as_one``, the same with the per-cube matrices forced (the varying medium's code path, equal media);
-  ``power``: the exitant power per channel of all skin1, the parts and all marble (the parts' between the two).
+  ``power``: the exitant power per channel of all skin1, the parts and all marble (the parts' between the two, to
+  1e-5 relative: the solve's tolerance; the nested ball changes nothing in blue, 12 mm under skin1).
 * ``accuracy`` (with ``--reference``): mean |M / ref - 1| per channel over *lit* vertices (an unshadowed entry
   sample of positive power) and over *unlit* vertices whose reference is above 1e-2 of the channel's peak,
   exactly as tools/benchmarks/bench_volume.py computes it, for the bake's patch-averaged exitance (eq. (104)),
@@ -97,10 +99,14 @@ def run(name, args):
     skin, marble = parts.materials
     t_one, one = timed(lambda: bake(mesh, skin, [light]), args.repeats)
     t_parts, got = timed(lambda: bake(mesh, parts, [light]), args.repeats)
+    t_marble, all_marble = timed(lambda: bake(mesh, marble, [light]), args.repeats)
     row = {"scene": name, "vertices": int(mesh.n_vertices), "faces": int(mesh.n_faces),
            "parts": dict(zip(parts.names, (m.name for m in parts.materials))),
            "buried_vertices": int(got.stats["volume_buried_vertices"]),
            "time": {"one_s": round(t_one, 3), "parts_s": round(t_parts, 3), "ratio": round(t_parts / t_one, 3),
+                    "marble_s": round(t_marble, 3), "ratio_to_marble": round(t_parts / t_marble, 3),
+                    "unknowns": {"one": one.stats["volume_unknowns"], "parts": got.stats["volume_unknowns"],
+                                 "marble": all_marble.stats["volume_unknowns"]},
                     "one": {k: round(v, 3) for k, v in one.timings.items()},
                     "parts": {k: round(v, 3) for k, v in got.timings.items()}}}
     same = bake(mesh, PartedMaterial([skin, skin], parts.face_part, parts.names), [light])
@@ -113,11 +119,10 @@ def run(name, args):
     finally:
         PartsMedium.force_cubes = False
     checks["cubes_same_as_one"] = float(np.abs(forced.radiance - one.radiance).max() / peak)
-    all_marble = bake(mesh, marble, [light])
     power = {"skin1": one.stats["exitant_power"], "parts": got.stats["exitant_power"],
              "marble": all_marble.stats["exitant_power"]}
     checks["power"] = {k: [round(x, 3) for x in v] for k, v in power.items()}
-    checks["power_between"] = bool(all(min(a, b) - 1e-9 * max(a, b) <= p <= max(a, b) * (1 + 1e-9)
+    checks["power_between"] = bool(all(min(a, b) * (1 - 1e-5) <= p <= max(a, b) * (1 + 1e-5)
                                        for a, p, b in zip(power["skin1"], power["parts"], power["marble"])))
     row["checks"] = checks
     if args.reference:
