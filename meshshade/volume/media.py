@@ -62,6 +62,9 @@ class VaryingMedium:
     def resolution_material(self):
         raise NotImplementedError
 
+    def note_resolution(self, res, own) -> None:
+        """The lattice's resolution ``res`` is chosen; ``own(material)`` is the one a material alone would have."""
+
     def edge_reach(self, points):
         """(p,) mm: how far around each edge of light at ``points`` the lattice is refined, or None: the
         resolution's one ``refine_radius`` (:mod:`meshshade.volume.resolution`)."""
@@ -216,16 +219,23 @@ class PartsMedium(VaryingMedium):
         kappa = np.concatenate([np.asarray(m.medium.kappa, dtype=np.float64) for m in self.media])
         return SimpleNamespace(medium=SimpleNamespace(kappa=kappa))
 
+    def note_resolution(self, res, own) -> None:
+        """Each medium's edges of light are refined as that medium alone would refine them, where the lattice's
+        surface spacing does not already resolve them as finely: REFINE_EFOLDS decay lengths of its fastest
+        channel, if ``res.h0`` is coarser than half its own surface spacing (``own(medium).h0``), else not at
+        all (a marble part in a skin1 lattice: skin1's 0.84 mm is finer than marble's 1 mm at its edges)."""
+        self._reach = np.array([REFINE_EFOLDS / float(np.max(m.medium.kappa))
+                                if res.h0 > 0.5 * own(m).h0 * (1.0 + 1e-9) else 0.0 for m in self.media])
+
     def edge_reach(self, points):
-        """(p,) mm: how far around each edge of light at ``points`` the lattice is refined: REFINE_EFOLDS decay
-        lengths of the fastest channel of the medium there (its nearest sampling vertex's), as that medium alone
-        would have it (the fastest medium's reach everywhere under-resolves a slower one's edges: its half of a
-        skin1 | marble sphere 3-7 % off)."""
+        """(p,) mm: how far around each edge of light at ``points`` the lattice is refined (0: not at all): that of
+        the medium there, its nearest sampling vertex's (:meth:`note_resolution`; the fastest medium's reach
+        everywhere under-resolves a slower one's edges where they need refining: its half of a sphere of marble
+        beside a more absorbing marble 3-7 % off)."""
         if len(self.media) == 1:
             return None
-        reach = np.array([REFINE_EFOLDS / float(np.max(m.medium.kappa)) for m in self.media])
         _, i = self._tree.query(np.asarray(points, dtype=np.float64))
-        return reach[self.sample_medium[i]]
+        return self._reach[self.sample_medium[i]]
 
     def attach(self, mesh, surface, spread):
         surf = surface

@@ -111,6 +111,9 @@ class VolumeTransport:
         res_material = medium.resolution_material() if medium is not None else material
         res = volume_resolution(res_material, float(mesh.total_area), mesh.bbox_size_mm, h0=options.h0,
                                 budget=options.budget)
+        if medium is not None:               # each medium's own resolution: where its edges need refining
+            medium.note_resolution(res, lambda m: volume_resolution(m, float(mesh.total_area), mesh.bbox_size_mm,
+                                                                    h0=options.h0, budget=options.budget))
         surface = SamplingSurface(mesh, SAMPLE_SPACING_OVER_H0 * res.h0 if sample_spacing is None else sample_spacing)
         inside = SurfaceVolume(mesh.vertices, mesh.nondegenerate_faces, surface.samples.vertices,
                                surface.spacing)
@@ -176,7 +179,7 @@ class VolumeTransport:
                 d, _ = tree.query(centres, distance_upper_bound=reach + r1)
                 return np.isfinite(d)
         elif len(pts):                         # a varying medium: each edge its own medium's reach
-            groups = [(cKDTree(pts[reaches == r]), float(r)) for r in np.unique(reaches)]
+            groups = [(cKDTree(pts[reaches == r]), float(r)) for r in np.unique(reaches) if r > 0]
             r1 = 0.5 * math.sqrt(3.0) * h1
 
             def refine(centres):
