@@ -22,7 +22,9 @@ import hashlib
 import numpy as np
 
 from meshshade.errors import MaterialError
+from meshshade.geometry.mesh import Mesh
 from meshshade.materials import Material
+from meshshade.volume.inside import WINDING_EXACT, WINDING_FAST, WINDING_MARGIN
 from meshshade.volume.triangle_tree import TriangleTree
 
 __all__ = ["PartedMaterial"]
@@ -54,11 +56,62 @@ class PartedMaterial:
         self.face_part = np.ascontiguousarray(fp, dtype=np.int64)
         self.name = name or " + ".join(f"{n}={m.name}" for n, m in zip(names, materials))
         self._trees = None
+        self._oriented = None
         self._digest = hashlib.sha1(self.face_part.tobytes()).hexdigest()[:12]
+
+    @classmethod
+    def from_names(cls, face_names: dict, assignments, default=None, *, where: str = "the mesh"):
+        """The parts ``assignments`` ((name, Material) pairs, in order) name among ``face_names`` (name -> (m,)
+        bool: the faces a mesh file gives that name, :func:`meshshade.io.part_names.read_face_names`), every other
+        face one part of ``default``. A face two assignments name takes the later one. MaterialError (one line)
+        for a name no face has (listing the names ``where`` has), for faces left without a material when
+        ``default`` is None, or for an assignment that leaves a part without faces."""
+        names = list(face_names)
+        if not names and assignments:
+            raise MaterialError(f"{where} names no parts (an OBJ's usemtl or g names, a glTF's materials), so "
+                                f"{assignments[0][0]}=... matches nothing")
+        n = len(next(iter(face_names.values()))) if names else 0
+        part = np.full(n, -1, dtype=np.int64)
+        materials, part_names = [], []
+        for name, material in assignments:
+            if name not in face_names:
+                raise MaterialError(f"no part named {name!r} in {where}; it has: {', '.join(names)}")
+            if name in part_names:
+                raise MaterialError(f"part {name!r} is given a material twice")
+            part[face_names[name]] = len(materials)
+            materials.append(material)
+            part_names.append(name)
+        rest = part < 0
+        if rest.any():
+            if default is None:
+                raise MaterialError(f"{int(rest.sum())} faces of {where} are in none of the parts named "
+                                    f"({', '.join(part_names)}): give a material for the rest too (--material NAME)")
+            part[rest] = len(materials)
+            materials.append(default)
+            part_names.append("rest" if "rest" not in part_names else "rest_")
+        used = np.bincount(part, minlength=len(materials))
+        if np.any(used == 0):
+            empty = [part_names[i] for i in np.flatnonzero(used == 0)]
+            raise MaterialError(f"the parts {', '.join(empty)} keep no faces (a later part takes them all)")
+        return cls(materials, part, part_names)
 
     @property
     def n_parts(self) -> int:
         return len(self.materials)
+
+    @property
+    def eta(self) -> float:
+        """The parts' one index (:meth:`check_one_index`; the internal interfaces are index-matched)."""
+        self.check_one_index()
+        return self.materials[0].eta
+
+    def check_one_index(self) -> None:
+        """MaterialError unless every part has the same index (the interfaces between parts are index-matched:
+        light crosses them unrefracted, which only one index on both sides is; docs/physics.md §17 "Parts")."""
+        etas = sorted({float(m.eta) for m in self.materials})
+        if len(etas) > 1:
+            raise MaterialError(f"the parts' materials have different indices ({', '.join(f'{e:g}' for e in etas)});"
+                                " the interfaces between parts are index-matched, so the parts need one index")
 
     @property
     def is_single(self) -> bool:
@@ -75,6 +128,26 @@ class PartedMaterial:
         """MaterialError unless the parts fit ``mesh``: a part for each of its faces."""
         if self.face_part.shape[0] != mesh.n_faces:
             raise MaterialError(f"the parts name {self.face_part.shape[0]} faces, the mesh has {mesh.n_faces}")
+
+    def oriented(self, mesh):
+        """``mesh`` with each part's faces turned outward as a solid of its own (its enclosed volume positive):
+        a part nested in another is a solid inside it, not a cavity, though the mesh's own repair
+        (:func:`meshshade.geometry.topology.orient_outward`) counts a closed surface inside another as a cavity's
+        wall and turns it inward (and two parts touching along a face, each inside the other there, both).
+        The same Mesh where nothing turns; kept per mesh, so a bake of it is reused."""
+        self.check_mesh(mesh)
+        if self._oriented is not None and self._oriented[0] is mesh:
+            return self._oriented[1]
+        V, F = mesh.vertices, np.array(mesh.faces, dtype=np.int64)
+        det = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]]))
+        vol = np.bincount(self.face_part, weights=det, minlength=self.n_parts)
+        flip = (vol < 0)[self.face_part]
+        out = mesh
+        if flip.any():
+            F[flip] = F[flip][:, [0, 2, 1]]
+            out = Mesh(V, F, mm_per_unit=mesh.mm_per_unit, source=mesh.source, defects=mesh.defects)
+        self._oriented = (mesh, out)
+        return out
 
     def faces_of(self, k: int, faces) -> np.ndarray:
         """(f_k, 3) the faces of part ``k`` among the mesh's ``faces`` (m, 3)."""
@@ -103,17 +176,34 @@ class PartedMaterial:
 
     def part_at(self, vertices, faces, points) -> np.ndarray:
         """(p,) int: the part owning each of ``points`` (p, 3) mm on the mesh of ``vertices`` and ``faces`` (the
-        innermost of the parts whose own winding number there is above 1/2 in magnitude), or -1 where none is."""
+        innermost of the parts whose own winding number there is above 1/2 in magnitude: a nested part that the
+        mesh's orientation repair wound inward is still that part), or -1 where none is. A part's winding number is
+        asked only inside its faces' bounding box (outside it a surface subtends less than a half sphere:
+        |w| < 1/2), quickly first and exactly where that is near 1/2 (as the volume's inside,
+        :meth:`meshshade.volume.inside.SurfaceVolume.winding`)."""
         P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         out = np.full(P.shape[0], -1, dtype=np.int64)
         if self._trees is None or self._trees[0] is not faces:
-            trees = [TriangleTree(vertices, self.faces_of(k, faces)) for k in range(self.n_parts)]
-            self._trees = (faces, trees, self.enclosed_volumes(vertices, faces))
-        _, trees, vol = self._trees
+            V = np.asarray(vertices, dtype=np.float64)
+            parts = [self.faces_of(k, faces) for k in range(self.n_parts)]
+            trees = [TriangleTree(V, f) if len(f) else None for f in parts]
+            boxes = [(V[f].reshape(-1, 3).min(axis=0), V[f].reshape(-1, 3).max(axis=0)) if len(f) else None
+                     for f in parts]
+            self._trees = (faces, trees, boxes, self.enclosed_volumes(vertices, faces))
+        _, trees, boxes, vol = self._trees
         best = np.full(P.shape[0], np.inf)
         for k in np.argsort(vol, kind="stable")[::-1]:      # largest first: an inner part overwrites
-            inside = np.abs(trees[k].winding(P)) > 0.5     # a nested part may be wound inward (below)
-            take = inside & (vol[k] <= best)
+            if trees[k] is None:
+                continue
+            lo, hi = boxes[k]
+            ask = np.flatnonzero(np.all((P >= lo) & (P <= hi), axis=1))
+            if ask.size == 0:
+                continue
+            w = np.abs(trees[k].winding(P[ask], WINDING_FAST))      # a nested part may be wound inward
+            unsure = np.flatnonzero(np.abs(w - 0.5) < WINDING_MARGIN)
+            if unsure.size:
+                w[unsure] = np.abs(trees[k].winding(P[ask[unsure]], WINDING_EXACT))
+            take = ask[(w > 0.5) & (vol[k] <= best[ask])]
             out[take] = k
             best[take] = vol[k]
         return out

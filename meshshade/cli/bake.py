@@ -12,6 +12,7 @@ from meshshade.cli.options import bake_options_from_args, lights_from_args, mesh
 from meshshade.asset_cache import AssetCache
 from meshshade.errors import ParameterError
 from meshshade.io import check_output_path, mtl_colour_map, read_colour_map, read_uv_map, read_vertex_colours
+from meshshade.materials import Material
 from meshshade.painted import PaintedMaterial
 from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, texture_outputs, write_bake, write_texture
 from meshshade.output.texture import bake_texture, check_texture_options
@@ -69,7 +70,9 @@ def run_bake(args) -> int:
             check_output_path(path, outs, suffixes=(path.suffix,), option="--texture")
     options = bake_options_from_args(args, progress=not args.quiet)
     lights = lights_from_args(args)
-    mesh, material = mesh_and_material(args)
+    mesh, material = mesh_and_material(args, parts_allowed=True)
+    if args.albedo_map and not isinstance(material, Material):
+        raise ParameterError("--albedo-map paints one material; it cannot be given with --material PART=NAME")
     if args.albedo_map:
         material = painted_material(args, mesh, material)
     texture = None

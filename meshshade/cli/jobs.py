@@ -170,6 +170,8 @@ def _normalise(command: str, options: dict, where: str, base: Path) -> dict:
             if not values:
                 raise JobFileError(f"{where}: {key} is an empty list")
             value = [_scalar_text(v, f"{where}: {key}") for v in values]
+            if key == "material" and len(value) == 1:
+                value = value[0]        # one material as it was before the key was repeatable (same job hash)
         else:
             value = _scalar_text(value, f"{where}: {key}")
         if key == "mesh":

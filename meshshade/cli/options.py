@@ -11,12 +11,13 @@ import math
 from dataclasses import dataclass
 
 from meshshade.cli.arguments.common import LIGHT_HELP
-from meshshade.errors import LightError, MeshshadeError
+from meshshade.errors import LightError, MeshshadeError, ParameterError
 from meshshade.geometry.mesh import Mesh
-from meshshade.io import load_mesh
+from meshshade.io import load_mesh, read_face_names
 from meshshade.light import AreaLight, EnvironmentLight, parse_light_spec
 from meshshade.materials import Material, material_from_options
 from meshshade.output.render import Camera, parse_camera
+from meshshade.parts import PartedMaterial
 from meshshade.transport import BakeOptions, SurfaceOptions, describe_scale
 from meshshade.units import mm_per_unit
 
@@ -47,22 +48,62 @@ def material_given(args) -> bool:
     return args.material is not None or args.sigma_s_prime is not None or args.sigma_a is not None
 
 
-def material_from_args(args) -> Material:
+def _material_specs(args):
+    """(plain presets, [(part, preset)]) of the repeatable ``--material``."""
+    given = args.material or []
+    given = [given] if isinstance(given, str) else list(given)
+    plain = [x for x in given if "=" not in x]
+    parts = []
+    for x in given:
+        if "=" in x:
+            name, _, preset = x.partition("=")
+            if not name.strip() or not preset.strip():
+                raise ParameterError(f"--material {x!r}: a part's material is PART=PRESET")
+            parts.append((name.strip(), preset.strip()))
+    if len(plain) > 1:
+        raise ParameterError(f"--material given {len(plain)} times ({', '.join(plain)}); one sets the whole mesh, "
+                             "PART=NAME the mesh's parts")
+    return plain, parts
+
+
+def material_from_args(args, *, parts_allowed: bool = False) -> Material:
+    plain, parts = _material_specs(args)
+    if parts and not parts_allowed:
+        raise ParameterError("--material PART=NAME (a material per part) is for `meshshade bake`; give one preset")
     ss = parse_floats(args.sigma_s_prime, "--sigma-s-prime", (1, 3)) if args.sigma_s_prime is not None else None
     sa = parse_floats(args.sigma_a, "--sigma-a", (1, 3)) if args.sigma_a is not None else None
-    if args.material is None and ss is None and sa is None:
+    if not plain and ss is None and sa is None:
+        if parts:
+            return None
         raise MeshshadeError("choose a material: --material NAME, or --sigma-s-prime and --sigma-a (1/mm)")
-    return material_from_options(args.material, sigma_s_prime=ss, sigma_a=sa, eta=args.eta,
+    return material_from_options(plain[0] if plain else None, sigma_s_prime=ss, sigma_a=sa, eta=args.eta,
                                  g=getattr(args, "g", 0.0) or 0.0)
 
 
+def parted_material(args, mesh, default):
+    """The :class:`~meshshade.parts.PartedMaterial` of ``--material PART=NAME`` on ``mesh`` (read from
+    ``args.mesh``'s part names: :func:`meshshade.io.part_names.read_face_names`), ``default`` (or None) the rest;
+    ``default`` itself where no part is named."""
+    _, parts = _material_specs(args)
+    if not parts:
+        return default
+    names = read_face_names(args.mesh, mesh.n_faces)
+    assigned = [(name, material_from_options(preset, eta=args.eta, g=getattr(args, "g", 0.0) or 0.0))
+                for name, preset in parts]
+    return PartedMaterial.from_names(names, assigned, default, where=str(args.mesh))
+
+
 # --- mesh, lights ---------------------------------------------------------------------------------------
-def mesh_and_material(args) -> tuple[Mesh, Material]:
-    """The material of the options, then the mesh (in mm); unless ``--quiet``, one line on their scales."""
-    material = material_from_args(args)
+def mesh_and_material(args, *, parts_allowed: bool = False) -> tuple[Mesh, Material]:
+    """The material of the options, then the mesh (in mm); unless ``--quiet``, one line on their scales. With
+    ``parts_allowed`` (bake), ``--material PART=NAME`` makes a material of the mesh's parts."""
+    material = material_from_args(args, parts_allowed=parts_allowed)
     mesh = load_mesh(args.mesh, units=args.units)
+    if parts_allowed:
+        material = parted_material(args, mesh, material)
     if not args.quiet:
-        print(describe_scale(mesh, material))
+        first = material.materials[-1] if hasattr(material, "materials") else material
+        print(describe_scale(mesh, first))
     return mesh, material
 
 

@@ -267,3 +267,101 @@ def apple(radius: float = 40.0, subdivisions: int = 5):
 
     V, F = _radial(subdivisions, shape)
     return V * float(radius), F
+
+
+# ------------------------------------------------------------------------------------------------ parts
+def _zipper(A, B):
+    """(k, 3) triangles between two closed rings of vertex ids ``A`` (a,) and ``B`` (b,), both starting at angle 0
+    and running the same way: the rings' advances merged by angle (a ring of one vertex is a pole: a fan)."""
+    a, b = len(A), len(B)
+    fa = (np.arange(a) + 0.5) / a
+    fb = (np.arange(b) + 0.5) / b
+    order = np.argsort(np.concatenate([fa, fb]), kind="stable")
+    from_a = order < a
+    i = np.cumsum(from_a) - from_a                 # A's position before each advance
+    j = np.cumsum(~from_a) - (~from_a)
+    tri_a = np.stack([A[i % a], A[(i + 1) % a], B[j % b]], axis=1)[from_a]
+    tri_b = np.stack([A[i % a], B[(j + 1) % b], B[j % b]], axis=1)[~from_a]
+    out = [tri_b] if a == 1 else [tri_a, tri_b]
+    if b == 1:
+        out = [tri_a]
+    return np.concatenate(out)
+
+
+def _orient_convex(V, F, centre):
+    """``F`` with every face turned to face away from ``centre`` (a point inside a convex shape)."""
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    c = V[F].mean(axis=1) - np.asarray(centre, dtype=np.float64)
+    flip = np.einsum("ij,ij->i", n, c) < 0
+    F = F.copy()
+    F[flip] = F[flip][:, [0, 2, 1]]
+    return F
+
+
+def _hemisphere(radius, axis, u, v, rings):
+    """A closed hemisphere (dome and flat cap) of a sphere of ``radius`` about the origin on the side of ``axis``:
+    ``rings`` rings of latitude, the cap's rings at the dome's spacing, the rim on the plane through the origin."""
+    ring_ids, pts = [], []
+    count = 0
+
+    def ring(points):
+        nonlocal count
+        ring_ids.append(np.arange(count, count + len(points)))
+        pts.append(points)
+        count += len(points)
+
+    def circle(m, r, h):
+        phi = 2.0 * np.pi * np.arange(m) / m
+        return (h * axis[None, :] + r * (np.cos(phi)[:, None] * u[None, :] + np.sin(phi)[:, None] * v[None, :]))
+
+    theta = 0.5 * np.pi * np.arange(rings + 1) / rings
+    for k, t in enumerate(theta):                       # the dome: the pole, then rings down to the rim
+        m = 1 if k == 0 else max(6, int(round(4 * rings * np.sin(t))))
+        ring(circle(m, radius * np.sin(t), radius * np.cos(t)))
+    dome = list(ring_ids)
+    n_c = max(1, int(round(2.0 * rings / np.pi)))
+    cap = [dome[-1]]                                    # the cap shares the rim
+    for j in range(n_c - 1, -1, -1):
+        rho = radius * j / n_c
+        m = 1 if j == 0 else max(6, int(round(4 * rings * rho / radius)))
+        ring(circle(m, rho, 0.0))
+        cap.append(ring_ids[-1])
+    V = np.concatenate(pts)
+    F = np.concatenate([_zipper(x, y) for x, y in zip(dome[:-1], dome[1:])] +
+                       [_zipper(y, x) for x, y in zip(cap[1:], cap[:-1])])
+    return V, _orient_convex(V, F, 0.375 * radius * axis)
+
+
+def split_sphere(radius: float = 20.0, normal=(1.0, 0.0, 0.0), rings: int = 24):
+    """A sphere of ``radius`` about the origin as two closed hemispheres, split by the plane through the origin
+    normal to ``normal``: ``(vertices, faces, face_part)``, part 0 on the side of ``normal``, part 1 the other.
+    Each hemisphere is a dome of ``rings`` rings of latitude and a flat cap; the two caps lie on each other with
+    opposite orientations and the rims' vertices coincide (two closed parts: vertices are not shared between
+    them). A mesh of parts (:class:`meshshade.parts.PartedMaterial`)."""
+    _check_positive(radius=radius)
+    rings = _check_count("rings", rings, 2)
+    a = np.asarray(normal, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    u = np.cross(a, [0.0, 0.0, 1.0] if abs(a[2]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(a, u)
+    V0, F0 = _hemisphere(float(radius), a, u, v, rings)
+    V1, F1 = _hemisphere(float(radius), -a, u, -v, rings)
+    V = np.concatenate([V0, V1])
+    F = np.concatenate([F0, F1 + V0.shape[0]])
+    part = np.concatenate([np.zeros(len(F0), np.int64), np.ones(len(F1), np.int64)])
+    return V, F, part
+
+
+def nested_spheres(radius: float = 20.0, inner_radius: float = 8.0, subdivisions: int = 5,
+                   inner_subdivisions: int = 4):
+    """An icosphere of ``radius`` with a closed icosphere of ``inner_radius`` inside it, both about the origin and
+    outward oriented: ``(vertices, faces, face_part)``, part 0 the outer surface, part 1 the inner ball (a mesh of
+    parts: the ball is a part nested in the outer one, :class:`meshshade.parts.PartedMaterial`)."""
+    _check_positive(radius=radius, inner_radius=inner_radius)
+    if not inner_radius < radius:
+        raise ValueError(f"the inner radius must be below the outer, got {inner_radius!r} >= {radius!r}")
+    V0, F0 = icosphere(radius, subdivisions)
+    V1, F1 = icosphere(inner_radius, inner_subdivisions)
+    part = np.concatenate([np.zeros(len(F0), np.int64), np.ones(len(F1), np.int64)])
+    return np.concatenate([V0, V1]), np.concatenate([F0, F1 + V0.shape[0]]), part

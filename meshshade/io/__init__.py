@@ -7,6 +7,8 @@ Every name of ``__all__`` is importable from ``meshshade.io``; each submodule ho
 * :mod:`meshshade.io.meshes`: reading meshes (OBJ, PLY, OFF, STL, GLB, glTF) in the file's order, converted to mm
   (``load_mesh``, ``read_mesh_arrays``, ``SUPPORTED_MESH_FORMATS``), and a bake's PLY read back
   (``read_baked_ply``, ``BAKED_RADIANCE``);
+* :mod:`meshshade.io.part_names`: the names a mesh file gives its faces (an OBJ's usemtl and g, a glTF's
+  materials), for materials of parts (``read_face_names``);
 * :mod:`meshshade.io.uv_maps`: texture coordinates of a mesh file as per-corner UV maps (``read_uv_map``);
 * :mod:`meshshade.io.ply`: the PLY reader and writers (``write_ply``, ``write_mesh_ply``, ``PLY_RESERVED_NAMES``);
 * :mod:`meshshade.io.transactions`: atomic outputs (``atomic_write``), outputs that appear together or not at all
@@ -33,6 +35,7 @@ from meshshade.io.jobs import (append_text, file_sha256, folder_files, job_folde
                                scratch_folder, temp_path)
 from meshshade.io.meshes import BAKED_RADIANCE, SUPPORTED_MESH_FORMATS, load_mesh, read_baked_ply, read_mesh_arrays
 from meshshade.io.ply import PLY_RESERVED_NAMES, write_mesh_ply, write_ply
+from meshshade.io.part_names import read_face_names
 from meshshade.io.uv_maps import read_uv_map
 from meshshade.io.transactions import (atomic_write, check_output_path, detached, discard_stdout, output_dir,
                                        output_transaction)
@@ -46,4 +49,4 @@ __all__ = ["SUPPORTED_MESH_FORMATS", "load_mesh", "read_mesh_arrays", "read_bake
            "write_exr", "write_png", "read_exr", "read_toml", "read_json", "read_json_lines", "write_json_lines",
            "file_sha256", "folder_files", "job_folder", "remove_stale_parts", "detached", "write_bytes", "write_usd",
            "write_obj", "scratch_folder", "remove_folder", "temp_path", "append_text", "read_uv_map",
-           "read_environment_map", "read_colour_map", "mtl_colour_map", "read_vertex_colours"]
+           "read_environment_map", "read_colour_map", "mtl_colour_map", "read_vertex_colours", "read_face_names"]

@@ -19,6 +19,7 @@ from meshshade.light.sources import light_list
 from meshshade.materials import Material
 from meshshade.painted import PaintedMaterial
 from meshshade.names import MODELS
+from meshshade.parts import PartedMaterial
 from meshshade.progress import Stopwatch
 from meshshade.surface.baking import SurfaceModel
 from meshshade.surface.hierarchical import SurfaceTransport
@@ -105,21 +106,27 @@ def bake(mesh, material: Material, lights, options: BakeOptions | None = None, *
     options, reuse = _options(options, reuse, deprecated)
     if not isinstance(mesh, Mesh):
         raise MeshshadeError(f"bake needs a meshshade Mesh (mm), got {type(mesh).__name__}")
-    if not isinstance(material, (Material, PaintedMaterial)):
-        raise MaterialError(f"bake needs a Material or a PaintedMaterial, got {type(material).__name__}")
-    if isinstance(material, PaintedMaterial):
+    if not isinstance(material, (Material, PaintedMaterial, PartedMaterial)):
+        raise MaterialError(f"bake needs a Material, a PaintedMaterial or a PartedMaterial, got "
+                            f"{type(material).__name__}")
+    varying = isinstance(material, (PaintedMaterial, PartedMaterial))
+    if varying:
+        kind = "a painted material" if isinstance(material, PaintedMaterial) else "a material of parts"
         if options.model != "volume":
-            raise ParameterError(f"model {options.model!r} takes one medium; a painted material (a medium varying "
-                                 "over the object) needs the volume model (docs/physics.md §17)")
+            raise ParameterError(f"model {options.model!r} takes one medium; {kind} (a medium varying over the "
+                                 "object) needs the volume model (docs/physics.md §17)")
         material.check_mesh(mesh)
+        if isinstance(material, PartedMaterial):
+            material.check_one_index()
+            mesh = material.oriented(mesh)      # each part a solid (a nested part is no cavity)
     _check_reuse(reuse, mesh, material, options.model)
     lights = light_list(lights)   # every element a light; none at all is refused by entry_samples
     clock = Stopwatch()
     model = MODELS_BY_NAME[options.model]
     part, why = model.run(mesh, material, lights, options, clock, reuse)
     if part is None:                       # the volume, on a mesh that encloses nothing it resolves
-        if isinstance(material, PaintedMaterial):
-            raise MeshshadeError(f"{why}; a painted material needs the volume model")
+        if varying:
+            raise MeshshadeError(f"{why}; {kind} needs the volume model")
         log.warning("%s; using the surface transport (model auto, beam source model)", why)
         model = MODELS_BY_NAME["auto"]
         options = replace(options, surface=replace(options.surface, source_model="beam"))

@@ -508,9 +508,9 @@ def _active_counts(ptr, other, distinct, newid, counts, r0, r1):
 
 
 @numba.njit(cache=True, nogil=True)
-def _scale_by_cube(start, cols, s_val, D, sig_a, scaled, mw, c0, c1):
-    """Cubes c0..c1: each stiffness triplet times its cube's D per channel (scaled[c]), each mass triplet's value
-    times its cube's sigma_a per channel (mw[c]; its stiffness columns 0)."""
+def _scale_by_cube(start, cols, s_val, D, scaled, c0, c1):
+    """Cubes c0..c1: each stiffness triplet times its cube's D per channel (scaled[c]); a mass triplet's stiffness
+    columns 0."""
     for q in range(c0, c1):
         for k in range(start[q], start[q + 1]):
             v = s_val[k]
@@ -520,7 +520,19 @@ def _scale_by_cube(start, cols, s_val, D, sig_a, scaled, mw, c0, c1):
             else:
                 for c in range(3):
                     scaled[c, k] = 0.0
-                    mw[c, k] = v * sig_a[q, c]
+
+
+@numba.njit(cache=True, nogil=True)
+def _mass_by_cube(start, rows, cols, s_val, sig_a, out):
+    """out[row, c] = sum of each mass triplet's value times its cube's sigma_a per channel, in triplet order (the
+    order of a bincount over the triplets: the same sums to the bit); one pass, no (3, triplets) array."""
+    for q in range(start.shape[0] - 1):
+        for k in range(start[q], start[q + 1]):
+            if cols[k] == -1 and rows[k] >= 0:
+                v = s_val[k]
+                r = rows[k]
+                for c in range(3):
+                    out[r, c] += v * sig_a[q, c]
 
 
 #: cubes per chunk of the assembly (the unit of its partial sums)
@@ -565,13 +577,10 @@ def assemble(lattice, *, ghost: float = GHOST, media=None) -> Assembly:
     if media is not None:                      # a medium per cube: D_c S and sigma_a,c m per channel (eq. (107))
         D, sig_a = (np.ascontiguousarray(v, dtype=np.float64) for v in media)
         scaled = np.empty((3, size))
-        mw = np.zeros((3, size))
-        parallel_for(lambda a, b: _scale_by_cube(start, cols, s_val, D, sig_a, scaled, mw, a, b), n_cells,
-                     min_block=CHUNK)
-        at = rows[mass]
-        m_media = np.stack([np.bincount(at, weights=mw[c][mass], minlength=n_free) for c in range(3)], axis=1)
+        parallel_for(lambda a, b: _scale_by_cube(start, cols, s_val, D, scaled, a, b), n_cells, min_block=CHUNK)
+        m_media = np.zeros((n_free, 3))
+        _mass_by_cube(start, rows, cols, s_val, sig_a, m_media)
         passes = [(scaled[0], b_val), (scaled[1], scaled[2])]
-        del mw
     # the symmetric CSR: rows counted per block of triplets, filled in triplet order
     n_blocks = max(1, min(default_threads(), size // 65536))
     edges = _block_edges(size, n_blocks)

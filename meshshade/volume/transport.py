@@ -30,18 +30,17 @@ from scipy.spatial import cKDTree
 
 from meshshade.errors import MeshshadeError
 from meshshade.kernels.fresnel import refract_in
-from meshshade.kernels.painted_reflectance import albedo_for_reflectance
 from meshshade.progress import kernel_interrupts
 from meshshade.volume.cutfem import assemble
 from meshshade.volume.inside import SurfaceVolume
 from meshshade.volume.lattice import build_lattice
 from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
+from meshshade.volume.media import NEAR_FIELD_NODES, varying_medium
 from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
 from meshshade.volume.remainder import RemainderTables, longest_edges, remainder_exitance
 from meshshade.volume.options import VolumeOptions
 from meshshade.volume.resolution import volume_resolution
 from meshshade.volume.surface import SamplingSurface
-from meshshade.painted import PaintedMaterial
 
 __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0", "NEAR_FIELD_NODES"]
 
@@ -51,9 +50,6 @@ __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0", "NEAR_FIELD_NODES"]
 SAMPLE_SPACING_OVER_H0 = 2.0
 #: a surface point farther than this many lattice spacings outside the lattice's own surface is read on it
 OUTSIDE_READ = 0.1
-#: a painted medium's near field is tabulated at this many reduced albedos per channel (spread evenly in
-#: log10(1 - alpha') over the paint's range) and interpolated at each receiver (docs/physics.md eq. (108))
-NEAR_FIELD_NODES = 3
 #: a vertex is buried when the winding number this far outside it (mm; at most a tenth of the mean edge) is > 1/2
 BURIED_OFFSET_MM = 0.05
 
@@ -69,16 +65,19 @@ class VolumeTransport:
     itself is made for the first light set it is given (finer at that light's edges) and remade only for a light
     set with edges elsewhere."""
 
-    def __init__(self, mesh, material, resolution, surface, inside, tables, timings):
+    def __init__(self, mesh, material, resolution, surface, inside, tables, timings, medium=None):
         self.mesh, self.material, self.resolution = mesh, material, resolution
         self.surface, self.inside, self.tables = surface, inside, tables
         self.timings = timings
-        self.painted = material if isinstance(material, PaintedMaterial) else None
-        m = material.base.medium if self.painted else material.medium   # d'Eon's D [mm], A, sigma_a (eq. (74))
+        # a medium varying over the object (painted, parts: :mod:`meshshade.volume.media`), or None: one medium
+        # (attached to ``surface``: :meth:`build`)
+        self.medium = medium
+        varying = medium is not None
+        m = medium.boundary.medium if varying else material.medium   # d'Eon's D [mm], A, sigma_a (eq. (74))
         self.A = np.array(m.A, dtype=np.float64)
-        if self.painted:      # D and sigma_a per cube inside the matrices (eq. (107)); the boundary's 1/(2A) here
+        if varying and not getattr(self.medium, "single", False):
+            # D and sigma_a per cube inside the matrices (eq. (107)); the boundary's 1/(2A) here (one index)
             self.coef = np.stack([np.ones(3), 1.0 / (2.0 * m.A), np.ones(3)], axis=1)
-            self._paint_samples(tables)
         else:
             self.coef = np.stack([m.D, 1.0 / (2.0 * m.A), m.sigma_a], axis=1)
         self._lattice_key = None
@@ -107,78 +106,26 @@ class VolumeTransport:
         options = VolumeOptions() if options is None else options
         timings = {}
         t = time.perf_counter()
-        painted = isinstance(material, PaintedMaterial)
-        # a painted medium: the lattice resolves the paint's fastest-decaying medium (its least albedo per channel)
-        res_material = material.material_of(material.albedo_range()[0]) if painted else material
+        medium = varying_medium(material)
+        # a varying medium: the lattice resolves its fastest-decaying media (and reaches as deep as its slowest)
+        res_material = medium.resolution_material() if medium is not None else material
         res = volume_resolution(res_material, float(mesh.total_area), mesh.bbox_size_mm, h0=options.h0,
                                 budget=options.budget)
+        if medium is not None:               # each medium's own resolution: where its edges need refining
+            medium.note_resolution(res, lambda m: volume_resolution(m, float(mesh.total_area), mesh.bbox_size_mm,
+                                                                    h0=options.h0, budget=options.budget))
         surface = SamplingSurface(mesh, SAMPLE_SPACING_OVER_H0 * res.h0 if sample_spacing is None else sample_spacing)
         inside = SurfaceVolume(mesh.vertices, mesh.nondegenerate_faces, surface.samples.vertices,
                                surface.spacing)
         _lap(timings, "volume sampling", t, on_stage)
         t = time.perf_counter()
-        tables = RemainderTables(material, res.spread) if not painted else res.spread   # painted: per node, below
+        # a varying medium: read on the sampling surface, its near field tabulated per medium node
+        tables = RemainderTables(material, res.spread) if medium is None else medium.attach(mesh, surface, res.spread)
         _lap(timings, "near-field tables", t, on_stage)
-        vt = cls(mesh, material, res, surface, inside, tables, timings)
+        vt = cls(mesh, material, res, surface, inside, tables, timings, medium)
         vt.on_stage = on_stage
         vt.options = options
         return vt
-
-    def _paint_samples(self, spread):
-        """A painted material's medium on the sampling surface (docs/physics.md §17): the reduced albedo (n_s, 3)
-        at each sampling vertex (eq. (106) of the colour there), a tree of those vertices (each cube and entry takes
-        the medium of the nearest), and the near field's tables at NEAR_FIELD_NODES albedos per channel."""
-        p, surf = self.painted, self.surface
-        F = surf.samples.faces
-        colour = np.zeros((surf.samples.n_vertices, 3))
-        for k in range(3):                                   # each corner's point on its input face
-            colour[F[:, k]] = p.colour_at(surf._origin, self.mesh.faces, surf._bary[:, k, :])
-        self.sample_albedo = albedo_for_reflectance(np.clip(colour, 0.0, None), p.eta, p.g)
-        self._paint_tree = cKDTree(surf.samples.vertices)
-        x = np.log10(1.0 - self.sample_albedo)
-        lo, hi = x.min(axis=0), x.max(axis=0)
-        k = 1 if np.all(hi - lo < 1e-12) else NEAR_FIELD_NODES
-        self._node_x = np.linspace(lo, hi, k)                                          # (k, 3)
-        self.tables_at = [RemainderTables(p.material_of(1.0 - 10.0 ** xn, f"painted node {j}"), spread)
-                          for j, xn in enumerate(self._node_x)]
-        self.tables = self.tables_at[0]
-
-    def _medium_at(self, points):
-        """(alpha' (p, 3), D (p, 3) mm, sigma_a (p, 3) 1/mm): a painted material's medium at ``points``, that of
-        the nearest sampling vertex (d'Eon's D = (2 - alpha') / (3 sigma_t'))."""
-        _, i = self._paint_tree.query(points)
-        a = self.sample_albedo[i]
-        st = self.painted.sigma_t_prime
-        return a, (2.0 - a) / (3.0 * st), (1.0 - a) * st
-
-    def _painted_near_field(self, samples, cos_t):
-        """Eq. (103) of a painted medium: the near field of each node's medium at every receiver, interpolated at
-        the receiver's own albedo per channel, linearly in log10(1 - alpha') (eq. (108))."""
-        src, rec = self._remainder_inputs(samples, cos_t)
-        parts, pairs = [], 0
-        for tab in self.tables_at:
-            Mf, n = remainder_exitance(tab, src, rec, spacing_mm=self._mean_spacing())
-            parts.append(Mf)
-            pairs += n
-        return self._at_receiver_albedo(parts, self.sample_albedo), pairs
-
-    def _at_receiver_albedo(self, parts, albedo):
-        """(p, 3): the near fields ``parts`` (one (p, 3) per node of ``self._node_x``) interpolated at each
-        receiver's ``albedo`` (p, 3) per channel, linearly in log10(1 - alpha') (eq. (108))."""
-        if len(parts) == 1:
-            return parts[0]
-        x = np.log10(1.0 - albedo)
-        out = np.zeros_like(parts[0])
-        nodes = self._node_x
-        index = np.arange(len(parts), dtype=np.float64)
-        for c in range(3):
-            u = np.interp(x[:, c], nodes[:, c], index)          # the nodes increase in x (albedo falling)
-            j = np.minimum(np.floor(u).astype(np.int64), len(parts) - 2)
-            f = u - j
-            stack = np.stack([P[:, c] for P in parts], axis=1)
-            rows = np.arange(stack.shape[0])
-            out[:, c] = (1.0 - f) * stack[rows, j] + f * stack[rows, j + 1]
-        return out
 
     def _buried_vertices(self):
         """(n,) bool: the mesh's vertices buried in another of its parts (only a mesh of several parts has them),
@@ -223,22 +170,34 @@ class VolumeTransport:
         t = time.perf_counter()
         reach = self.resolution.refine_radius
         refine = None
-        if len(pts):
+        reaches = self.medium.edge_reach(pts) if self.medium is not None and len(pts) else None
+        if len(pts) and reaches is None:
             tree = cKDTree(pts)
             r1 = 0.5 * math.sqrt(3.0) * h1
 
             def refine(centres):
                 d, _ = tree.query(centres, distance_upper_bound=reach + r1)
                 return np.isfinite(d)
+        elif len(pts):                         # a varying medium: each edge its own medium's reach
+            groups = [(cKDTree(pts[reaches == r]), float(r)) for r in np.unique(reaches) if r > 0]
+            r1 = 0.5 * math.sqrt(3.0) * h1
+
+            def refine(centres):
+                out = np.zeros(len(centres), dtype=bool)
+                for tree_r, r in groups:
+                    d, _ = tree_r.query(centres, distance_upper_bound=r + r1)
+                    out |= np.isfinite(d)
+                return out
         lo, hi = self.mesh.bbox
         lattice = build_lattice(self.inside.depth, lo, hi, self.resolution.grading, refine=refine)
         _lap(timings, "volume lattice", t, on_stage)
         t = time.perf_counter()
         media = None
-        if self.painted:          # each cube the medium of the nearest sampled surface point (eq. (107))
+        if self.medium is not None:          # each cube's medium at its centre (eq. (107); §17)
             centres = (lattice.ijk + 0.5) * lattice.cell_size[:, None]
-            _, D, sig_a = self._medium_at(centres)
-            media = (D, sig_a)
+            media = self.medium.cube_media(centres)
+            _lap(timings, "volume media", t, None)
+            t = time.perf_counter()
         asm = assemble(lattice, media=media)
         op = ChannelOperator(asm, self.coef)
         _lap(timings, "volume operator", t, on_stage)
@@ -272,16 +231,8 @@ class VolumeTransport:
         t = time.perf_counter()
         w = refract_in(samples.directions, samples.normals, float(mat.eta))
         cos_t = np.clip(-np.einsum("ij,ij->i", w, samples.normals), 0.0, 1.0)
-        if self.painted:          # each entry's sources in the medium where it enters (eq. (107))
-            a, D, sig_a = self._medium_at(samples.positions)
-            x, q = line_rule(1.0)
-            loads = np.zeros((self.lattice.n_nodes, 3))
-            dropped = np.zeros(3)
-            for c in range(3):
-                power = samples.power * a[:, c] * ewald_weight(np.sqrt(sig_a[:, c] / D[:, c]), self.resolution.spread)
-                lc, dc = lattice_loads(self.lattice, samples.positions, w, samples.normals, power,
-                                       x[None, :] / float(mat.sigma_t_prime[c]), q[None, :], self.resolution.spread)
-                loads[:, c], dropped[c] = lc[:, 0], dc[0]
+        if self.medium is not None:          # each entry's sources in the medium where it enters (eq. (107))
+            loads, dropped = self.medium.entry_loads(self.lattice, samples, w, self.resolution.spread)
         else:
             depths, strengths = np.zeros((3, 6)), np.zeros((3, 6))
             for c in range(3):
@@ -299,8 +250,8 @@ class VolumeTransport:
         M, outside = self._read(phi, surf.vertices, surf.vertex_normals)
         _lap(timings, "volume solve", t, on_stage)
         t = time.perf_counter()
-        if self.painted:
-            Mf, pairs = self._painted_near_field(samples, cos_t)
+        if self.medium is not None:
+            Mf, pairs = self.medium.near_field(*self._remainder_inputs(samples, cos_t), self._mean_spacing())
         else:
             Mf, pairs = remainder_exitance(self.tables, *self._remainder_inputs(samples, cos_t),
                                            spacing_mm=self._mean_spacing())
@@ -332,11 +283,10 @@ class VolumeTransport:
                "area": np.zeros(len(index)), "cos_t": cos_t, "light": np.zeros(len(index), dtype=np.int64)}
         rec = {"pos": points, "normal": np.asarray(normals, dtype=np.float64), "radius": np.asarray(radius),
                "E": np.zeros((len(points), 1)), "cos_t": np.ones((len(points), 1))}
-        if not self.painted:
+        if self.medium is None:
             M, _ = remainder_exitance(self.tables, src, rec)
             return M
-        parts = [remainder_exitance(tab, src, rec)[0] for tab in self.tables_at]
-        return self._at_receiver_albedo(parts, self._medium_at(points)[0])
+        return self.medium.point_near_field(src, rec, points)
 
     def _read(self, phi, points, normals):
         """(M (p, 3) = phi / (2A) at ``points``, how many lay outside the lattice). A point farther outside the

@@ -1,0 +1,339 @@
+"""A medium that varies over the object, as the volume transport reads it (docs/physics.md §17): one interface,
+two kinds.
+
+The volume transport (:mod:`meshshade.volume.transport`) of one homogeneous :class:`~meshshade.materials.Material`
+keeps its own path (constants in the operator's coefficients, one table of the near field). A varying medium is
+read through a :class:`VaryingMedium`, which answers the five questions the transport asks:
+
+* :meth:`~VaryingMedium.resolution_material`: what the lattice must resolve (its fastest and slowest decays);
+* :meth:`~VaryingMedium.attach`: the medium at the sampling surface's vertices (the receivers) and the near
+  field's tables;
+* :meth:`~VaryingMedium.cube_media`: D and sigma_a per cube of the lattice (eq. (107));
+* :meth:`~VaryingMedium.entry_loads`: the lattice's line sources of each entry, in the medium where it enters;
+* :meth:`~VaryingMedium.near_field` / :meth:`~VaryingMedium.point_near_field`: eq. (103) with the receiver's
+  medium.
+
+Two kinds: :class:`PaintedMedium` (a :class:`~meshshade.painted.PaintedMaterial`: the albedo painted on the
+surface, each point of the volume the medium of the nearest sampled surface point, the near field tabulated at a
+few albedos and interpolated, eq. (108)) and :class:`PartsMedium` (a :class:`~meshshade.parts.PartedMaterial`:
+each point the medium of the part owning it, the near field tabulated per distinct medium, §17 "Parts").
+
+Pure array work; no I/O.
+"""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from meshshade.kernels.painted_reflectance import albedo_for_reflectance
+from meshshade.painted import PaintedMaterial
+from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
+from meshshade.volume.remainder import RemainderTables, remainder_exitance
+from meshshade.volume.resolution import REFINE_EFOLDS
+
+__all__ = ["VaryingMedium", "PaintedMedium", "PartsMedium", "varying_medium", "NEAR_FIELD_NODES"]
+
+#: a painted medium's near field is tabulated at this many reduced albedos per channel (spread evenly in
+#: log10(1 - alpha') over the paint's range) and interpolated at each receiver (docs/physics.md eq. (108))
+NEAR_FIELD_NODES = 3
+
+
+def varying_medium(material):
+    """The :class:`VaryingMedium` of ``material``, or None for a homogeneous Material (the transport's own path)."""
+    if isinstance(material, PaintedMaterial):
+        return PaintedMedium(material)
+    if hasattr(material, "face_part") and hasattr(material, "part_at"):
+        # a meshshade.parts.PartedMaterial (recognised by its record, not imported: parts reads the volume's
+        # winding numbers, so the volume importing parts would be a cycle between the stages)
+        return PartsMedium(material)
+    return None
+
+
+class VaryingMedium:
+    """The interface (module docstring). ``boundary`` is the Material whose A (eq. (74)) sets the object's
+    boundary term 1/(2A) everywhere (A depends on the index only; every kind here has one index)."""
+
+    boundary = None
+    #: per-cube media for a medium that is in fact one (tests: the same bake through the per-cube matrices)
+    force_cubes = False
+
+    def resolution_material(self):
+        raise NotImplementedError
+
+    def note_resolution(self, res, own) -> None:
+        """The lattice's resolution ``res`` is chosen; ``own(material)`` is the one a material alone would have."""
+
+    def edge_reach(self, points):
+        """(p,) mm: how far around each edge of light at ``points`` the lattice is refined, or None: the
+        resolution's one ``refine_radius`` (:mod:`meshshade.volume.resolution`)."""
+        return None
+
+    def attach(self, mesh, surface, spread: float):
+        """Read the medium at the sampling ``surface`` of ``mesh`` and tabulate the near field at the lattice's ``spread``;
+        returns the first table (the stats' radius)."""
+        raise NotImplementedError
+
+    def cube_media(self, centres):
+        """(D (C, 3) mm, sigma_a (C, 3) 1/mm) at the cubes' ``centres``, or None where the medium is one."""
+        raise NotImplementedError
+
+    def entry_loads(self, lattice, samples, w, spread):
+        """(loads (N, 3), dropped (3,)): the line sources (eqs. (97)-(100)) of ``samples`` entering along the
+        refracted directions ``w``, each in the medium where it enters."""
+        raise NotImplementedError
+
+    def near_field(self, src, rec, spacing_mm):
+        """(M_f (n_s, 3), pairs): eq. (103) at the sampling surface's vertices (``rec``) for the entries ``src``."""
+        raise NotImplementedError
+
+    def point_near_field(self, src, rec, points):
+        """(p, 3): eq. (103) of the point entries ``src`` at ``points`` (receivers ``rec``), no coarse far part."""
+        raise NotImplementedError
+
+
+# ------------------------------------------------------------------------------------------------ painted
+class PaintedMedium(VaryingMedium):
+    """A painted material's medium (docs/physics.md §17): the reduced albedo at each sampling vertex (eq. (106)
+    of the colour there), each cube and entry the medium of the nearest sampling vertex, the near field at
+    NEAR_FIELD_NODES albedos per channel interpolated at the receiver's (eq. (108))."""
+
+    def __init__(self, material: PaintedMaterial):
+        self.material = material
+        self.boundary = material.base
+
+    def resolution_material(self):
+        # the lattice resolves the paint's fastest-decaying medium (its least albedo per channel)
+        return self.material.material_of(self.material.albedo_range()[0])
+
+    def attach(self, mesh, surface, spread):
+        p, surf = self.material, surface
+        F = surf.samples.faces
+        colour = np.zeros((surf.samples.n_vertices, 3))
+        for k in range(3):                                   # each corner's point on its input face
+            colour[F[:, k]] = p.colour_at(surf._origin, mesh.faces, surf._bary[:, k, :])
+        self.sample_albedo = albedo_for_reflectance(np.clip(colour, 0.0, None), p.eta, p.g)
+        self._tree = cKDTree(surf.samples.vertices)
+        x = np.log10(1.0 - self.sample_albedo)
+        lo, hi = x.min(axis=0), x.max(axis=0)
+        k = 1 if np.all(hi - lo < 1e-12) else NEAR_FIELD_NODES
+        self._node_x = np.linspace(lo, hi, k)                                          # (k, 3)
+        self.tables_at = [RemainderTables(p.material_of(1.0 - 10.0 ** xn, f"painted node {j}"), spread)
+                          for j, xn in enumerate(self._node_x)]
+        return self.tables_at[0]
+
+    def medium_at(self, points):
+        """(alpha' (p, 3), D (p, 3) mm, sigma_a (p, 3) 1/mm) at ``points``: that of the nearest sampling vertex
+        (d'Eon's D = (2 - alpha') / (3 sigma_t'))."""
+        _, i = self._tree.query(points)
+        a = self.sample_albedo[i]
+        st = self.material.sigma_t_prime
+        return a, (2.0 - a) / (3.0 * st), (1.0 - a) * st
+
+    def cube_media(self, centres):
+        _, D, sig_a = self.medium_at(centres)
+        return D, sig_a
+
+    def entry_loads(self, lattice, samples, w, spread):
+        a, D, sig_a = self.medium_at(samples.positions)
+        st = self.material.sigma_t_prime
+        x, q = line_rule(1.0)
+        loads = np.zeros((lattice.n_nodes, 3))
+        dropped = np.zeros(3)
+        for c in range(3):
+            power = samples.power * a[:, c] * ewald_weight(np.sqrt(sig_a[:, c] / D[:, c]), spread)
+            lc, dc = lattice_loads(lattice, samples.positions, w, samples.normals, power,
+                                   x[None, :] / float(st[c]), q[None, :], spread)
+            loads[:, c], dropped[c] = lc[:, 0], dc[0]
+        return loads, dropped
+
+    def near_field(self, src, rec, spacing_mm):
+        parts, pairs = [], 0
+        for tab in self.tables_at:
+            Mf, n = remainder_exitance(tab, src, rec, spacing_mm=spacing_mm)
+            parts.append(Mf)
+            pairs += n
+        return self._at_receiver_albedo(parts, self.sample_albedo), pairs
+
+    def point_near_field(self, src, rec, points):
+        parts = [remainder_exitance(tab, src, rec)[0] for tab in self.tables_at]
+        return self._at_receiver_albedo(parts, self.medium_at(points)[0])
+
+    def _at_receiver_albedo(self, parts, albedo):
+        """(p, 3): the near fields ``parts`` (one (p, 3) per node) interpolated at each receiver's ``albedo``
+        (p, 3) per channel, linearly in log10(1 - alpha') (eq. (108))."""
+        if len(parts) == 1:
+            return parts[0]
+        x = np.log10(1.0 - albedo)
+        out = np.zeros_like(parts[0])
+        nodes = self._node_x
+        index = np.arange(len(parts), dtype=np.float64)
+        for c in range(3):
+            u = np.interp(x[:, c], nodes[:, c], index)          # the nodes increase in x (albedo falling)
+            j = np.minimum(np.floor(u).astype(np.int64), len(parts) - 2)
+            f = u - j
+            stack = np.stack([P[:, c] for P in parts], axis=1)
+            rows = np.arange(stack.shape[0])
+            out[:, c] = (1.0 - f) * stack[rows, j] + f * stack[rows, j + 1]
+        return out
+
+
+# ------------------------------------------------------------------------------------------------ parts
+def _medium_key(m):
+    """What makes two parts' materials one medium: the coefficients, index and anisotropy (not the name)."""
+    return (tuple(np.asarray(m.sigma_s_prime, dtype=np.float64).tolist()),
+            tuple(np.asarray(m.sigma_a, dtype=np.float64).tolist()), float(m.eta), float(m.g))
+
+
+class PartsMedium(VaryingMedium):
+    """A material of parts (docs/physics.md §17 "Parts"): parts of equal coefficients are one medium; each cube
+    takes the medium of the part owning its centre (:meth:`~meshshade.parts.PartedMaterial.part_at`, the
+    innermost part whose winding number is above 1/2), each sampling vertex that of its input face's part, each
+    entry that of the sampling vertex where it enters (a beam: the nearest one), and the near field at a receiver
+    is tabulated in the receiver's medium. One index for all parts (MaterialError otherwise): the internal
+    interfaces are index-matched."""
+
+    def __init__(self, material):
+        self.material = material
+        material.check_one_index()
+        keys, self.media, index = {}, [], []
+        for m in material.materials:
+            k = _medium_key(m)
+            if k not in keys:
+                keys[k] = len(self.media)
+                self.media.append(m)
+            index.append(keys[k])
+        self.part_medium = np.asarray(index, dtype=np.int64)          # part -> distinct medium
+        self.boundary = self.media[0]
+
+    @property
+    def single(self) -> bool:
+        """Whether the parts are of one medium (then the cubes' media are constants: the homogeneous matrices)."""
+        return len(self.media) == 1 and not self.force_cubes
+
+    def resolution_material(self):
+        if len(self.media) == 1:
+            return self.media[0]
+        # every medium's decay: the fastest sets the spacing and the grading's bands, the slowest the depth
+        kappa = np.concatenate([np.asarray(m.medium.kappa, dtype=np.float64) for m in self.media])
+        return SimpleNamespace(medium=SimpleNamespace(kappa=kappa))
+
+    def note_resolution(self, res, own) -> None:
+        """Each medium's edges of light are refined as that medium alone would refine them, where the lattice's
+        surface spacing does not already resolve them as finely: REFINE_EFOLDS decay lengths of its fastest
+        channel, if ``res.h0`` is coarser than half its own surface spacing (``own(medium).h0``), else not at
+        all (a marble part in a skin1 lattice: skin1's 0.84 mm is finer than marble's 1 mm at its edges)."""
+        self._reach = np.array([REFINE_EFOLDS / float(np.max(m.medium.kappa))
+                                if res.h0 > 0.5 * own(m).h0 * (1.0 + 1e-9) else 0.0 for m in self.media])
+
+    def edge_reach(self, points):
+        """(p,) mm: how far around each edge of light at ``points`` the lattice is refined (0: not at all): that of
+        the medium there, its nearest sampling vertex's (:meth:`note_resolution`; the fastest medium's reach
+        everywhere under-resolves a slower one's edges where they need refining: its half of a sphere of marble
+        beside a more absorbing marble 3-7 % off)."""
+        if len(self.media) == 1:
+            return None
+        _, i = self._tree.query(np.asarray(points, dtype=np.float64))
+        return self._reach[self.sample_medium[i]]
+
+    def attach(self, mesh, surface, spread):
+        surf = surface
+        self._mesh = mesh
+        self.material.check_mesh(mesh)
+        fp = self.material.face_part[surf._origin]               # each sampling face's part
+        F = surf.samples.faces
+        vp = np.full(surf.samples.n_vertices, -1, dtype=np.int64)
+        for k in range(3):                                       # a vertex on a seam: the highest-numbered part
+            np.maximum.at(vp, F[:, k], fp)
+        vp[vp < 0] = 0                                           # a vertex of no face (none on a sampling surface)
+        self.sample_part = vp
+        self.sample_medium = self.part_medium[vp]
+        self._tree = cKDTree(surf.samples.vertices)
+        self.tables_at = [RemainderTables(m, spread) for m in self.media]
+        return self.tables_at[0]
+
+    def medium_at(self, points):
+        """(p,) int: the medium (index into ``media``) at ``points`` (p, 3) of the volume: that of the part owning
+        the point, or where none does (a point outside every part's own winding number, as a cut cube's centre
+        outside the surface), of the nearest sampling vertex."""
+        P = np.asarray(points, dtype=np.float64)
+        part = self.material.part_at(self._mesh.vertices, self._mesh.faces, P)
+        miss = np.flatnonzero(part < 0)
+        if miss.size:
+            _, i = self._tree.query(P[miss])
+            part[miss] = self.sample_part[i]
+        return self.part_medium[part]
+
+    def cube_media(self, centres):
+        if self.single:
+            return None
+        k = self.medium_at(centres)
+        D = np.stack([np.asarray(m.medium.D, dtype=np.float64) for m in self.media])[k]
+        sig_a = np.stack([np.asarray(m.sigma_a, dtype=np.float64) for m in self.media])[k]
+        return D, sig_a
+
+    def entry_medium(self, samples):
+        """(k,) int: the medium where each entry enters (its sampling vertex's; a beam's nearest vertex's)."""
+        k = np.empty(len(samples), dtype=np.int64)
+        at_v = samples.vertex >= 0
+        k[at_v] = self.sample_medium[samples.vertex[at_v]]
+        if (~at_v).any():
+            _, i = self._tree.query(samples.positions[~at_v])
+            k[~at_v] = self.sample_medium[i]
+        return k
+
+    def entry_loads(self, lattice, samples, w, spread):
+        where = self.entry_medium(samples)
+        loads, dropped = None, np.zeros(3)
+        for j, mat in enumerate(self.media):
+            sel = np.flatnonzero(where == j)
+            if sel.size == 0:
+                continue
+            depths, strengths = np.zeros((3, 6)), np.zeros((3, 6))
+            for c in range(3):
+                x, q = line_rule(float(mat.albedo_prime[c]))
+                depths[c] = x / float(mat.sigma_t_prime[c])
+                strengths[c] = q * ewald_weight(float(mat.medium.kappa[c]), spread)
+            idx = slice(None) if sel.size == len(samples) else sel
+            lc, dc = lattice_loads(lattice, samples.positions[idx], w[idx], samples.normals[idx],
+                                   samples.power[idx], depths, strengths, spread)
+            loads = lc if loads is None else loads + lc
+            dropped = dropped + dc
+        if loads is None:
+            loads = np.zeros((lattice.n_nodes, 3))
+        return loads, dropped
+
+    def near_field(self, src, rec, spacing_mm):
+        if len(self.media) == 1:
+            return remainder_exitance(self.tables_at[0], src, rec, spacing_mm=spacing_mm)
+        out = np.zeros((rec["pos"].shape[0], 3))
+        pairs = 0
+        for j, tab in enumerate(self.tables_at):              # each receiver in its own medium, every entry
+            sel = np.flatnonzero(self.sample_medium == j)
+            if sel.size == 0:
+                continue
+            Mf, n = remainder_exitance(tab, src, _subset(rec, sel), spacing_mm=spacing_mm)
+            out[sel] = Mf
+            pairs += n
+        return out, pairs
+
+    def point_near_field(self, src, rec, points):
+        if len(self.media) == 1:
+            return remainder_exitance(self.tables_at[0], src, rec)[0]
+        _, i = self._tree.query(np.asarray(points, dtype=np.float64))
+        k = self.sample_medium[i]
+        out = np.zeros((len(points), 3))
+        for j, tab in enumerate(self.tables_at):
+            sel = np.flatnonzero(k == j)
+            if sel.size:
+                out[sel] = remainder_exitance(tab, src, _subset(rec, sel))[0]
+        return out
+
+
+def _subset(rec, sel):
+    """The receivers ``sel`` of the receivers' dict ``rec`` (every per-receiver array taken at ``sel``)."""
+    n = rec["pos"].shape[0]
+    return {k: (v[sel] if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == n else v)
+            for k, v in rec.items()}
+
