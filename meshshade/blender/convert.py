@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from meshshade.errors import LightError, MaterialError, UnitsError
+from meshshade.kernels.painted_reflectance import albedo_for_reflectance
 from meshshade.light.sources import AreaLight, DirectionalLight, EnvironmentLight, PointLight, Spot
 from meshshade.light.spec import parse_light_spec
 
@@ -314,7 +315,6 @@ def principled_medium(slot: PrincipledSlot, mm_per_unit: float) -> tuple[dict, l
     if slot.image is not None:
         albedo = np.full(3, 0.5)
     else:
-        from meshshade.kernels.painted_reflectance import albedo_for_reflectance
         colour = np.asarray(slot.base_colour, dtype=np.float64)[:3]
         try:
             albedo = albedo_for_reflectance(colour, eta)
