@@ -33,6 +33,21 @@ def _decode_text(data: bytes, path: Path) -> str:
     return data.decode("utf-8", errors="replace")
 
 
+def _obj_statements(text: str):
+    """(line number, line, its words) of each non-empty statement of an OBJ's decoded ``text``: any line ending
+    (\\n, \\r\\n, \\r), comments dropped, a trailing backslash joining the next line (numbered by the last)."""
+    pending = ""
+    for lineno, raw in enumerate(text.replace("\r\n", "\n").replace("\r", "\n").split("\n"), start=1):
+        line = pending + raw.split("#", 1)[0].rstrip()
+        if line.endswith("\\"):
+            pending = line[:-1] + " "
+            continue
+        pending = ""
+        parts = line.split()
+        if parts:
+            yield lineno, line, parts
+
+
 def _warn_polygons(path: Path, n_polygons: int) -> None:
     warnings.warn(f"{path}: {n_polygons} polygons with more than 3 corners were fan-triangulated (0, i, i+1)",
                   MeshDefectWarning, stacklevel=4)

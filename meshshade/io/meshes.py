@@ -43,7 +43,7 @@ from meshshade import memo
 from meshshade.errors import MeshValidationError
 from meshshade.geometry.mesh import Mesh, MeshDefectWarning
 from meshshade.io._messages import _one_line
-from meshshade.io._reading import _decode_text, _fan_triangulate, _warn_polygons
+from meshshade.io._reading import _decode_text, _fan_triangulate, _obj_statements, _warn_polygons
 from meshshade.io.ply import _parse_ply_header, _ply_data, _read_ply
 from meshshade.units import mm_per_unit
 
@@ -118,16 +118,7 @@ def _read_obj_lines(path: Path, text: str | None = None, *, uv: bool = False):
     corners: list = []
     untextured = 0
     n_polygons = 0
-    pending = ""
-    for lineno, raw in enumerate(text.replace("\r\n", "\n").replace("\r", "\n").split("\n"), start=1):
-        line = pending + raw.split("#", 1)[0].rstrip()
-        if line.endswith("\\"):
-            pending = line[:-1] + " "
-            continue
-        pending = ""
-        parts = line.split()
-        if not parts:
-            continue
+    for lineno, line, parts in _obj_statements(text):
         if parts[0] == "v":
             try:
                 verts.append((float(parts[1]), float(parts[2]), float(parts[3])))

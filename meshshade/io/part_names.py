@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from meshshade.errors import MeshValidationError
-from meshshade.io._reading import _decode_text
+from meshshade.io._reading import _decode_text, _obj_statements
 
 __all__ = ["read_face_names"]
 
@@ -46,20 +46,11 @@ def read_face_names(path, n_faces: int) -> dict[str, np.ndarray]:
 def _obj_labels(path: Path):
     """[(usemtl names, each face's index into them), (g names, each face's)]: the names current at each ``f``
     record, repeated for its triangles (index -1: none yet)."""
-    text = _decode_text(path.read_bytes(), path).replace("\r\n", "\n").replace("\r", "\n")
+    text = _decode_text(path.read_bytes(), path)
     kinds = {"usemtl": ([], {}), "g": ([], {})}
     current = {"usemtl": -1, "g": -1}
     per_face = {"usemtl": [], "g": []}
-    pending = ""
-    for raw in text.split("\n"):
-        line = pending + raw.split("#", 1)[0].rstrip()
-        if line.endswith("\\"):
-            pending = line[:-1] + " "
-            continue
-        pending = ""
-        parts = line.split()
-        if not parts:
-            continue
+    for _, _, parts in _obj_statements(text):
         key = parts[0]
         if key in kinds:
             name = " ".join(parts[1:]) if len(parts) > 1 else None

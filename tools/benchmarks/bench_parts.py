@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -48,6 +49,9 @@ from meshshade.materials import Material
 from meshshade.parts import PartedMaterial
 from meshshade.raycast import make_scene
 from meshshade.transport import bake
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # tools/ is not a package: the benchmarks beside this
+from bench_volume import errors  # noqa: E402  (the errors every accuracy benchmark reports)
 
 SUN = (0.0, 0.0, -1.0)
 
@@ -68,20 +72,6 @@ def scene(name, args):
         mesh = Mesh.from_arrays(V, F, source=name)
     parts = PartedMaterial([skin, marble], part, names)
     return parts.oriented(mesh), parts, DirectionalLight(SUN, 1.0)
-
-
-def errors(M, ref, lit):
-    """bench_volume.py's errors: mean |M / ref - 1| per channel over lit vertices (ref > 0) and unlit ones whose
-    reference is above 1e-2 of the channel's peak."""
-    peak = ref.max(axis=0)
-    out = {"lit": [], "unlit": [], "unlit_count": []}
-    for c in range(3):
-        sl = lit & (ref[:, c] > 0)
-        su = ~lit & (ref[:, c] > 1e-2 * peak[c])
-        out["lit"].append(round(float(np.mean(np.abs(M[sl, c] / ref[sl, c] - 1.0))), 4))
-        out["unlit"].append(round(float(np.mean(np.abs(M[su, c] / ref[su, c] - 1.0))), 4) if su.any() else None)
-        out["unlit_count"].append(int(su.sum()))
-    return out
 
 
 def timed(fn, repeats):
