@@ -22,11 +22,10 @@ from meshshade.geometry.curvature import principal_curvatures
 from meshshade.light import entry_samples
 from meshshade.raycast import make_scene
 from meshshade.surface.direct_sum import direct_sum, merge_plans, subset_samples
-from meshshade.surface.gather import cutoff_radii
 from meshshade.surface.hierarchical import (VERIFY_TOL, FarFieldUnsupported, SurfaceTransport, verify_far_field,
                                             vertex_drift, vertex_power)
+from meshshade.surface.medium import surface_medium
 from meshshade.surface.options import SurfaceOptions
-from meshshade.surface.source_factors import near_field_factors
 
 log = logging.getLogger("meshshade")
 
@@ -74,20 +73,22 @@ def surface_bake(mesh, material, lights, model: str, options: SurfaceOptions, cl
     clock.lap("curvature")
     scene = memo.cached("scene", (id(mesh), backend),  # face ids must index mesh.faces
                         lambda: make_scene(mesh.vertices, mesh.faces, backend=backend), pins=(mesh,))
+    options = replace(options, source_model=source_model)
+    # what every stage reads of the material: the cutoff radii, the near field's factors, the sphere's tables
+    medium = surface_medium(material, options)
     samples = entry_samples(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.vertex_areas, lights, scene=scene,
-                            eta=material.eta)
+                            eta=medium.eta)
     clock.lap("rays")
-    cut = np.minimum(cutoff_radii(material, options.cutoff_tol), mesh.scale)
-    factors = near_field_factors(material) if source_model == "beam" else None
-    core, why, built = _transport(reuse, mesh, material, model, samples, curv,
-                                  replace(options, source_model=source_model), progress)
+    cut = np.minimum(medium.cutoff_mm, mesh.scale)
+    factors = medium.near
+    core, why, built = _transport(reuse, mesh, medium, model, samples, curv, options, progress)
     verified = None
     if core is not None:
         pv = vertex_power(samples, mesh.n_vertices)
         pv_c = pv
         if factors is not None:   # per channel: each sample's power times its incidence scale
             pv_c = vertex_power(samples, mesh.n_vertices, factors.incidence_scale(samples.cos_incidence))
-        drift = vertex_drift(samples, mesh.n_vertices, material.eta) if factors is not None else None
+        drift = vertex_drift(samples, mesh.n_vertices, medium.eta) if factors is not None else None
         M, hstats = core.exitance(pv_c, drift=drift, progress=progress)
         if options.transport == "auto" and reuse is None:  # the far field's distances on this light, or direct
             t_v = time.perf_counter()
@@ -99,7 +100,7 @@ def surface_bake(mesh, material, lights, model: str, options: SurfaceOptions, cl
                 log.info("meshshade: %s; using the direct sum", why)
                 core = None
     if core is None:
-        M, beam_distance, stats, plan, kstats = direct_sum(mesh, material, lights, samples, curv, cut, clock, model,
+        M, beam_distance, stats, plan, kstats = direct_sum(mesh, medium, lights, samples, curv, cut, clock, model,
                                                            options, progress)
         stats["transport"] = "direct" + (f" ({why})" if why else "")
     else:
@@ -112,7 +113,7 @@ def surface_bake(mesh, material, lights, model: str, options: SurfaceOptions, cl
         plan, beam_distance, kstats = core.sample_plan(samples), None, {}
         if np.any(point):  # beams: few samples, the direct sum over their whole neighbourhoods
             sub = subset_samples(samples, point)
-            Mb, beam_distance, bstats, bplan, kstats = direct_sum(mesh, material, lights, sub, curv, cut, clock,
+            Mb, beam_distance, bstats, bplan, kstats = direct_sum(mesh, medium, lights, sub, curv, cut, clock,
                                                                   model, replace(options, far_field="off"), progress)
             M = M + Mb
             stats.update({f"beam_{k}": v for k, v in bstats.items() if k in ("pairs_found", "pairs_evaluated")})
@@ -125,12 +126,13 @@ def surface_bake(mesh, material, lights, model: str, options: SurfaceOptions, cl
     return SurfaceBake(M, curv, samples, beam_distance, cut, stats, plan)
 
 
-def _transport(reuse, mesh, material, model, samples, curv, options: SurfaceOptions, progress):
-    """``(SurfaceTransport or None, reason, built)``: the hierarchical transport of the vertex samples, or None for
-    the direct sum (asked for, no vertex samples, or ``transport="auto"`` on a mesh where it is not accurate);
-    ``built``: whether this call built it (not passed in, nor reused from :mod:`meshshade.memo`)."""
+def _transport(reuse, mesh, medium, model, samples, curv, options: SurfaceOptions, progress):
+    """``(SurfaceTransport or None, reason, built)``: the hierarchical transport of the vertex samples in ``medium``
+    (SurfaceMedium), or None for the direct sum (asked for, no vertex samples, or ``transport="auto"`` on a mesh
+    where it is not accurate); ``built``: whether this call built it (not passed in, nor reused from
+    :mod:`meshshade.memo`)."""
     if reuse is not None:
-        if (reuse.mesh is not mesh or reuse.material.describe() != material.describe() or reuse.model != model
+        if (reuse.mesh is not mesh or reuse.material.describe() != medium.describe() or reuse.model != model
                 or reuse.source_model != options.source_model):
             raise ParameterError("the SurfaceTransport passed as reuse was built for another mesh, material, "
                                  "model or source model")
@@ -143,29 +145,29 @@ def _transport(reuse, mesh, material, model, samples, curv, options: SurfaceOpti
         return None, "no vertex samples", False
     # inside memo.reuse() (a batch worker) the transport (or the verdict that it does not apply) is kept for
     # further lights on this mesh, material, model and options
-    key = (id(mesh), material.describe(), model, id(curv), options)
+    key = (id(mesh), medium.describe(), model, id(curv), options)
     built = []
 
     def build():
         built.append(True)
-        return _build(mesh, material, model, curv, options, progress)
+        return _build(mesh, medium, model, curv, options, progress)
 
     core, why = memo.cached("transport", key, build, pins=(mesh, curv))
     return core, why, bool(built)
 
 
-def _build(mesh, material, model, curv, options: SurfaceOptions, progress):
+def _build(mesh, medium, model, curv, options: SurfaceOptions, progress):
     if options.transport == "hierarchical":
         try:
-            return SurfaceTransport.build(mesh, material, model, options, curvature=curv, progress=progress), None
+            return SurfaceTransport.build(mesh, medium, model, options, curvature=curv, progress=progress), None
         except FarFieldUnsupported as e:
             worst = e.check["errors"][-1]
             log.warning("meshshade: %s; transport='hierarchical' was asked for: using %g patch radii anyway",
                         e, worst["near_patch_radii"])
-            return SurfaceTransport.build(mesh, material, model, options, curvature=curv, progress=progress,
+            return SurfaceTransport.build(mesh, medium, model, options, curvature=curv, progress=progress,
                                           near_patch_radii=worst["near_patch_radii"]), None
     try:
-        return SurfaceTransport.build(mesh, material, model, options, curvature=curv, progress=progress), None
+        return SurfaceTransport.build(mesh, medium, model, options, curvature=curv, progress=progress), None
     except FarFieldUnsupported as e:
         w = e.check["errors"][-1]
         return None, (f"hierarchical far field not accurate on this mesh: distance error mean {w['mean']:.2g}, "

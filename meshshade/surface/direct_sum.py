@@ -15,10 +15,11 @@ import numpy as np
 from meshshade.light import BeamLight
 from meshshade.progress import Progress, kernel_interrupts
 from meshshade.surface.auto import AutoPlan, neighbourhood_curvature, plan_sources
-from meshshade.surface.farfield import far_field_exitance, far_field_exitance_pairwise, far_field_radius
+from meshshade.surface.farfield import far_field_exitance, far_field_exitance_pairwise
 from meshshade.surface.gather import PairStream, chunk_size, gather
+from meshshade.surface.medium import SurfaceMedium
 from meshshade.surface.options import SurfaceOptions
-from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.source_factors import drift_angles, refracted_drift
 from meshshade.surface.pair_kernel import PairKernel, source_frames
 from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, source_patch_radius
 from meshshade.surface.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay, neighbourhood_solver
@@ -26,29 +27,30 @@ from meshshade.surface.zones import NEAR_MARGIN, ZONES, assign_zones, groups_pay
 log = logging.getLogger("meshshade")
 
 
-def direct_sum(mesh, material, lights, samples, curv, cut, clock, model: str, options: SurfaceOptions,
+def direct_sum(mesh, medium: SurfaceMedium, lights, samples, curv, cut, clock, model: str, options: SurfaceOptions,
                progress: bool | str = False):
-    """The direct sum of model ``model`` with ``options`` over ``samples``: (M, beam distance, stats, AutoPlan or
-    None, kernel stats)."""
+    """The direct sum of model ``model`` in ``medium`` (the bake's SurfaceMedium) with ``options`` over
+    ``samples``: (M, beam distance, stats, AutoPlan or None, kernel stats)."""
     far_geodesic, geodesic, rtol = options.far_geodesic, options.geodesic, options.rtol
     source_model = options.source_model_of(model)
     frames = source_frames(samples, curv, mesh.faces)
-    far_field, near = _near_radius(mesh, material, samples, cut, options.far_field_of(model), options.far_tol)
+    far_field, near = _near_radius(mesh, medium, samples, cut, options.far_field_of(model))
     plan = None
     if model == "auto":
-        plan = _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, options.auto)
+        plan = _auto_plan(mesh, medium, samples, curv, frames, cut, near, far_field, geodesic, options.auto)
         clock.lap("auto")
     if plan is not None and far_geodesic == "shared" and not groups_pay(mesh, cut):
         far_geodesic = "none"  # small mesh or short cutoff: shared far-zone geodesics would not save work
     zone = assign_zones(len(samples), samples.vertex >= 0, far_field, geodesic, plan, far_geodesic)
     clustered, src_cut, chord_cut = _gather_radii(zone, cut, near)
     groups = _zone_groups(zone)
-    factors = near_field_factors(material) if source_model == "beam" else None
-    kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors, reach_mm=cut)
+    factors = medium.near if source_model == "beam" else None
+    kernel = PairKernel(model, medium, frames, rtol=rtol, plan=plan, near=factors, sphere=medium.sphere,
+                        reach_mm=cut)
     kernel.pair_points = (samples.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
     if factors is not None:
         kernel.source_scale = factors.incidence_scale(samples.cos_incidence)
-        kernel.source_drift = drift_angles(refracted_drift(frames.normals, samples.directions, material.eta),
+        kernel.source_drift = drift_angles(refracted_drift(frames.normals, samples.directions, medium.eta),
                                            frames.d1, frames.d2)
     methods = {m for z, _ in groups for m in ZONES[z].solver_methods}
     solvers = {m: neighbourhood_solver(m, mesh) for m in methods}
@@ -64,7 +66,7 @@ def direct_sum(mesh, material, lights, samples, curv, cut, clock, model: str, op
         M, gstats = _gather_near(kernel, stream, groups, chord_cut, progress)
         stats.update(gstats)
         if np.any(clustered):
-            M_far, fstats = _far_field(samples, clustered, mesh, material, near, cut, far_field, options.far_rel_tol,
+            M_far, fstats = _far_field(samples, clustered, mesh, medium, near, cut, far_field, options.far_rel_tol,
                                        None if factors is None else kernel.source_scale,
                                        None if factors is None else (factors.log_ratio_table(),
                                                                      *factors.slope_table(0)[1:]))
@@ -95,22 +97,22 @@ def merge_plans(vertex_plan, point_plan, point):
     return AutoPlan(**out)
 
 
-def _near_radius(mesh, material, samples, cut, far_field: str, far_tol: float) -> tuple[str, np.ndarray]:
+def _near_radius(mesh, medium, samples, cut, far_field: str) -> tuple[str, np.ndarray]:
     """``(far_field, near)``: r_near (3,) mm per channel, the chord radius beyond which the pairs of vertex
     samples go to the far-field sum (the cutoff ``cut`` when there is none); far_field becomes "off" when r_near
-    reaches the cutoff in every channel."""
+    reaches the cutoff in every channel. The far radius is the medium's (SurfaceMedium.far_mm, at its far_tol)."""
     area = samples.vertex >= 0  # vertex samples of directional and point lights
     near = cut.copy()
     if far_field != "off" and np.any(area):
         # the far field is a point-to-point sum: keep every pair that needs the source-patch average near
         a_max = float(source_patch_radius(samples, mesh.vertex_areas)[area].max())
-        near = np.minimum(np.maximum(far_field_radius(material, far_tol), PATCH_AVERAGE_RADII * a_max), cut)
+        near = np.minimum(np.maximum(medium.far_mm, PATCH_AVERAGE_RADII * a_max), cut)
     if not np.any(near < cut):
         far_field = "off"
     return far_field, near
 
 
-def _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geodesic, tolerances):
+def _auto_plan(mesh, medium, samples, curv, frames, cut, near, far_field, geodesic, tolerances):
     """The AutoPlan of the entry samples: curvature maxima within each sample's near radius and cutoff, then
     :func:`~meshshade.surface.auto.plan_sources` (exact geodesics switched off when ``geodesic`` is "arc")."""
     k = len(samples)
@@ -122,7 +124,7 @@ def _auto_plan(mesh, material, samples, curv, frames, cut, near, far_field, geod
     kn_near, kn_far = neighbourhood_curvature(samples, vals, mesh.vertices, mesh.faces, [near_radius, cut.max()],
                                               mesh.mean_edge_length)
     k_near, k_far, kmin_far = kn_near[:, 0], kn_far[:, 0], -kn_far[:, 1]
-    plan = plan_sources(frames.k1, frames.k2, k_near, k_far, material, near_radius, cut, kmin_far=kmin_far,
+    plan = plan_sources(frames.k1, frames.k2, k_near, k_far, medium, near_radius, cut, kmin_far=kmin_far,
                         **tolerances.keywords())
     if geodesic != "exact":
         plan = replace(plan, exact_geodesic=np.zeros(k, dtype=bool))
@@ -164,7 +166,7 @@ def _gather_near(kernel, stream: PairStream, groups, chord_cut, progress) -> tup
     return M, {**stats, "pairs_found": stream.pairs_found, "geodesic_pairs_computed": stream.geodesic_pairs}
 
 
-def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, far_rel_tol: float, scale=None,
+def _far_field(samples, clustered, mesh, medium, near, cut, far_field: str, far_rel_tol: float, scale=None,
                near_ratio=None):
     """The far field of the clustered sources (pairs with chord beyond r_near): M (n, 3) W/mm^2 and stats.
     ``scale`` (k, 3) or None: per-sample, per-channel power factors (the near field's incidence scale); channels
@@ -186,7 +188,7 @@ def _far_field(samples, clustered, mesh, material, near, cut, far_field: str, fa
                 continue
             done.append(c)
         with kernel_interrupts():  # numba in this thread: a Ctrl-C is a KeyboardInterrupt, not a SystemError
-            Mc, fstats = fn((pos, power), mesh.vertices, material, near, cut, rel_tol=far_rel_tol,
+            Mc, fstats = fn((pos, power), mesh.vertices, medium, near, cut, rel_tol=far_rel_tol,
                             near_ratio=near_ratio)
         if c is None:
             M = Mc

@@ -40,13 +40,13 @@ from meshshade.progress import Progress
 from meshshade.surface.auto import AutoPlan, neighbourhood_curvature, plan_sources
 from meshshade.surface.farfield import _receiver_order
 from meshshade.surface.farfield_loops import kd_permutation, node_ranges, tree_depth
-from meshshade.surface.gather import cutoff_radii
 from meshshade.surface.hierarchy_loops import (FAR_TRAVERSE, Clusters, FarFactors, Opening, TreeSources,
                                                    cluster_geometry)
-from meshshade.surface.kernel_evaluation import SphereTables, kernel_params
+from meshshade.surface.kernel_evaluation import kernel_params
+from meshshade.surface.medium import SurfaceMedium, surface_medium
 from meshshade.surface.models import MODEL_KERNEL, MODELS, Kernel
 from meshshade.surface.options import SurfaceOptions, options_from_keywords
-from meshshade.surface.source_factors import drift_angles, near_field_factors, refracted_drift
+from meshshade.surface.source_factors import drift_angles, refracted_drift
 from meshshade.surface.pair_kernel import PairKernel, source_frames
 from meshshade.surface.patch_average import PATCH_AVERAGE_RADII, patch_average_factor
 from meshshade.surface.zones import NEAR_MARGIN, neighbourhood_solver
@@ -57,9 +57,8 @@ NEAR_PATCH_RADII = (5.0, 7.0, 10.0, 14.0, 20.0)
 #: tolerance of the far field's distance model: mean and max over the sampled sources of the error the arcs make in
 #: a source's total exitance (:func:`far_distance_check`)
 FAR_DISTANCE_TOL = (3e-3, 2e-2)
-#: the distance check looks within the radius holding all but this share of the dipole's total (saves time)
-CHECK_CUTOFF_TOL = 1e-2
-#: ... and within the radius holding about this many vertices around a source (time)
+#: the distance check looks within the radius holding all but CHECK_CUTOFF_TOL of the dipole's total
+#: (surface/medium.py) and within the radius holding about this many vertices around a source (time)
 CHECK_MAX_PAIRS = 4_000
 #: receivers sampled by verify_far_field, and its tolerance (mean, max of the relative error of M). The check
 #: measures distances through the planar dipole; the curved kernel is more sensitive to the pair geometry (on bob at
@@ -125,7 +124,7 @@ def _exact_and_arc(mesh, idx, rmax):
         yield i, x, cand, s, chord, arc_distances(chord, kc)
 
 
-def _dipole_mm(material: Material, c: int, r):
+def _dipole_mm(material: "Material | SurfaceMedium", c: int, r):
     """The planar dipole of channel c at distances r [mm] (inf allowed: 0), 1/mm^2."""
     ch = material.channel(c)
     st = ch["sigma_t_prime"]
@@ -133,7 +132,7 @@ def _dipole_mm(material: Material, c: int, r):
     return np.where(np.isfinite(r), R, 0.0)
 
 
-def far_distance_check(mesh, material: Material, cut, patch, *, candidates=NEAR_PATCH_RADII,
+def far_distance_check(mesh, medium: SurfaceMedium, cut, patch, *, candidates=NEAR_PATCH_RADII,
                        n_sources: int = DISTANCE_CHECK_SOURCES, tol=FAR_DISTANCE_TOL, seed: int = 0) -> dict:
     """Measure the far field's distance model on ``mesh`` and pick the near radius (in patch radii).
 
@@ -153,15 +152,15 @@ def far_distance_check(mesh, material: Material, cut, patch, *, candidates=NEAR_
     n = mesh.n_vertices
     rng = np.random.default_rng(seed)
     idx = np.sort(rng.choice(n, size=min(n, n_sources), replace=False))
-    cut = np.minimum(cut, cutoff_radii(material, CHECK_CUTOFF_TOL))  # the part of the kernel that matters
+    cut = np.minimum(cut, medium.check_cutoff_mm)  # the part of the kernel that matters
     # and at most about CHECK_MAX_PAIRS exact geodesics per source (window propagation slows down on fine meshes)
     cut = np.minimum(cut, np.sqrt(CHECK_MAX_PAIRS * np.median(mesh.vertex_areas) / np.pi))
     rmax = float(np.max(cut))
     err = np.zeros((len(candidates), idx.size, 3))
     for i, u, cand, s, chord, arc in _exact_and_arc(mesh, idx, rmax):
         for c in range(3):
-            Rs = np.where(s <= cut[c], _dipole_mm(material, c, s), 0.0)
-            Ra = np.where(arc <= cut[c], _dipole_mm(material, c, arc), 0.0)
+            Rs = np.where(s <= cut[c], _dipole_mm(medium, c, s), 0.0)
+            Ra = np.where(arc <= cut[c], _dipole_mm(medium, c, arc), 0.0)
             tot = Rs.sum()
             for j, f in enumerate(candidates):
                 far = chord > f * patch[u]
@@ -207,7 +206,8 @@ class SurfaceTransport:
     """What the hierarchical transport of one mesh, material and model reuses across lights and frames.
 
     Build with :meth:`build`; :meth:`exitance` maps vertex-sample powers to exitance. Attributes: ``mesh``,
-    ``material``, ``model``; ``curvature`` (PrincipalCurvatures of the vertices); ``frames`` (SourceFrames of
+    ``medium`` (the :class:`~meshshade.surface.medium.SurfaceMedium` it was built for; ``material`` its material),
+    ``model``; ``curvature`` (PrincipalCurvatures of the vertices); ``frames`` (SourceFrames of
     every vertex); ``plan`` (AutoPlan per vertex for ``model="auto"``, else None); ``kind`` (n,) int8 kernel
     per vertex as a source (models.Kernel); ``cutoff_mm`` (3,); ``near_mm`` (n,) near radius per
     source; ``near`` the sparse near-zone matrices per computed channel (receiver rows, source columns,
@@ -215,7 +215,7 @@ class SurfaceTransport:
     """
 
     mesh: object
-    material: Material
+    medium: SurfaceMedium
     model: str
     curvature: object
     frames: object
@@ -241,12 +241,19 @@ class SurfaceTransport:
     #: drift factor of each light; None otherwise
     near_pairs: object = None
 
+    @property
+    def material(self) -> Material:
+        """The material the transport was built for."""
+        return self.medium.material
+
     # ------------------------------------------------------------------------------------------------ build
     @classmethod
-    def build(cls, mesh, material: Material, model: str = "auto", options: SurfaceOptions | None = None, *,
-              curvature=None, theta: float = THETA, near_patch_radii: float | None = None,
+    def build(cls, mesh, material: "Material | SurfaceMedium", model: str = "auto",
+              options: SurfaceOptions | None = None, *, curvature=None, theta: float = THETA, near_patch_radii: float | None = None,
               progress: bool | str = False, **deprecated) -> "SurfaceTransport":
         """The geometric work for ``mesh`` (a Mesh in mm), ``material`` and ``model`` (one of MODELS).
+        ``material``: a Material, or the :class:`~meshshade.surface.medium.SurfaceMedium` a bake made of it (made
+        here from the options otherwise).
 
         ``options`` (:class:`~meshshade.surface.options.SurfaceOptions`, default ones for None): its ``geodesic``
         ("exact" or "arc": the near zone's geodesics; with ``auto``, exact where the plan asks for it and "exact"
@@ -279,11 +286,15 @@ class SurfaceTransport:
         src = VertexSources(mesh)
         frames = source_frames(src, curv, mesh.faces)
         n = mesh.n_vertices
-        cut = np.minimum(cutoff_radii(material, cutoff_tol), mesh.scale)
+        medium = surface_medium(material, options, source_model)
+        if medium.cutoff_tol != cutoff_tol or medium.source_model != source_model or medium.rtol != rtol:
+            raise ParameterError(f"{medium!r} was made for other options than these (cutoff_tol {cutoff_tol:g}, "
+                                 f"source model {source_model}, rtol {rtol:g})")
+        cut = np.minimum(medium.cutoff_mm, mesh.scale)
         patch = np.sqrt(mesh.vertex_areas / np.pi)
         check = None
         if near_patch_radii is None:
-            check = far_distance_check(mesh, material, cut, patch)
+            check = far_distance_check(mesh, medium, cut, patch)
             timings["distance check"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             if check["near_patch_radii"] is None:
@@ -295,7 +306,7 @@ class SurfaceTransport:
             vals = np.stack([np.maximum(np.abs(curv.k1), np.abs(curv.k2)), -curv.k2], axis=1)
             kn_near, kn_far = neighbourhood_curvature(src, vals, mesh.vertices, mesh.faces,
                                                       [NEAR_MARGIN * near_mm, cut.max()], mesh.mean_edge_length)
-            plan = plan_sources(frames.k1, frames.k2, kn_near[:, 0], kn_far[:, 0], material, NEAR_MARGIN * near_mm,
+            plan = plan_sources(frames.k1, frames.k2, kn_near[:, 0], kn_far[:, 0], medium, NEAR_MARGIN * near_mm,
                                 cut, kmin_far=-kn_far[:, 1], **options.auto.keywords())
         H = 0.5 * (frames.k1 + frames.k2)
         kind = (np.asarray(plan.kernel, dtype=np.int8) if model == "auto"
@@ -304,15 +315,15 @@ class SurfaceTransport:
             kind[H <= 0] = Kernel.DIPOLE_CHORD
         timings["plan"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        sphere = SphereTables(material, rtol)
+        sphere = medium.sphere
         sph_row = np.full(n, -1, dtype=np.int64)
         sph_row[kind == Kernel.EXACT_SPHERE] = sphere.rows(H[kind == Kernel.EXACT_SPHERE])
         logr = np.where(sph_row >= 0, np.log(sphere.r0[np.maximum(sph_row, 0)] if sphere.r0.size else 1.0), 0.0)
-        params = kernel_params(material, cut, sphere)
+        params = kernel_params(medium, cut, sphere)
         timings["sphere tables"] = time.perf_counter() - t0
-        factors = near_field_factors(material) if source_model == "beam" else None
+        factors = medium.near
         # the near matrices read the same tables as the far field (no series at single pairs)
-        kernel = PairKernel(model, material, frames, rtol=rtol, plan=plan, near=factors, params=params,
+        kernel = PairKernel(model, medium, frames, rtol=rtol, plan=plan, near=factors, params=params,
                             sphere=sphere, sphere_series_pairs=0)
         kernel.pair_points = (src.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)
         t0 = time.perf_counter()
@@ -338,7 +349,7 @@ class SurfaceTransport:
                  **{f"sources_{k.name.lower()}": int((kind == k).sum()) for k in Kernel}}
         if model == "exact-sphere":
             stats["exact_sphere_fallback_dipole"] = int((H <= 0).sum())
-        return cls(mesh, material, model, curv, frames, plan, kind, cut, near_mm, patch, kernel.channels, near,
+        return cls(mesh, medium, model, curv, frames, plan, kind, cut, near_mm, patch, kernel.channels, near,
                    float(theta), trees, shape, sph_row, logr, params, timings, stats, source_model, near_pairs)
 
     # ------------------------------------------------------------------------------------------------ use
@@ -368,7 +379,7 @@ class SurfaceTransport:
             if pv.ndim == 1:
                 pv = np.repeat(pv[:, None], 3, axis=1)
         if pv.ndim == 2 and pv.shape == (n, 3):
-            st = np.asarray(self.material.sigma_t_prime, dtype=np.float64)
+            st = np.asarray(self.medium.sigma_t_prime, dtype=np.float64)
 
             def alike(k, c):
                 return np.array_equal(pv[:, k], pv[:, c]) and (drift is None or st[k] == st[c])
@@ -403,15 +414,15 @@ class SurfaceTransport:
         dslope, dlog0, dlogstep, dst = np.zeros(0), 0.0, 1.0, 1.0
         nlog = np.zeros((3, 0))
         if self.source_model == "beam":   # the near field's factor N(s) on every far pair (eq. (80))
-            factors = near_field_factors(self.material)
+            factors = self.medium.near
             nlog = factors.log_ratio_table()
             _, dlog0, dlogstep = factors.slope_table(0)
         if drift is not None:
             chan, d = drift
-            dst = float(self.material.sigma_t_prime[chan])
+            dst = float(self.medium.sigma_t_prime[chan])
             d_mm = d / dst    # the drift in mm (eq. (87))
             sin_t, psi = drift_angles(d, self.frames.d1, self.frames.d2)
-            dslope, dlog0, dlogstep = near_field_factors(self.material).slope_table(chan)
+            dslope, dlog0, dlogstep = self.medium.near.slope_table(chan)
         timings: dict = {}
         t0 = time.perf_counter()
         M = np.zeros((n, 3))
@@ -420,7 +431,7 @@ class SurfaceTransport:
             if chan is not None and chan in same:   # this light's drift factor on every near pair (eq. (88))
                 P = self.near_pairs
                 W = W.copy()
-                W.data *= near_field_factors(self.material).drift_factor(
+                W.data *= self.medium.near.drift_factor(
                     chan, P.s, self.patch_mm[P.source], sin_t[P.source], np.cos(P.phi - psi[P.source]))
             m = W @ pv
             for cc in same:
@@ -593,8 +604,8 @@ def verify_far_field(core: "SurfaceTransport", M, vertex_power, *, n_receivers: 
     for i, x, cand, s, chord, arc in _exact_and_arc(mesh, idx, float(np.max(cut))):
         far = (chord > core.near_mm[cand]) & (pv[cand] > 0)
         for c in range(3):
-            a = (pv[cand] * np.where(arc <= cut[c], _dipole_mm(core.material, c, arc), 0.0))[far].sum()
-            b = (pv[cand] * np.where(s <= cut[c], _dipole_mm(core.material, c, s), 0.0))[far].sum()
+            a = (pv[cand] * np.where(arc <= cut[c], _dipole_mm(core.medium, c, arc), 0.0))[far].sum()
+            b = (pv[cand] * np.where(s <= cut[c], _dipole_mm(core.medium, c, s), 0.0))[far].sum()
             err[i, c] = abs(a - b) / M[x, c] if M[x, c] > 0 else 0.0
     worst = err.max(axis=1)
     return {"mean": float(worst.mean()), "max": float(worst.max()), "receivers": int(idx.size)}
