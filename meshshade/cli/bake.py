@@ -8,12 +8,10 @@ from __future__ import annotations
 
 import sys
 
-from meshshade.cli.options import bake_options_from_args, lights_from_args, mesh_and_material
+from meshshade.cli.options import bake_options_from_args, lights_from_args, mesh_and_material, painted_material
 from meshshade.asset_cache import AssetCache
 from meshshade.errors import ParameterError
-from meshshade.io import check_output_path, mtl_colour_map, read_colour_map, read_uv_map, read_vertex_colours
-from meshshade.materials import Material
-from meshshade.painted import PaintedMaterial
+from meshshade.io import check_output_path, read_uv_map
 from meshshade.output.bake_file import BAKE_FORMATS, check_bake_output, texture_outputs, write_bake, write_texture
 from meshshade.output.texture import bake_texture, check_texture_options
 from meshshade.transport import bake, describe_result, mesh_note
@@ -26,30 +24,6 @@ def _refine(text):
         return int(text)
     except ValueError:
         raise ParameterError(f"--texture-refine must be auto or a whole number, got {text!r}") from None
-
-
-def painted_material(args, mesh, material) -> PaintedMaterial:
-    """``material`` painted as ``--albedo-map`` says (a file over the UVs, the OBJ's map_Kd, the PLY's vertex
-    colours); a one-line error for a map that cannot be read, a mesh without UVs or a colour no medium has (unless
-    ``--albedo-clamp``, which says how many it moved)."""
-    if getattr(args, "model", "volume") != "volume":   # meshshade mc has no model: its walk takes any medium
-        raise ParameterError(f"--albedo-map needs the volume model (model {args.model!r} takes one medium)")
-    kind = args.albedo_map
-    clamp = bool(args.albedo_clamp)
-    if kind == "vertex":
-        painted = PaintedMaterial(material, colour=read_vertex_colours(args.mesh, mesh), clamp=clamp)
-    else:
-        image_path = mtl_colour_map(args.mesh) if kind == "mtl" else kind
-        image = read_colour_map(image_path)
-        uv = read_uv_map(args.mesh, mesh)
-        if uv is None:
-            raise ParameterError(f"{args.mesh}: has no texture coordinates (UVs), so --albedo-map cannot be laid on it")
-        painted = PaintedMaterial(material, image=image, uv=uv, clamp=clamp)
-    if painted.clamped and not args.quiet:
-        lo, hi = painted.clamp_range
-        print(f"meshshade: note: --albedo-clamp moved {painted.clamped} painted values into [{lo:.4f}, {hi:.4f}]",
-              file=sys.stderr)
-    return painted
 
 
 def run_bake(args) -> int:
@@ -71,8 +45,6 @@ def run_bake(args) -> int:
     options = bake_options_from_args(args, progress=not args.quiet)
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args, parts_allowed=True)
-    if args.albedo_map and not isinstance(material, Material):
-        raise ParameterError("--albedo-map paints one material; it cannot be given with --material PART=NAME")
     if args.albedo_map:
         material = painted_material(args, mesh, material)
     texture = None

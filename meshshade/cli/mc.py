@@ -10,8 +10,7 @@ from __future__ import annotations
 import contextlib
 
 from meshshade.batch.dask_cluster import check_cluster_options, open_client
-from meshshade.cli.bake import painted_material
-from meshshade.cli.options import lights_from_args, mesh_and_material
+from meshshade.cli.options import lights_from_args, mesh_and_material, painted_material
 from meshshade.errors import MeshshadeError
 from meshshade.io import check_output_path
 from meshshade.montecarlo import MCOptions, describe_mc, simulate

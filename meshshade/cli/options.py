@@ -8,15 +8,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from dataclasses import dataclass
 
 from meshshade.cli.arguments.common import LIGHT_HELP
 from meshshade.errors import LightError, MeshshadeError, ParameterError
 from meshshade.geometry.mesh import Mesh
-from meshshade.io import load_mesh, read_face_names
+from meshshade.io import (load_mesh, mtl_colour_map, read_colour_map, read_face_names, read_uv_map,
+                          read_vertex_colours)
 from meshshade.light import AreaLight, EnvironmentLight, parse_light_spec
 from meshshade.materials import Material, material_from_options
 from meshshade.output.render import Camera, parse_camera
+from meshshade.painted import PaintedMaterial
 from meshshade.parts import PartedMaterial
 from meshshade.transport import BakeOptions, SurfaceOptions, describe_scale
 from meshshade.units import mm_per_unit
@@ -69,7 +72,8 @@ def _material_specs(args):
 def material_from_args(args, *, parts_allowed: bool = False) -> Material:
     plain, parts = _material_specs(args)
     if parts and not parts_allowed:
-        raise ParameterError("--material PART=NAME (a material per part) is for `meshshade bake`; give one preset")
+        raise ParameterError("--material PART=NAME (a material per part) is for `meshshade bake` and `render`; "
+                             "give one preset")
     ss = parse_floats(args.sigma_s_prime, "--sigma-s-prime", (1, 3)) if args.sigma_s_prime is not None else None
     sa = parse_floats(args.sigma_a, "--sigma-a", (1, 3)) if args.sigma_a is not None else None
     if not plain and ss is None and sa is None:
@@ -105,6 +109,32 @@ def mesh_and_material(args, *, parts_allowed: bool = False) -> tuple[Mesh, Mater
         first = material.materials[-1] if hasattr(material, "materials") else material
         print(describe_scale(mesh, first))
     return mesh, material
+
+
+def painted_material(args, mesh, material) -> PaintedMaterial:
+    """``material`` painted as ``--albedo-map`` says (a file over the UVs, the OBJ's map_Kd, the PLY's vertex
+    colours); a one-line error for a map that cannot be read, a mesh without UVs or a colour no medium has (unless
+    ``--albedo-clamp``, which says how many it moved). ``meshshade bake``, ``render`` and ``mc`` read it."""
+    if not isinstance(material, Material):
+        raise ParameterError("--albedo-map paints one material; it cannot be given with --material PART=NAME")
+    if getattr(args, "model", "volume") != "volume":   # meshshade mc has no model: its walk takes any medium
+        raise ParameterError(f"--albedo-map needs the volume model (model {args.model!r} takes one medium)")
+    kind = args.albedo_map
+    clamp = bool(args.albedo_clamp)
+    if kind == "vertex":
+        painted = PaintedMaterial(material, colour=read_vertex_colours(args.mesh, mesh), clamp=clamp)
+    else:
+        image_path = mtl_colour_map(args.mesh) if kind == "mtl" else kind
+        image = read_colour_map(image_path)
+        uv = read_uv_map(args.mesh, mesh)
+        if uv is None:
+            raise ParameterError(f"{args.mesh}: has no texture coordinates (UVs), so --albedo-map cannot be laid on it")
+        painted = PaintedMaterial(material, image=image, uv=uv, clamp=clamp)
+    if painted.clamped and not args.quiet:
+        lo, hi = painted.clamp_range
+        print(f"meshshade: note: --albedo-clamp moved {painted.clamped} painted values into [{lo:.4f}, {hi:.4f}]",
+              file=sys.stderr)
+    return painted
 
 
 def lights_from_args(args, mesh: Mesh | None = None) -> list:
@@ -173,8 +203,12 @@ def background_from_args(args) -> list | None:
 
 
 def image_scene_from_args(args) -> ImageScene:
+    """The mesh, material, lights, camera and background of ``meshshade render`` and ``compare``; render's
+    material may have parts (``--material PART=NAME``) or be painted (``--albedo-map``), as bake's."""
     lights = lights_from_args(args)
-    mesh, material = mesh_and_material(args)
+    mesh, material = mesh_and_material(args, parts_allowed=hasattr(args, "albedo_map"))
+    if getattr(args, "albedo_map", None):
+        material = painted_material(args, mesh, material)
     camera = parse_camera(args.camera, mesh, mesh.mm_per_unit)
     bg = background_from_args(args)
     meta = {"material": material.describe(), "lights": "; ".join(args.light), "camera": camera.describe(),

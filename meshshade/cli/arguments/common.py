@@ -62,7 +62,7 @@ def integer(minimum: int | None = None):
 # --- material ---------------------------------------------------------------------------------------------
 def add_albedo_map_args(p: argparse.ArgumentParser, *, note: str = "") -> None:
     """``--albedo-map FILE|mtl|vertex`` and ``--albedo-clamp`` (a painted material, docs/physics.md §17), as
-    ``meshshade bake`` and ``meshshade mc`` read them (:func:`meshshade.cli.bake.painted_material`)."""
+    ``meshshade bake``, ``render`` and ``mc`` read them (:func:`meshshade.cli.options.painted_material`)."""
     p.add_argument("--albedo-map", metavar="FILE|mtl|vertex",
                    help="paint the material: the colour (diffuse reflectance) per point of the surface, over the "
                         "mesh's UVs from FILE (EXR linear; PNG, JPEG... sRGB), the OBJ's MTL map_Kd (mtl) or the "
