@@ -71,3 +71,23 @@ def test_glb_material_names_per_primitive(tmp_path):
     assert names["skin"].sum() == 2 and names["stone"].sum() == 3
     assert not (names["skin"] & names["stone"]).any()
     assert names["skin"][:2].all()                     # the reader concatenates the primitives in file order
+
+
+@pytest.mark.parametrize("with_uv", [False, True])
+def test_write_obj_groups_read_back_as_the_parts(tmp_path, with_uv):
+    """write_obj's groups are usemtl runs that read_face_names reads back face for face; the mesh is unchanged."""
+    from meshshade.geometry.procedural import icosphere, spherical_uv
+    from meshshade.io import load_mesh, read_face_names, write_obj
+
+    V, F = icosphere(5.0, 1)
+    part = (np.arange(len(F)) // 7) % 3
+    path = write_obj(tmp_path / "parts.obj", V, F, uv=spherical_uv(V, F) if with_uv else None,
+                     groups=(["skin", "stone", "eye"], part))
+    names = read_face_names(path, len(F))
+    assert list(names) == ["skin", "stone", "eye"]
+    for i, name in enumerate(["skin", "stone", "eye"]):
+        np.testing.assert_array_equal(names[name], part == i)
+    mesh = load_mesh(path)
+    np.testing.assert_array_equal(mesh.faces, F)
+    with pytest.raises(ValueError, match="without blanks"):
+        write_obj(tmp_path / "bad.obj", V, F, groups=(["a b", "c", "d"], part))

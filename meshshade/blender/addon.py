@@ -277,25 +277,51 @@ def principled_slot(mat) -> PrincipledSlot:
                           float(weight_in.default_value) if weight_in else 1.0)
 
 
-def material_settings(ob, settings: BakeSettings, mm_per_unit: float) -> tuple[BakeSettings, list[str]]:
-    """``settings`` with the medium of ``ob``'s material (the add-on's "From the object's material"): the
-    Principled BSDF of the one slot its faces use (:func:`principled_slot`,
-    :func:`meshshade.blender.convert.principled_medium`), and notes."""
+def material_settings(ob, settings: BakeSettings, mm_per_unit: float) -> tuple[BakeSettings, list[str], object]:
+    """``(settings, notes, face_part)``: ``settings`` with the media of ``ob``'s materials (the add-on's "From the
+    object's material"): the Principled BSDF of each slot its faces use (:func:`principled_slot`,
+    :func:`meshshade.blender.convert.principled_medium`). One medium: the settings' material, ``face_part`` None.
+    Several: the first slot's medium for its faces, the others' as parts (``settings.parts``, named ``slotK``;
+    ``face_part`` (m,) per loop triangle, -1 for the first's), transported through as parts of different media
+    (one index for all: a MeshshadeError otherwise, as for an image on one of several media)."""
     me = ob.data
     me.calc_loop_triangles()
     index = np.empty(len(me.loop_triangles), dtype=np.int32)
     me.loop_triangles.foreach_get("material_index", index)
     slots = [s.material for s in ob.material_slots]
-    used = sorted(set(np.clip(index, 0, max(len(slots) - 1, 0)).tolist())) if slots else []
+    index = np.clip(index, 0, max(len(slots) - 1, 0))
+    used = sorted(set(index.tolist())) if slots else []
     if not used:
         raise MeshshadeError(f"{ob.name}: no material to read the medium from (add one, or pick a preset)")
     media = [principled_medium(principled_slot(slots[k]), mm_per_unit) for k in used]
-    if any(m != media[0][0] for m, _ in media[1:]):
-        raise MeshshadeError(f"{ob.name}: its faces use {len(used)} materials of different media; bake them as one "
-                             "material, or one object per material")
-    medium, notes = media[0]
+    notes = [n for _, more in media for n in more]
+    medium = media[0][0]
+    distinct = [k for k, (m, _) in zip(used, media) if m != medium]
+    if not distinct:
+        return replace(settings, preset=None, sigma_s_prime=medium["sigma_s_prime"], sigma_a=medium["sigma_a"],
+                       eta=medium["eta"], albedo_map=medium["albedo_map"]), notes, None
+    names = [slots[k].name for k in used]
+    if any(m["albedo_map"] for m, _ in media):
+        raise MeshshadeError(f"{ob.name}: its faces use {len(used)} materials of different media ({', '.join(names)})"
+                             " and one is painted by an image; bake the painted one as an object of its own")
+    if any(m["eta"] != medium["eta"] for m, _ in media):
+        raise MeshshadeError(f"{ob.name}: its materials ({', '.join(names)}) have different IORs; parts of different "
+                             "media need one IOR (their interfaces are index-matched)")
+    parts, part_of_medium = [], {}
+    slot_part = np.full(max(used) + 1, -1, dtype=np.int64)        # the first slot's medium: -1, the rest
+    for k, (m, _) in zip(used[1:], media[1:]):
+        if m == medium:
+            continue
+        key = (m["sigma_s_prime"], m["sigma_a"])
+        if key not in part_of_medium:                             # slots of one medium: one part
+            part_of_medium[key] = len(parts)
+            parts.append((f"slot{k}", m["sigma_s_prime"], m["sigma_a"]))
+        slot_part[k] = part_of_medium[key]
+    face_part = slot_part[index]
+    notes.append(f"{ob.name}: {len(parts) + 1} media from its materials ({', '.join(names)}), transported through "
+                 "as parts")
     return replace(settings, preset=None, sigma_s_prime=medium["sigma_s_prime"], sigma_a=medium["sigma_a"],
-                   eta=medium["eta"], albedo_map=medium["albedo_map"]), notes
+                   eta=medium["eta"], albedo_map=None, parts=tuple(parts)), notes, face_part
 
 
 def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJob, list[str]]:
@@ -315,8 +341,9 @@ def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJo
     if mods:
         notes.append(f"{ob.name}: baked on the base mesh; modifiers ({', '.join(mods)}) interpolate the result")
     bake_settings = settings.bake_settings()
+    face_part = None
     if settings.material == "MATERIAL":
-        bake_settings, more = material_settings(ob, bake_settings, mpu)
+        bake_settings, more, face_part = material_settings(ob, bake_settings, mpu)
         notes += more
     uv = None
     if settings.texture or bake_settings.albedo_map:
@@ -326,7 +353,7 @@ def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJo
     job = BakeJob(world_vertices_mm(local, M, mpu), world_faces(tris, M), colour_groups(lights),
                   bake_settings, python=python or bake_python(context),
                   log=io.temp_path(LOG_NAME), uv=uv,
-                  texture_size=int(settings.texture_size) if settings.texture else None)
+                  texture_size=int(settings.texture_size) if settings.texture else None, face_part=face_part)
     job.object_name, job.n_vertices = ob.name, len(ob.data.vertices)
     return job, notes
 

@@ -86,7 +86,9 @@ class BakeSettings:
     (RGB, 1/mm) with ``eta``; ``model``, ``cutoff_tol``, ``geodesic``, ``transport`` as ``meshshade bake``;
     ``albedo_map``: a colour map over the mesh's UVs painting the medium (``--albedo-map``; the job then needs
     ``uv``), its colours that no medium reflects moved into the reachable range with ``albedo_clamp``
-    (``--albedo-clamp``, noted)."""
+    (``--albedo-clamp``, noted); ``parts``: ``((name, sigma_s_prime, sigma_a), ...)``, the media of the faces a
+    :class:`BakeJob`'s ``face_part`` gives to each (``--material NAME=SIGMA_S_PRIME/SIGMA_A``, one index ``eta``
+    for all), the material above the rest."""
 
     preset: str | None = "skin1"
     sigma_s_prime: tuple = (1.0, 1.0, 1.0)
@@ -98,6 +100,7 @@ class BakeSettings:
     transport: str = "auto"
     albedo_map: str | None = None
     albedo_clamp: bool = True
+    parts: tuple = ()
 
     def cli_args(self) -> list[str]:
         """The options of ``meshshade bake`` these settings stand for."""
@@ -106,6 +109,8 @@ class BakeSettings:
         else:
             material = ["--sigma-s-prime", _vec(self.sigma_s_prime), "--sigma-a", _vec(self.sigma_a),
                         "--eta", _num(self.eta)]
+        for name, ss, sa in self.parts:
+            material += ["--material", f"{name}={_vec(ss)}/{_vec(sa)}"]
         if self.albedo_map:
             material += ["--albedo-map", str(self.albedo_map)] + (["--albedo-clamp"] if self.albedo_clamp else [])
         return material + ["--model", self.model, "--cutoff-tol", _num(self.cutoff_tol), "--geodesic",
@@ -133,11 +138,13 @@ class BakeJob:
     every child's output (for a failure that is not a user mistake). ``texture_size``: also bake a texture of that
     many texels per side over the per-corner UV map ``uv`` (m, 3, 2) with ``padding``; :attr:`texture` (H, W, 4)
     float64 is then the colour-weighted exitance (RGB, W/mm^2; row 0 the top, v = 1) and the coverage (A).
+    ``face_part`` (m,) int, with ``settings.parts``: each face's part (-1: the settings' material), written as the
+    mesh's ``usemtl`` names that ``--material NAME=...`` reads.
     """
 
     def __init__(self, vertices, faces, groups, settings: BakeSettings, *, python: str | None = None,
                  log: str | os.PathLike | None = None, uv=None, texture_size: int | None = None,
-                 padding: int = 16):
+                 padding: int = 16, face_part=None):
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.faces = np.asarray(faces, dtype=np.int64)
         self.groups = groups
@@ -153,6 +160,13 @@ class BakeJob:
         if needs_uv and (self.uv is None or self.uv.shape != (self.faces.shape[0], 3, 2)):
             raise BakeJobError(("a texture bake" if texture_size is not None else "a colour map (albedo map)")
                                + " needs a UV map: one (u, v) per face corner")
+        self.face_part = None
+        if settings.parts:
+            fp = None if face_part is None else np.asarray(face_part, dtype=np.int64)
+            if fp is None or fp.shape != (self.faces.shape[0],) or fp.min() < -1 or fp.max() >= len(settings.parts):
+                raise BakeJobError(f"parts of {len(settings.parts)} media need each face's part: -1 for the rest, "
+                                   "else an index into the parts")
+            self.face_part = fp
         self.texture: np.ndarray | None = None
         self._texture_sum: np.ndarray | None = None
         self.warnings: list[str] = []
@@ -172,8 +186,12 @@ class BakeJob:
         self._dir = io.scratch_folder("meshshade-blender-")
         textured = self.texture_size is not None
         with_uv = textured or bool(self.settings.albedo_map)
+        groups = None
+        if self.face_part is not None:     # each part a usemtl of its own, the rest "rest"
+            groups = (["rest", *(name for name, _ss, _sa in self.settings.parts)], self.face_part + 1)
         mesh = io.write_obj(self._dir / "mesh.obj", self.vertices, self.faces, uv=self.uv if with_uv else None,
-                            comment="meshshade: world-space mesh in mm, written by the Blender add-on")
+                            comment="meshshade: world-space mesh in mm, written by the Blender add-on",
+                            groups=groups)
         for k, (colour, lights) in enumerate(self.groups):
             npz = self._dir / f"group{k}.npz"
             exr = self._dir / f"group{k}.exr" if textured else None

@@ -52,7 +52,7 @@ def material_given(args) -> bool:
 
 
 def _material_specs(args):
-    """(plain presets, [(part, preset)]) of the repeatable ``--material``."""
+    """(plain presets, [(part, preset or coefficients)]) of the repeatable ``--material``."""
     given = args.material or []
     given = [given] if isinstance(given, str) else list(given)
     plain = [x for x in given if "=" not in x]
@@ -61,7 +61,8 @@ def _material_specs(args):
         if "=" in x:
             name, _, preset = x.partition("=")
             if not name.strip() or not preset.strip():
-                raise ParameterError(f"--material {x!r}: a part's material is PART=PRESET")
+                raise ParameterError(f"--material {x!r}: a part's material is PART=PRESET or "
+                                     "PART=SIGMA_S_PRIME/SIGMA_A[/ETA]")
             parts.append((name.strip(), preset.strip()))
     if len(plain) > 1:
         raise ParameterError(f"--material given {len(plain)} times ({', '.join(plain)}); one sets the whole mesh, "
@@ -92,9 +93,25 @@ def parted_material(args, mesh, default):
     if not parts:
         return default
     names = read_face_names(args.mesh, mesh.n_faces)
-    assigned = [(name, material_from_options(preset, eta=args.eta, g=getattr(args, "g", 0.0) or 0.0))
-                for name, preset in parts]
+    g = getattr(args, "g", 0.0) or 0.0
+    assigned = [(name, _part_material(name, spec, args.eta, g)) for name, spec in parts]
     return PartedMaterial.from_names(names, assigned, default, where=str(args.mesh))
+
+
+def _part_material(name: str, spec: str, eta, g) -> Material:
+    """A part's material: a preset's name, or its coefficients ``SIGMA_S_PRIME/SIGMA_A[/ETA]`` in 1/mm (each one
+    value or R,G,B; ETA defaults to ``--eta``, else 1.3), named after the part."""
+    if "/" not in spec:
+        return material_from_options(spec, eta=eta, g=g)
+    fields = spec.split("/")
+    what = f"--material {name}={spec}"
+    if len(fields) not in (2, 3):
+        raise ParameterError(f"{what}: coefficients are SIGMA_S_PRIME/SIGMA_A[/ETA] (1/mm, one value or R,G,B each)")
+    ss = parse_floats(fields[0], f"{what} (sigma_s')", (1, 3))
+    sa = parse_floats(fields[1], f"{what} (sigma_a)", (1, 3))
+    if len(fields) == 3:
+        eta = parse_floats(fields[2], f"{what} (eta)", (1,))[0]
+    return Material(ss, sa, 1.3 if eta is None else eta, g, name=name)
 
 
 # --- mesh, lights ---------------------------------------------------------------------------------------

@@ -148,11 +148,13 @@ def read_json(path):
         return None
 
 
-def write_obj(path, vertices, faces, *, uv=None, comment: str | None = None) -> Path:
+def write_obj(path, vertices, faces, *, uv=None, comment: str | None = None, groups=None) -> Path:
     """Write an OBJ (atomically) of ``vertices`` (n, 3), every float64 written exactly (17 significant digits, so
     :func:`load_mesh` reads back the same numbers), and 0-based triangle ``faces`` (m, 3); with ``uv`` (m, 3, 2)
     per-corner texture coordinates, each distinct (u, v) once as ``vt`` (in order of first use) and faces as
-    ``f v/vt``."""
+    ``f v/vt``. ``groups``: ``(names, face_group)``, part names (no blanks) and each face's index into them (m,):
+    a ``usemtl NAME`` line wherever the part changes, the faces in their order (the parts
+    :func:`~meshshade.io.read_face_names` reads)."""
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
     if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
@@ -166,15 +168,32 @@ def write_obj(path, vertices, faces, *, uv=None, comment: str | None = None) -> 
         rank = np.empty_like(order)
         rank[order] = np.arange(order.size)
         T, TI = table[order], rank[inverse.reshape(-1)].reshape(-1, 3)
+    runs = [(0, F.shape[0], None)]
+    if groups is not None:
+        names, part = list(groups[0]), np.asarray(groups[1], dtype=np.int64)
+        if part.shape != (F.shape[0],) or (part.size and (part.min() < 0 or part.max() >= len(names))):
+            raise ValueError(f"groups: one index into the {len(names)} names per face ({F.shape[0]}), got "
+                             f"{part.shape}")
+        if any(not n or any(ch.isspace() for ch in n) for n in names):
+            raise ValueError(f"groups: part names must be non-empty and without blanks, got {names}")
+        cut = np.flatnonzero(np.diff(part)) + 1
+        starts = np.concatenate([[0], cut]).astype(np.int64)
+        ends = np.concatenate([cut, [F.shape[0]]]).astype(np.int64)
+        runs = [(int(a), int(b), names[part[a]]) for a, b in zip(starts, ends)] if F.shape[0] else runs
     path = check_output_path(path, suffixes=(".obj",), option="OBJ output")
     with atomic_write(path) as tmp:
         with open(tmp, "w", encoding="ascii") as fh:
             if comment:
                 fh.write("".join(f"# {line}\n" for line in comment.splitlines()))
             np.savetxt(fh, V, fmt="v %.17g %.17g %.17g")
-            if uv is None:
-                np.savetxt(fh, F + 1, fmt="f %d %d %d")
-            else:
+            if uv is not None:
                 np.savetxt(fh, T, fmt="vt %.17g %.17g")
-                np.savetxt(fh, np.stack([F + 1, TI + 1], axis=2).reshape(-1, 6), fmt="f %d/%d %d/%d %d/%d")
+            for a, b, name in runs:
+                if name is not None:
+                    fh.write(f"usemtl {name}\n")
+                if uv is None:
+                    np.savetxt(fh, F[a:b] + 1, fmt="f %d %d %d")
+                else:
+                    np.savetxt(fh, np.stack([F[a:b] + 1, TI[a:b] + 1], axis=2).reshape(-1, 6),
+                               fmt="f %d/%d %d/%d %d/%d")
     return path

@@ -474,3 +474,91 @@ def test_spot_textured_from_its_material_bakes_as_the_cli(registered, tmp_path, 
         expected = np.asarray(z["radiance"])
     assert expected.max() > 0 and len(np.unique(np.round(got[:, 0] / got[:, 0].max(), 3))) > 50   # painted, lit
     np.testing.assert_allclose(got, expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())
+
+
+def principled(name, colour, radius, scale=1.0, ior=1.3):
+    """A material with a Principled BSDF: Base Color ``colour``, Subsurface Weight 1, ``radius`` x ``scale``."""
+    mat = bpy.data.materials.new(name)
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
+    bsdf.inputs["Subsurface Weight"].default_value = 1.0
+    bsdf.inputs["Subsurface Radius"].default_value = radius
+    bsdf.inputs["Subsurface Scale"].default_value = scale
+    bsdf.inputs["IOR"].default_value = ior
+    return mat
+
+
+def test_slots_of_different_media_bake_as_the_cli_parts(registered, tmp_path):
+    """Issue 49: an object whose faces use two materials of different media, baked "From the object's material",
+    equals the command-line bake of the same world-space mesh with its faces in two usemtl parts, the first slot's
+    medium for the rest and the second's for its part, each given the coefficients the test converts by hand (radius x scale x mm per unit = 1/sigma_t'; the albedo from the Base
+    Color by the model's own reflectance, eq. (106)); an image on one of them is refused in one line."""
+    from meshshade.kernels.painted_reflectance import albedo_for_reflectance
+
+    sc = bpy.context.scene
+    sc.world = None
+    sc.unit_settings.scale_length = 0.001                                   # 1 unit = 1 mm
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=10.0)
+    ob = bpy.context.active_object
+    new_light("Sun", "SUN", 1000.0, rotation=(0.6, 0.2, 0.3))
+    skin = principled("skin", (0.6, 0.35, 0.25), (1.2, 0.6, 0.3))
+    stone = principled("stone", (0.8, 0.8, 0.75), (4.0, 3.5, 3.0))
+    ob.data.materials.append(skin)
+    ob.data.materials.append(stone)
+    for poly in ob.data.polygons:
+        poly.material_index = 1 if poly.center[0] < -2.0 else 0
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.meshshade_bake(material="MATERIAL") == {"FINISHED"}
+    got = attribute(ob.data, "meshshade_radiance")[:, :3]
+
+    me = ob.data
+    M = np.array(ob.matrix_world)
+    co = np.array([v.co for v in me.vertices], dtype=np.float64)
+    mm_per_unit = 1000.0 * sc.unit_settings.scale_length
+    V = (co @ M[:3, :3].T + M[:3, 3]) * mm_per_unit
+    me.calc_loop_triangles()
+    F = np.array([t.vertices[:] for t in me.loop_triangles])
+    slot = np.array([t.material_index for t in me.loop_triangles])
+    obj = tmp_path / "world.obj"
+    with open(obj, "w") as fh:
+        fh.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in V)
+        for i, (a, b, c) in enumerate(F):
+            if i == 0 or slot[i] != slot[i - 1]:
+                fh.write(f"usemtl {'stone' if slot[i] else 'skin'}\n")
+            fh.write(f"f {a + 1} {b + 1} {c + 1}\n")
+    vec = lambda v: ",".join(repr(float(x)) for x in v)   # noqa: E731
+
+    def coefficients(mat):
+        bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+        st = 1.0 / (np.array(bsdf.inputs["Subsurface Radius"].default_value, dtype=np.float64) * mm_per_unit)
+        alb = albedo_for_reflectance(np.array(bsdf.inputs["Base Color"].default_value[:3], dtype=np.float64), 1.3)
+        return vec(alb * st), vec((1 - alb) * st)
+
+    sun_dir = -np.array(bpy.data.objects["Sun"].matrix_world)[:3, 2]
+    cmd = [sys.executable, "-m", "meshshade.cli", "bake", str(obj), "--units", "mm",
+           "--sigma-s-prime", coefficients(skin)[0], "--sigma-a", coefficients(skin)[1],     # the first slot: the rest
+           "--material", "stone=" + "/".join(coefficients(stone)), "--eta", "1.3",
+           "--quiet", "--out", str(tmp_path / "cli.ply"), "--npz", str(tmp_path / "cli.npz"),
+           "--light", f"directional:{vec(sun_dir)}:{1000 * 1e-6!r}"]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    with np.load(tmp_path / "cli.npz") as z:
+        expected = np.asarray(z["radiance"])
+    assert expected.max() > 0
+    np.testing.assert_allclose(got, expected.astype(np.float32), rtol=2e-6, atol=1e-6 * expected.max())
+    # not the bake of either medium alone
+    stone.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.6, 0.35, 0.25, 1.0)
+    stone.node_tree.nodes["Principled BSDF"].inputs["Subsurface Radius"].default_value = (1.2, 0.6, 0.3)
+    assert bpy.ops.object.meshshade_bake(material="MATERIAL") == {"FINISHED"}
+    alone = attribute(ob.data, "meshshade_radiance")[:, :3]
+    assert np.abs(alone - got).max() > 0.05 * got.max()
+    # an image on one of several media: one line, nothing baked
+    img = bpy.data.images.new("paint", 4, 4)
+    img.filepath_raw = str(tmp_path / "paint.png")
+    img.file_format = "PNG"
+    img.save()
+    tex = stone.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    stone.node_tree.nodes["Principled BSDF"].inputs["Subsurface Radius"].default_value = (4.0, 3.5, 3.0)
+    stone.node_tree.links.new(tex.outputs["Color"], stone.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    with pytest.raises(RuntimeError, match="painted by an image"):
+        bpy.ops.object.meshshade_bake(material="MATERIAL")

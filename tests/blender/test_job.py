@@ -93,6 +93,31 @@ def test_a_slot_painted_by_an_image_bakes_as_the_api_does(tmp_path):
         BakeJob(V, F, [(np.ones(3), [sun])], settings)
 
 
+def test_parts_of_different_media_bake_as_the_api_parts():
+    """Faces of several media (the add-on's material slots): the job writes them as usemtl parts and passes each
+    part's coefficients; the result equals the API's PartedMaterial bake (rtol 1e-12)."""
+    from meshshade.parts import PartedMaterial
+
+    V, F = icosphere(8.0, 3)
+    centre = V[F].mean(axis=1)
+    face_part = np.where(centre[:, 0] < -2.0, 0, np.where(centre[:, 2] > 4.0, 1, -1))
+    rest = Material((1.1, 0.9, 0.7), (0.011, 0.02, 1 / 30), 1.3)
+    a = Material((2.19, 2.62, 3.0), (0.0021, 0.0041, 0.0071), 1.3)
+    b = Material((0.5, 0.6, 0.7), (0.2, 0.1, 0.05), 1.3)
+    settings = BakeSettings(preset=None, sigma_s_prime=(1.1, 0.9, 0.7), sigma_a=(0.011, 0.02, 1 / 30), eta=1.3,
+                            parts=(("slot1", (2.19, 2.62, 3.0), (0.0021, 0.0041, 0.0071)),
+                                   ("slot2", (0.5, 0.6, 0.7), (0.2, 0.1, 0.05))))
+    sun = DirectionalLight((0.3, 0.1, -1.0), 1e-3)
+    radiance = BakeJob(V, F, [(np.ones(3), [sun])], settings, face_part=face_part).wait()
+    mesh = Mesh.from_arrays(V, F)
+    # the parts named first, in order, the rest last (as PartedMaterial.from_names orders them)
+    expected = bake(mesh, PartedMaterial([a, b, rest], np.where(face_part < 0, 2, face_part),
+                                         ["slot1", "slot2", "rest"]), [sun]).radiance
+    np.testing.assert_allclose(radiance, expected, rtol=1e-12, atol=1e-15 * expected.max())
+    with pytest.raises(BakeJobError, match="each face's part"):
+        BakeJob(V, F, [(np.ones(3), [sun])], settings)
+
+
 def test_a_mistake_is_the_commands_one_line_error(tmp_path):
     V, F, groups = scene()
     job = BakeJob(V, F, groups, BakeSettings(preset="no-such-medium"), log=tmp_path / "log.txt")

@@ -84,3 +84,28 @@ def test_a_job_file_takes_the_material_key_as_a_list(nested_obj):
     jobs = read_jobs(nested_obj / "jobs.toml")
     argv = job_argv(jobs[0], nested_obj / "parts")
     assert "--material=skin1" in argv and "--material=stone=marble" in argv
+
+
+def test_a_part_given_by_its_coefficients_is_that_medium(cli, nested_obj):
+    """PART=SIGMA_S_PRIME/SIGMA_A[/ETA] (1/mm) bakes as the preset of those coefficients (marble's, written out from
+    Jensen et al. 2001 Table 2 here), bit for bit."""
+    base = ["bake", nested_obj / "nested.obj", "--material", "skin1", "--light", SUN, "--quiet"]
+    rc, _, err = cli.run(base + ["--material", "stone=2.19,2.62,3.00/0.0021,0.0041,0.0071/1.3", "--npz",
+                                 nested_obj / "c.npz", "--out", nested_obj / "c.ply"])
+    assert rc == 0, err
+    rc, _, err = cli.run(base + ["--material", "stone=marble", "--npz", nested_obj / "m.npz", "--out",
+                                 nested_obj / "m.ply"])
+    assert rc == 0, err
+    np.testing.assert_array_equal(np.load(nested_obj / "c.npz")["radiance"], np.load(nested_obj / "m.npz")["radiance"])
+
+
+@pytest.mark.parametrize("spec, needle", [("1,1,1/0.1/1.3/2", "SIGMA_S_PRIME/SIGMA_A[/ETA]"),
+                                          ("abc/0.1", "comma-separated numbers"),
+                                          ("1,2/0.1", "expected 1 or 3 value(s)"),
+                                          ("1/-0.1", "sigma_a"),
+                                          ("1/0.1/1.5", "index-matched")])
+def test_bad_part_coefficients_are_a_clean_failure(cli, nested_obj, spec, needle):
+    before = cli.snapshot(nested_obj)
+    rc, _, err = cli.run(["bake", nested_obj / "nested.obj", "--material", "skin1", "--material", f"stone={spec}",
+                          "--light", SUN, "--out", nested_obj / "out.ply"])
+    cli.assert_clean_failure(rc, err, before, nested_obj, needle)

@@ -78,8 +78,9 @@ def add_material_args(p: argparse.ArgumentParser, *, with_g: bool = False) -> No
     g.add_argument("--material", metavar="NAME", action="append",
                    help="measured preset (Jensen et al. 2001, Narasimhan et al. 2006; `meshshade materials` lists "
                         "them): " + ", ".join(sorted(JENSEN_2001_PRESETS)) + ", lowfat-milk, espresso, ...; "
-                        "bake also takes PART=NAME, repeatable: the preset of the mesh's part PART (an OBJ usemtl "
-                        "or g name, a glTF material), a plain NAME then sets the rest")
+                        "bake and render also take PART=NAME, repeatable: the preset of the mesh's part PART (an "
+                        "OBJ usemtl or g name, a glTF material), or its coefficients PART=SIGMA_S_PRIME/SIGMA_A[/ETA] "
+                        "(1/mm, one value or R,G,B each); a plain NAME then sets the rest")
     g.add_argument("--sigma-s-prime", metavar="S", help="reduced scattering [1/mm]: one value or R,G,B")
     g.add_argument("--sigma-a", metavar="A", help="absorption [1/mm]: one value or R,G,B")
     g.add_argument("--eta", type=number, help="relative index of refraction (default: the preset's, 1.3 or 1.33; "
