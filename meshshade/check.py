@@ -183,7 +183,7 @@ def volume_report(mesh, material: Material | None = None) -> dict:
         res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm)
         spacing = SAMPLE_SPACING_OVER_H0 * res.h0
         V, F, *_ = split_long_edges(mesh.vertices, mesh.faces, spacing)
-        out.update({"lattice_mm": float(res.h0), "lattice_limited_by": res.limited_by,
+        out.update({"lattice_mm": float(res.h0), "lattice_limited_by": res.limited_by, "lattice_reason": res.reason,
                     "sample_spacing_mm": float(spacing), "sampling_vertices": int(V.shape[0])})
     return out
 
@@ -220,7 +220,8 @@ def format_check(report: dict) -> str:
         if v["buried_vertices"]:
             line += f", {v['buried_vertices']} vertices buried inside other parts (reported as 0)"
         if "lattice_mm" in v:
-            line += (f"; lattice {v['lattice_mm']:.3g} mm ({v['lattice_limited_by']}), light sampled every "
+            line += (f"; lattice {v['lattice_mm']:.3g} mm ({v.get('lattice_reason', v['lattice_limited_by'])}), "
+                     "light sampled every "
                      f"{v['sample_spacing_mm']:.3g} mm on {v['sampling_vertices']} points")
     lines.append(line)
     if "channels" not in report:

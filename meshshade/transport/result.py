@@ -112,8 +112,9 @@ def describe_result(result: BakeResult) -> str:
     ex = s["exitant_power"]
     if s.get("transport") == "volume":
         cells = s.get("volume_cells_per_level", [])
+        why = s.get("volume_resolution_reason", s["volume_resolution_limited_by"])
         return (f"volume: {s['entry_samples']} entry samples; diffusion on {sum(cells)} cubes of "
-                f"{s['volume_resolution_mm']:.3g} mm ({s['volume_resolution_limited_by']}; "
+                f"{s['volume_resolution_mm']:.3g} mm ({why}; "
                 f"{cells[0] if cells else 0} of half that at edges of light), {s['volume_unknowns']} unknowns; "
                 f"near field within {max(s['cutoff_mm']):.3g} mm ({s['near_field_pairs']} evaluations); entering "
                 f"{s['entering_power']:.4g} W, exitant {ex[0]:.4g}/{ex[1]:.4g}/{ex[2]:.4g} W (r/g/b); {t}")

@@ -105,7 +105,7 @@ class PaintedMedium(VaryingMedium):
 
     def resolution_material(self):
         # the lattice resolves the paint's fastest-decaying medium (its least albedo per channel)
-        return self.material.material_of(self.material.albedo_range()[0])
+        return self.material.material_of(self.material.albedo_range()[0], "the paint's darkest colour")
 
     def attach(self, mesh, surface, spread):
         p, surf = self.material, surface
@@ -217,7 +217,8 @@ class PartsMedium(VaryingMedium):
             return self.media[0]
         # every medium's decay: the fastest sets the spacing and the grading's bands, the slowest the depth
         kappa = np.concatenate([np.asarray(m.medium.kappa, dtype=np.float64) for m in self.media])
-        return SimpleNamespace(medium=SimpleNamespace(kappa=kappa))
+        fastest = self.media[int(np.argmax(kappa)) // 3]
+        return SimpleNamespace(medium=SimpleNamespace(kappa=kappa), name=f"the part in {fastest.name}")
 
     def note_resolution(self, res, own) -> None:
         """Each medium's edges of light are refined as that medium alone would refine them, where the lattice's

@@ -68,9 +68,12 @@ class VolumeResolution:
     them), level 1 (h0) at the surface elsewhere; ``spread`` mm the sources' sideways spread, ``kappa`` (3,)
     1/mm, ``refine_radius`` mm."""
 
-    def __init__(self, h0, grading, spread, kappa, limited_by, requested):
+    def __init__(self, h0, grading, spread, kappa, limited_by, requested, reason: str = ""):
         self.h0, self.grading, self.spread, self.kappa = h0, grading, spread, kappa
         self.limited_by, self.requested = limited_by, requested
+        #: one line: what set ``h0`` (the channel and medium whose decay length it resolves, the object's thinnest
+        #: extent, the budget, or the caller)
+        self.reason = reason or limited_by
         self.refine_radius = REFINE_EFOLDS / float(np.max(kappa))
 
     def describe(self) -> str:
@@ -105,7 +108,9 @@ def material_spacing(kappa: float) -> float:
 def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None = None,
                       budget: int = DEFAULT_BUDGET) -> VolumeResolution:
     """The resolution for ``material`` on a surface of ``area_mm2`` whose bounding box is ``extent_mm`` (3,);
-    ``h0`` forces the finest spacing (mm), ``budget`` caps the level-0 cubes (module docstring)."""
+    ``h0`` forces the finest spacing (mm), ``budget`` caps the level-0 cubes (module docstring). Its ``reason``
+    names what set the spacing; ``material``'s ``name`` (a preset's, or what a varying medium's resolution
+    material says it stands for) is part of it."""
     kappa = np.array(material.medium.kappa, dtype=np.float64)
     if h0 is not None:
         if not (isinstance(h0, (int, float)) and math.isfinite(h0) and h0 > 0):
@@ -114,7 +119,8 @@ def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None 
     else:
         if not (isinstance(budget, int) and budget >= 1000):
             raise ParameterError(f"the volume's cell budget must be an integer >= 1000, got {budget!r}")
-        h_mat = material_spacing(float(kappa.max()))
+        fast = int(np.argmax(kappa))
+        h_mat = material_spacing(float(kappa[fast]))
         thinnest = float(np.min(extent_mm))
         if not (thinnest > 0.0 and area_mm2 > 0.0):
             raise NoVolumeError("the mesh is flat (a sheet of zero thickness): it encloses no volume")
@@ -123,6 +129,11 @@ def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None 
         # up must not pass the object's cap)
         h_mat, h_obj = _round_h(h_mat), float(2.0 ** (math.floor(4.0 * math.log2(h_obj)) / 4.0))
         h, why = (h_mat, "material") if h_mat <= h_obj else (h_obj, "object")
+        name = getattr(material, "name", None)
+        colour = ("red", "green", "blue")[fast % 3]
+        reason = (f"material: {name + chr(39) + 's ' if name else ''}{colour} decays in {1.0 / kappa[fast]:.3g} mm"
+                  if why == "material" else
+                  f"object: its thinnest extent {thinnest:.3g} mm over {MIN_CELLS_ACROSS:g}")
         # surface cubes (h0): the surface's area times their band (to where level 2 starts) and a cut layer, over
         # h0^3 (the finer cubes at edges of light come on top, in proportion to the edges' length)
         for _ in range(40):
@@ -131,7 +142,9 @@ def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None 
                 break
             h *= 2.0 ** 0.25
             why = "budget"
+            reason = f"budget: {budget} surface cubes"
     depth_max = TRUNCATION_EFOLDS / float(kappa.min())
     fine = 0.5 * h
     grading = Grading(fine, _bands(fine, kappa), depth_max)
-    return VolumeResolution(h, grading, SPREAD_OVER_H0 * fine, kappa, why, h0)
+    return VolumeResolution(h, grading, SPREAD_OVER_H0 * fine, kappa, why, h0,
+                            "given" if h0 is not None else reason)

@@ -88,6 +88,7 @@ class VolumeTransport:
         self.buried = self._buried_vertices()
         self.stats = {
             "volume_resolution_mm": round(resolution.h0, 5), "volume_resolution_limited_by": resolution.limited_by,
+            "volume_resolution_reason": resolution.reason,
             "volume_spread_mm": round(resolution.spread, 5),
             "volume_samples": int(surface.samples.n_vertices), "volume_samples_split": bool(surface.split),
             "volume_lattice_fraction": [round(float(x), 4) for x in self.tables.long_fraction],

@@ -53,3 +53,44 @@ def test_a_beam_on_a_far_scattering_sphere_against_its_exact_series():
     plan = bench_plan.bench_plan(config=bench_plan.BenchConfig(scenes=(scene,), levels={}), models=("volume",))
     (row,) = bench_runner.run_bench(plan, seed=0).rows
     assert row["error_mean"] < 0.1, row
+
+
+def _decay_mm(material, c):
+    """1/kappa of channel c from d'Eon's D = (2 - alpha') / (3 sigma_t') and kappa = sqrt(sigma_a / D), written out."""
+    st = float(material.sigma_s_prime[c] + material.sigma_a[c])
+    alb = float(material.sigma_s_prime[c]) / st
+    return 1.0 / math.sqrt(float(material.sigma_a[c]) / ((2.0 - alb) / (3.0 * st)))
+
+
+def test_the_resolution_says_what_set_it():
+    """The reason names the fastest-decaying channel and its decay length (skin1: blue), the object's thinnest
+    extent where that caps the spacing, the budget, or a given spacing."""
+    skin = Material.preset("skin1")
+    res = volume_resolution(skin, 4.0 * math.pi * 400.0, np.array([40.0, 40.0, 40.0]))
+    assert res.limited_by == "material"
+    assert res.reason == f"material: skin1's blue decays in {_decay_mm(skin, 2):.3g} mm"
+    thin = volume_resolution(skin, 2.0 * 20.0 * 20.0, np.array([20.0, 20.0, 3.0]))
+    assert thin.limited_by == "object" and thin.reason == "object: its thinnest extent 3 mm over 12"
+    small = volume_resolution(skin, 1e6, np.array([500.0, 500.0, 500.0]), budget=1000)
+    assert small.limited_by == "budget" and small.reason == "budget: 1000 surface cubes"
+    assert volume_resolution(skin, 1e3, np.array([20.0, 20.0, 20.0]), h0=1.0).reason == "given"
+
+
+def test_a_painted_and_a_parted_bake_say_which_medium_set_the_lattice():
+    from meshshade.geometry.mesh import Mesh
+    from meshshade.geometry.procedural import icosphere, nested_spheres
+    from meshshade.light import DirectionalLight
+    from meshshade.painted import PaintedMaterial
+    from meshshade.parts import PartedMaterial
+    from meshshade.transport import bake
+
+    sun = [DirectionalLight((0, 0, -1.0), 1.0)]
+    V, F = icosphere(10.0, 3)
+    colour = np.where(V[:, :1] > 0, [[0.6, 0.4, 0.3]], [[0.2, 0.1, 0.05]])
+    got = bake(Mesh.from_arrays(V, F), PaintedMaterial(Material.preset("skin1"), colour=colour), sun)
+    assert got.stats["volume_resolution_reason"].startswith("material: the paint's darkest colour's blue decays in")
+    V, F, part = nested_spheres(10.0, 4.0, 2, 1)
+    parts = PartedMaterial([Material.preset("marble"), Material.preset("ketchup")], part, ["rest", "core"])
+    mesh = parts.oriented(Mesh.from_arrays(V, F))
+    got = bake(mesh, parts, sun)
+    assert got.stats["volume_resolution_reason"].startswith("material: the part in ketchup's")
