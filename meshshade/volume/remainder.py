@@ -191,25 +191,27 @@ def _lookup(tab, c, k, frac, x, log_r0, dlog, n_r, beyond_zero):
     return (1.0 - frac) * lo + frac * hi
 
 
-def _build_tree(pos, power, normal, cos_t, leaf):
+def _build_tree(pos, power, normal, cos_t, leaf, area=None):
     """A tree over the entries (the Morton order of their positions split where the codes' highest differing bit
     changes: :func:`meshshade.volume.triangle_tree.prefix_tree`): ``perm``, per node its range ``lo``/``hi`` in
     perm, ``child`` (first child, -1 for a leaf; the second is child + 1), bounding ``box`` (n, 6), and the
-    power-weighted aggregates ``agg`` (n, 9): total power, centroid (3), cos theta_t, unit mean normal (3), the
-    cosine of the widest angle between a member's normal and the mean."""
+    aggregates ``agg`` (n, 14): total power, power-weighted centroid (3) and cos theta_t, unit mean normal (3), the
+    cosine of the widest angle between a member's normal and the mean (members with power or area), total area
+    (``area``, mm^2, zeros when None), area-weighted centroid (3) and cos theta_t."""
     if pos.shape[0] == 0:
         return (np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64), np.full(1, -1, np.int64),
-                np.zeros((1, 6)), np.zeros((1, 9)))
+                np.zeros((1, 6)), np.zeros((1, 14)))
     perm, codes = morton_order(pos)
     lo, hi, child = prefix_tree(codes, leaf)
     box = np.zeros((lo.size, 6))
-    agg = np.zeros((lo.size, 9))
-    _aggregates(pos, power, normal, cos_t, perm.astype(np.int64), lo, hi, box, agg)
+    agg = np.zeros((lo.size, 14))
+    area = np.zeros(pos.shape[0]) if area is None else np.ascontiguousarray(area, dtype=np.float64)
+    _aggregates(pos, power, normal, cos_t, area, perm.astype(np.int64), lo, hi, box, agg)
     return perm.astype(np.int64), lo, hi, child, box, agg
 
 
 @numba.njit(cache=True, nogil=True)
-def _aggregates(pos, power, normal, cos_t, perm, lo, hi, box, agg):
+def _aggregates(pos, power, normal, cos_t, area, perm, lo, hi, box, agg):
     """Each node's box and aggregates (:func:`_build_tree`) over its members perm[lo:hi]."""
     n_nodes = lo.size
     for nd in range(n_nodes):
@@ -224,6 +226,7 @@ def _aggregates(pos, power, normal, cos_t, perm, lo, hi, box, agg):
     for nd in range(n_nodes):
         tot = 0.0
         cx = cy = cz = cc = nx = ny = nz = 0.0
+        at = ax = ay = az = ac = 0.0
         for t in range(lo[nd], hi[nd]):
             j = perm[t]
             w = power[j]
@@ -232,19 +235,28 @@ def _aggregates(pos, power, normal, cos_t, perm, lo, hi, box, agg):
             cy += w * pos[j, 1]
             cz += w * pos[j, 2]
             cc += w * cos_t[j]
-            nx += w * normal[j, 0]
-            ny += w * normal[j, 1]
-            nz += w * normal[j, 2]
+            u = area[j]
+            at += u
+            ax += u * pos[j, 0]
+            ay += u * pos[j, 1]
+            az += u * pos[j, 2]
+            ac += u * cos_t[j]
+            nx += (w + u) * normal[j, 0]
+            ny += (w + u) * normal[j, 1]
+            nz += (w + u) * normal[j, 2]
         agg[nd, 0] = tot
         if tot > 0.0:
             agg[nd, 1], agg[nd, 2], agg[nd, 3], agg[nd, 4] = cx / tot, cy / tot, cz / tot, cc / tot
+        agg[nd, 9] = at
+        if at > 0.0:
+            agg[nd, 10], agg[nd, 11], agg[nd, 12], agg[nd, 13] = ax / at, ay / at, az / at, ac / at
         ln = math.sqrt(nx * nx + ny * ny + nz * nz)
         if ln > 0.0:
             agg[nd, 5], agg[nd, 6], agg[nd, 7] = nx / ln, ny / ln, nz / ln
         worst = 1.0
         for t in range(lo[nd], hi[nd]):
             j = perm[t]
-            if power[j] > 0.0:
+            if power[j] > 0.0 or area[j] > 0.0:
                 worst = min(worst, normal[j, 0] * agg[nd, 5] + normal[j, 1] * agg[nd, 6] + normal[j, 2] * agg[nd, 7])
         agg[nd, 8] = worst
 
@@ -355,10 +367,11 @@ def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog
 def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_pos, src_n, src_p, src_area, src_a,
               src_cos, src_light, f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
               rec_near, theta, out, counts, r_lo, r_hi):
-    """Receivers r_lo:r_hi: eq. (103)'s pair sum over the entries. Entries within ``rec_near[r]`` of receiver r one
-    by one, their weight P_j - E_l(x) A_j; beyond, nodes whose extent over distance is below ``theta`` (and whose
-    normals agree) as one entry of their total power at their centroid; the rest one by one without the
-    subtraction."""
+    """Receivers r_lo:r_hi: eq. (103)'s pair sum over the entries, every pair with its weight P_j - E_l(x) A_j.
+    Entries within ``rec_near[r]`` of receiver r one by one; beyond, nodes whose extent over distance is below
+    ``theta`` (and whose normals agree) as one entry of their total power at their power centroid less the
+    receiver's irradiance times their area at their area centroid (one light: a receiver of several lights opens
+    the nodes), the rest one by one."""
     rmax = 0.0
     for c in range(3):
         rmax = max(rmax, radius[c])
@@ -372,6 +385,8 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
         for l in range(rec_E.shape[1]):
             if rec_E[r, l] != 0.0:
                 unlit = False
+        one_light = rec_E.shape[1] == 1
+        e0 = rec_E[r, 0]
         top = 1
         stack[0] = 0
         while top > 0:
@@ -384,19 +399,33 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
             dmin = math.sqrt(dx * dx + dy * dy + dz * dz)
             if dmin > rmax:
                 continue
-            if agg[nd, 0] <= 0.0 and (unlit or dmin >= near):
+            sub_w = 0.0 if unlit else e0 * agg[nd, 9]           # the subtraction's weight (one light)
+            if agg[nd, 0] <= 0.0 and sub_w == 0.0 and (unlit or one_light):
                 continue                       # no power below, and no subtraction term (weights all 0)
-            if child[nd] >= 0 and dmin >= near and agg[nd, 0] > 0.0 and agg[nd, 8] > 0.9:
+            if (child[nd] >= 0 and dmin >= near and (agg[nd, 0] > 0.0 or sub_w > 0.0) and agg[nd, 8] > 0.9
+                    and (unlit or one_light)):
                 ex = max(box[nd, 3] - box[nd, 0], box[nd, 4] - box[nd, 1], box[nd, 5] - box[nd, 2])
-                cx, cy, cz = agg[nd, 1] - x0, agg[nd, 2] - x1, agg[nd, 3] - x2
-                dc = math.sqrt(cx * cx + cy * cy + cz * cz)
-                if ex < theta * dc:
+                dc, da = math.inf, math.inf
+                if agg[nd, 0] > 0.0:
+                    cx, cy, cz = agg[nd, 1] - x0, agg[nd, 2] - x1, agg[nd, 3] - x2
+                    dc = math.sqrt(cx * cx + cy * cy + cz * cz)
+                if sub_w > 0.0:
+                    cx, cy, cz = agg[nd, 10] - x0, agg[nd, 11] - x1, agg[nd, 12] - x2
+                    da = math.sqrt(cx * cx + cy * cy + cz * cz)
+                if ex < theta * min(dc, da):
                     if agg[nd, 5] * rec_n[r, 0] + agg[nd, 6] * rec_n[r, 1] + agg[nd, 7] * rec_n[r, 2] > 0.0:
-                        v0, v1, v2 = _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
-                                              dlog_a, agg[nd, 4], dc, 0.0)
-                        a0 += agg[nd, 0] * v0
-                        a1 += agg[nd, 0] * v1
-                        a2 += agg[nd, 0] * v2
+                        if agg[nd, 0] > 0.0:
+                            v0, v1, v2 = _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
+                                                  dlog_a, agg[nd, 4], dc, 0.0)
+                            a0 += agg[nd, 0] * v0
+                            a1 += agg[nd, 0] * v1
+                            a2 += agg[nd, 0] * v2
+                        if sub_w > 0.0:
+                            v0, v1, v2 = _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
+                                                  dlog_a, agg[nd, 13], da, 0.0)
+                            a0 -= sub_w * v0
+                            a1 -= sub_w * v1
+                            a2 -= sub_w * v2
                         n_pairs += 1
                     continue
             if child[nd] >= 0:
@@ -412,9 +441,7 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                 d = math.sqrt(qx * qx + qy * qy + qz * qz)
                 if d > rmax:
                     continue
-                w = src_p[j]
-                if d < near:
-                    w -= rec_E[r, src_light[j]] * src_area[j]
+                w = src_p[j] - rec_E[r, src_light[j]] * src_area[j]
                 if w == 0.0:
                     continue
                 a = src_a[j] if src_a[j] > 0.0 else rec_a[r]
@@ -430,14 +457,14 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
         counts[r] = n_pairs
 
 
-#: the subtracted zone reaches at most this many mm from each receiver
+#: the zone of pairs summed one by one reaches at most this many mm from each receiver
 NEAR_MM = 2.5
-#: entries within this many of a receiver's longest edges (at most NEAR_MM) are summed one by one with the
-#: subtraction of eq. (103); the subtraction needs the light sampled, and a fixed radius would hold pairs growing as
-#: the square of a fine mesh's density (566k vertices: 310M pairs in 2.5 mm). The sun-lit ball's lit error against
-#: its exact series at 10k / 41k / 164k vertices: 1.69 / 1.75 / 1.62 % (2.5 mm everywhere: 1.65 / 1.73 / 1.82 %)
+#: entries within this many of a receiver's longest edges (at most NEAR_MM) are summed one by one (beyond: the
+#: tree's nodes); a fixed radius would hold pairs growing as the square of a fine mesh's density (566k vertices:
+#: 310M pairs in 2.5 mm). The sun-lit ball's lit error against its exact series at 10k / 41k / 164k vertices: 1.69 /
+#: 1.75 / 1.62 % (2.5 mm everywhere: 1.65 / 1.73 / 1.82 %; measured with the subtraction within this zone only)
 NEAR_SPACINGS = 3.0
-#: the subtracted zone reaches at most this many mean sampling spacings
+#: the one-by-one zone reaches at most this many mean sampling spacings
 MID_SPACINGS = 6.0
 #: beyond the subtracted zone, a node of the entries' tree whose extent is below THETA times its distance counts as
 #: one entry
@@ -463,12 +490,14 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     irradiance of each light at the receiver and the cosine its light travels inside at there; optionally
     ``spacing`` (n,) mm, the receiver's longest edge.
 
-    Entries within a receiver's subtracted radius (``near_mm``; with ``spacing_mm``, the entries' mean spacing,
-    NEAR_SPACINGS times the receiver's own spacing where that is less, and never more than MID_SPACINGS mean
-    spacings) are summed one by one with the subtraction, and the receiver gets E_l(x) [int_0^r f + the energy
-    beyond the table's radius] analytically; beyond, the entries' tree is opened until a node's extent is below
-    ``theta`` times its distance (Barnes-Hut), so the cost per receiver grows with the log of the radius over the
-    spacing, not with its square. Every receiver is summed itself: an earlier pass that evaluated the part beyond
+    Every pair within the table's reach carries the subtraction (weight P_j - E_l(x) A_j) and the receiver gets
+    E_l(x) T analytically, so a uniformly lit receiver gets exactly E T whatever the sampling (physics §15.4: the
+    subtraction within 2.5 mm only left marble's long f to the sampled sum, 9-14 % low on a flat face). Entries
+    within ``near_mm`` (with ``spacing_mm``, the entries' mean spacing: NEAR_SPACINGS times the receiver's own
+    spacing where that is less, and never more than MID_SPACINGS mean spacings) are summed one by one; beyond, the
+    entries' tree is opened until a node's extent is below ``theta`` times its distance (Barnes-Hut: a node's power
+    at its power centroid less E(x) times its area at its area centroid), so the cost per receiver grows with the
+    log of the radius over the spacing, not with its square. Every receiver is summed itself: an earlier pass that evaluated the part beyond
     a reach at one receiver per cube and interpolated it split the pairs at the reach differently for the receiver
     and the cube's (up to 22 % off at single samples of the 141k head, and a 5e-8 change of scale moved a vertex by
     13 %); made consistent, it cost what this does."""
@@ -486,8 +515,8 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     E, rc = _arg(rec["E"]), np.asarray(rec["cos_t"], dtype=np.float64)
     for l in range(E.shape[1]):
         lit = E[:, l] > 0
-        if lit.any():
-            out[lit] += E[lit, l, None] * tables.near_and_beyond(rc[lit, l], sub[lit])
+        if lit.any():          # every pair within the table carries the subtraction: the receiver gets E T
+            out[lit] += E[lit, l, None] * tables.totals(rc[lit, l])
     k = src["pos"].shape[0]
     if k == 0:
         return out, 0
@@ -495,8 +524,8 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     nrm = _arg(src["normal"])
     pw = _arg(src["power"])
     cos_s = _arg(src["cos_t"])
-    perm, lo, hi, child, box, agg = _build_tree(pos, pw, nrm, cos_s, LEAF)
     area = _arg(src["area"])
+    perm, lo, hi, child, box, agg = _build_tree(pos, pw, nrm, cos_s, LEAF, area)
     disc = np.sqrt(np.maximum(area, 0.0) / math.pi)
     tables.ensure_discs(np.concatenate([disc, ra]))
     light = _arg(src["light"], np.int64)
