@@ -210,6 +210,24 @@ def _build_tree(pos, power, normal, cos_t, leaf, area=None):
     return perm.astype(np.int64), lo, hi, child, box, agg
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _weighted_moments(weight, pos, cos_t, perm, a, b, agg, nd, col):
+    """agg[nd, col] = the total of ``weight`` over members perm[a:b], agg[nd, col + 1: col + 5] their weighted
+    centroid (3) and cos theta_t (left 0 where the total is 0)."""
+    tot = cx = cy = cz = cc = 0.0
+    for t in range(a, b):
+        j = perm[t]
+        w = weight[j]
+        tot += w
+        cx += w * pos[j, 0]
+        cy += w * pos[j, 1]
+        cz += w * pos[j, 2]
+        cc += w * cos_t[j]
+    agg[nd, col] = tot
+    if tot > 0.0:
+        agg[nd, col + 1], agg[nd, col + 2], agg[nd, col + 3], agg[nd, col + 4] = cx / tot, cy / tot, cz / tot, cc / tot
+
+
 @numba.njit(cache=True, nogil=True)
 def _aggregates(pos, power, normal, cos_t, area, perm, lo, hi, box, agg):
     """Each node's box and aggregates (:func:`_build_tree`) over its members perm[lo:hi]."""
@@ -224,32 +242,15 @@ def _aggregates(pos, power, normal, cos_t, area, perm, lo, hi, box, agg):
                 box[nd, d] = min(box[nd, d], pos[j, d])
                 box[nd, 3 + d] = max(box[nd, 3 + d], pos[j, d])
     for nd in range(n_nodes):
-        tot = 0.0
-        cx = cy = cz = cc = nx = ny = nz = 0.0
-        at = ax = ay = az = ac = 0.0
+        _weighted_moments(power, pos, cos_t, perm, lo[nd], hi[nd], agg, nd, 0)     # power: columns 0-4
+        _weighted_moments(area, pos, cos_t, perm, lo[nd], hi[nd], agg, nd, 9)      # area: columns 9-13
+        nx = ny = nz = 0.0
         for t in range(lo[nd], hi[nd]):
             j = perm[t]
-            w = power[j]
-            tot += w
-            cx += w * pos[j, 0]
-            cy += w * pos[j, 1]
-            cz += w * pos[j, 2]
-            cc += w * cos_t[j]
-            u = area[j]
-            at += u
-            ax += u * pos[j, 0]
-            ay += u * pos[j, 1]
-            az += u * pos[j, 2]
-            ac += u * cos_t[j]
-            nx += (w + u) * normal[j, 0]
-            ny += (w + u) * normal[j, 1]
-            nz += (w + u) * normal[j, 2]
-        agg[nd, 0] = tot
-        if tot > 0.0:
-            agg[nd, 1], agg[nd, 2], agg[nd, 3], agg[nd, 4] = cx / tot, cy / tot, cz / tot, cc / tot
-        agg[nd, 9] = at
-        if at > 0.0:
-            agg[nd, 10], agg[nd, 11], agg[nd, 12], agg[nd, 13] = ax / at, ay / at, az / at, ac / at
+            w = power[j] + area[j]
+            nx += w * normal[j, 0]
+            ny += w * normal[j, 1]
+            nz += w * normal[j, 2]
         ln = math.sqrt(nx * nx + ny * ny + nz * nz)
         if ln > 0.0:
             agg[nd, 5], agg[nd, 6], agg[nd, 7] = nx / ln, ny / ln, nz / ln
