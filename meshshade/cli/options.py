@@ -219,12 +219,12 @@ def background_from_args(args) -> list | None:
     return rgb
 
 
-def image_scene_from_args(args) -> ImageScene:
-    """The mesh, material, lights, camera and background of ``meshshade render`` and ``compare``; render's
-    material may have parts (``--material PART=NAME``) or be painted (``--albedo-map``), as bake's."""
+def image_scene_from_args(args, *, varying: bool = False) -> ImageScene:
+    """The mesh, material, lights, camera and background of ``meshshade render`` and ``compare``; with ``varying``
+    (render) the material may have parts (``--material PART=NAME``) or be painted (``--albedo-map``), as bake's."""
     lights = lights_from_args(args)
-    mesh, material = mesh_and_material(args, parts_allowed=hasattr(args, "albedo_map"))
-    if getattr(args, "albedo_map", None):
+    mesh, material = mesh_and_material(args, parts_allowed=varying)
+    if varying and args.albedo_map:
         material = painted_material(args, mesh, material)
     camera = parse_camera(args.camera, mesh, mesh.mm_per_unit)
     bg = background_from_args(args)

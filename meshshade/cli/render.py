@@ -54,7 +54,7 @@ def run_render(args) -> int:
     if baked is not None:
         return _render_baked(args, baked, exr, png)
     options = bake_options_from_args(args, progress=False if args.quiet else "render")
-    scene = image_scene_from_args(args)
+    scene = image_scene_from_args(args, varying=True)
     mesh, material = scene.mesh, scene.material
     res = bake(mesh, material, scene.lights, options)
     gather = PixelGather(mesh, res) if args.per_pixel else None

@@ -44,7 +44,7 @@ def direct_sum(mesh, medium: SurfaceMedium, lights, samples, curv, cut, clock, m
     zone = assign_zones(len(samples), samples.vertex >= 0, far_field, geodesic, plan, far_geodesic)
     clustered, src_cut, chord_cut = _gather_radii(zone, cut, near)
     groups = _zone_groups(zone)
-    factors = medium.near if source_model == "beam" else None
+    factors = medium.near                          # the near field's factors with the beam source model, else None
     kernel = PairKernel(model, medium, frames, rtol=rtol, plan=plan, near=factors, sphere=medium.sphere,
                         reach_mm=cut)
     kernel.pair_points = (samples.positions, mesh.vertices, mesh.vertex_normals, curv.k1, curv.k2, curv.d1)

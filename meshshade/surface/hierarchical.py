@@ -269,7 +269,7 @@ class SurfaceTransport:
         """
         options = options_from_keywords(options, deprecated, "SurfaceTransport.build")
         source_model = options.source_model or "point"
-        geodesic, cutoff_tol, rtol = options.geodesic, options.cutoff_tol, options.rtol
+        geodesic, rtol = options.geodesic, options.rtol
         if model not in MODELS:
             raise ParameterError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
         if not 0.0 < float(theta) < 1.0:
@@ -287,9 +287,6 @@ class SurfaceTransport:
         frames = source_frames(src, curv, mesh.faces)
         n = mesh.n_vertices
         medium = surface_medium(material, options, source_model)
-        if medium.cutoff_tol != cutoff_tol or medium.source_model != source_model or medium.rtol != rtol:
-            raise ParameterError(f"{medium!r} was made for other options than these (cutoff_tol {cutoff_tol:g}, "
-                                 f"source model {source_model}, rtol {rtol:g})")
         cut = np.minimum(medium.cutoff_mm, mesh.scale)
         patch = np.sqrt(mesh.vertex_areas / np.pi)
         check = None

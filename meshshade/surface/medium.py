@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshshade.errors import ParameterError
 from meshshade.materials import Material
 from meshshade.surface.farfield import DEFAULT_FAR_TOL, far_field_radius
 from meshshade.surface.gather import cutoff_radii
@@ -80,12 +81,6 @@ class SurfaceMedium:
         """The material's one-line description (what the bake's caches are keyed on)."""
         return self.material.describe()
 
-    def same_as(self, other: "SurfaceMedium") -> bool:
-        """Whether ``other`` was made for the same material, cutoff, source model and tolerance."""
-        return (self.describe() == other.describe() and self.cutoff_tol == other.cutoff_tol
-                and self.source_model == other.source_model and self.rtol == other.rtol
-                and self.far_tol == other.far_tol)
-
     def __repr__(self) -> str:
         cut = "/".join(f"{x:.3g}" for x in np.asarray(self.cutoff_mm))
         return (f"<SurfaceMedium of {self.describe()}: cutoff {cut} mm at {self.cutoff_tol:g}, "
@@ -94,11 +89,17 @@ class SurfaceMedium:
 
 def surface_medium(material, options: SurfaceOptions | None = None, source_model: str | None = None
                    ) -> SurfaceMedium:
-    """The :class:`SurfaceMedium` of ``material`` (a Material; a SurfaceMedium is returned as it is) under the
-    surface ``options`` (default ones for None) and ``source_model`` (None: the options', else "point")."""
-    if isinstance(material, SurfaceMedium):
-        return material
+    """The :class:`SurfaceMedium` of ``material`` under the surface ``options`` (default ones for None) and
+    ``source_model`` (None: the options', else "point"). A SurfaceMedium given as ``material`` is returned as it is
+    when it was made for these options (ParameterError otherwise: its radii and tables would not be theirs)."""
     options = options if options is not None else SurfaceOptions()
-    return SurfaceMedium(material, cutoff_tol=options.cutoff_tol,
-                         source_model=source_model or options.source_model or "point", rtol=options.rtol,
+    source_model = source_model or options.source_model or "point"
+    if isinstance(material, SurfaceMedium):
+        made = (material.cutoff_tol, material.source_model, material.rtol, material.far_tol)
+        if made != (options.cutoff_tol, source_model, options.rtol, options.far_tol):
+            raise ParameterError(f"{material!r} was made for other options than these (cutoff_tol "
+                                 f"{options.cutoff_tol:g}, source model {source_model}, rtol {options.rtol:g}, "
+                                 f"far_tol {options.far_tol:g})")
+        return material
+    return SurfaceMedium(material, cutoff_tol=options.cutoff_tol, source_model=source_model, rtol=options.rtol,
                          far_tol=options.far_tol)

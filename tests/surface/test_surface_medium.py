@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
+from meshshade.errors import ParameterError
 from meshshade.geometry.mesh import Mesh
 from meshshade.geometry.procedural import icosphere
 from meshshade.light import BeamLight, DirectionalLight
@@ -72,7 +73,9 @@ def test_the_record_is_the_materials_and_the_options():
     assert np.array_equal(point.sigma_t_prime, SKIN.sigma_t_prime) and point.eta == SKIN.eta
     assert point.channel(1) == SKIN.channel(1) and point.describe() == SKIN.describe()
     assert surface_medium(point) is point
-    assert point.same_as(surface_medium(SKIN, SurfaceOptions())) and not point.same_as(beam)
+    assert surface_medium(point, SurfaceOptions()) is point
+    with pytest.raises(ParameterError, match="other options"):
+        surface_medium(point, SurfaceOptions(source_model="beam"))
     with pytest.raises(ValueError, match="source_model"):
         SurfaceMedium(SKIN, cutoff_tol=1e-4, source_model="disc")
 
