@@ -34,6 +34,7 @@ import numpy as np
 from meshshade.kernels.beam_diffusion import DipoleConstants, DipoleVariant, dipole_constants, fresnel_moments
 from meshshade.kernels.near_field import NearFieldModel, incidence_ratios, near_field_sources
 from meshshade.kernels.optics import DiffusionParams, check_material, diffusion_params
+from meshshade.kernels.single_scattering import single_scattering
 
 __all__ = ["Medium", "medium_of"]
 
@@ -117,7 +118,9 @@ class Medium:
         lead = at[:-1]
         return NearFieldModel(float(self.albedo_prime[at]), float(self.eta[lead]), float(self.g[lead]),
                               self.dipole(c, index), self.near_depths, self.near_strengths[at],
-                              bool(self.near_clamped[at]), self.incidence_rho[at])
+                              bool(self.near_clamped[at]), self.incidence_rho[at],
+                              single_scattering(float(self.albedo_prime[at]), float(self.eta[lead]),
+                                                float(self.g[lead])))
 
     def take(self, index) -> "Medium":
         """The media at ``index`` (an integer array into the leading axis, e.g. a region per vertex or cell):

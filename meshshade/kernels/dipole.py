@@ -136,6 +136,16 @@ def dipole_cutoff_radius(tol, *, albedo_prime, eta, r_max_opt=1e12):
     return hi
 
 
+def dipole_cutoff_radii(tol, *, sigma_t_prime, albedo_prime, eta) -> np.ndarray:
+    """(c,) mm: per channel of reduced extinction ``sigma_t_prime`` (1/mm) and reduced albedo ``albedo_prime``
+    ((c,) each; ``eta`` a scalar), the radius beyond which the dipole's reflectance is below ``tol`` of its total:
+    :func:`dipole_cutoff_radius` over ``sigma_t_prime``."""
+    st = np.atleast_1d(np.asarray(sigma_t_prime, dtype=np.float64))
+    al = np.broadcast_to(np.asarray(albedo_prime, dtype=np.float64), st.shape)
+    return np.array([dipole_cutoff_radius(tol, albedo_prime=float(a), eta=float(eta)) / float(s)
+                     for a, s in zip(al, st)])
+
+
 def _total_reflectance(p):
     """:func:`dipole_total_reflectance` from :class:`~meshshade.kernels.optics.DiffusionParams` ``p``."""
     return 0.5 * p.albedo_prime * (np.exp(-p.mu * p.z_r) + np.exp(-p.mu * p.z_v))

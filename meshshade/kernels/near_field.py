@@ -31,8 +31,7 @@ from meshshade.kernels.beam_diffusion import DipoleVariant, dipole_variant
 from meshshade.kernels.cylinder import cylinder_point_source_exitance
 from meshshade.kernels.optics import check_material
 from meshshade.kernels.sphere import sphere_point_source_exitance
-from meshshade.kernels.single_scattering import (real_coefficients, single_scattering_profile,
-                                                 single_scattering_ring, single_scattering_total)
+from meshshade.kernels.single_scattering import SingleScattering, real_coefficients, single_scattering
 
 __all__ = ["NearFieldModel", "near_field_model", "near_field_sources", "incidence_ratios", "near_field_profile",
            "near_field_ring", "near_field_total", "incidence_gain", "near_field_sphere_profile", "near_field_cylinder_profile", "FIT_DOMAIN"]
@@ -88,7 +87,8 @@ class NearFieldModel:
     """The near-field model of one medium channel (eq. (76)), optical units: the medium's ``albedo_prime``,
     ``eta`` and ``g``, its d'Eon dipole ``dipole`` (:class:`~meshshade.kernels.beam_diffusion.DipoleVariant`), the
     beam's fitted sources ``depths`` and ``strengths`` (K,) (``clamped``: outside :data:`FIT_DOMAIN`, the nearest
-    node's) and the incidence table's ratios ``rho`` (:func:`incidence_ratios`). The numbers are made once
+    node's), the incidence table's ratios ``rho`` (:func:`incidence_ratios`) and its exact single scattering
+    ``single`` (:class:`~meshshade.kernels.single_scattering.SingleScattering`). The numbers are made once
     (:func:`near_field_model`, or read from a :class:`meshshade.medium.Medium`); its methods are the model's
     profile, ring averages, total and incidence gain, pure functions of arrays."""
 
@@ -100,24 +100,23 @@ class NearFieldModel:
     strengths: np.ndarray
     clamped: bool
     rho: np.ndarray
+    single: SingleScattering
 
     def profile(self, r_opt, cos_t=1.0):
         """R_near(r) per unit entering power (:func:`near_field_profile`); inf at r = 0."""
         r = np.asarray(r_opt, dtype=np.float64)
         ms = sum(wk * self.dipole.reflectance(r, cos_t * t) for t, wk in zip(self.depths, self.strengths) if wk > 0)
-        return single_scattering_profile(r, albedo_prime=self.albedo_prime, eta=self.eta, g=self.g,
-                                         cos_t=cos_t) + ms
+        return self.single.profile(r, cos_t) + ms
 
     def ring(self, lo, hi, cos_t=1.0):
         """Average of R_near over the ring lo <= r < hi (:func:`near_field_ring`)."""
         ms = sum(wk * self.dipole.ring(lo, hi, cos_t * t) for t, wk in zip(self.depths, self.strengths) if wk > 0)
-        return single_scattering_ring(lo, hi, albedo_prime=self.albedo_prime, eta=self.eta, g=self.g,
-                                      cos_t=cos_t) + ms
+        return self.single.ring(lo, hi, cos_t) + ms
 
     def total(self, cos_t=1.0) -> float:
         """int R_near 2 pi r dr per unit entering power (:func:`near_field_total`)."""
         ms = float(sum(wk * self.dipole.total(cos_t * t) for t, wk in zip(self.depths, self.strengths)))
-        return single_scattering_total(albedo_prime=self.albedo_prime, eta=self.eta, g=self.g, cos_t=cos_t) + ms
+        return self.single.total(cos_t) + ms
 
     def incidence_gain(self, cos_t=1.0) -> float:
         """T(theta) / T(0) of light entering at refracted angle theta_t (:func:`incidence_gain`, eq. (86))."""
@@ -136,7 +135,8 @@ def near_field_model(albedo_prime: float, eta: float, g: float = 0.0) -> NearFie
     [1, 2.5], g in (-1, 1))."""
     depths, w, clamped = near_field_sources(albedo_prime, eta, g)
     return NearFieldModel(float(albedo_prime), float(eta), float(g), dipole_variant(albedo_prime, eta, "better"),
-                          depths, w, clamped, incidence_ratios(albedo_prime, eta, g))
+                          depths, w, clamped, incidence_ratios(albedo_prime, eta, g),
+                          single_scattering(albedo_prime, eta, g))
 
 
 def near_field_profile(r_opt, *, albedo_prime, eta, g=0.0, cos_t=1.0):
@@ -190,7 +190,7 @@ def near_field_sphere_profile(theta, *, R0_opt, albedo_prime, eta, g=0.0, rtol=1
     ms = sum(wk * sphere_point_source_exitance(th, R0_opt=R0, depth_opt=t, rtol=rtol, **kw)
              for t, wk in zip(depths, w) if wk > 0)
     chord = 2.0 * R0 * np.sin(0.5 * th)
-    return single_scattering_profile(chord, albedo_prime=albedo_prime, eta=eta, g=g) + ms
+    return model.single.profile(chord) + ms
 
 
 def near_field_cylinder_profile(theta, z, *, R0_opt, albedo_prime, eta, g=0.0, rtol=1e-8):
@@ -205,4 +205,4 @@ def near_field_cylinder_profile(theta, z, *, R0_opt, albedo_prime, eta, g=0.0, r
     ms = sum(wk * cylinder_point_source_exitance(th, zz, R0_opt=R0, depth_opt=t, rtol=rtol, **kw)
              for t, wk in zip(depths, w) if wk > 0)
     chord = np.hypot(2.0 * R0 * np.sin(0.5 * th), zz)
-    return single_scattering_profile(chord, albedo_prime=albedo_prime, eta=eta, g=g) + ms
+    return model.single.profile(chord) + ms

@@ -24,6 +24,7 @@ reduced, scattering: the phase function carries g).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,7 +32,7 @@ from meshshade.errors import MaterialError
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.kernels.optics import check_material
 
-__all__ = ["single_scattering_profile", "single_scattering_ring", "single_scattering_total", "hg_phase",
+__all__ = ["SingleScattering", "single_scattering", "single_scattering_profile", "single_scattering_ring", "single_scattering_total", "hg_phase",
            "real_coefficients"]
 
 #: Gauss-Legendre nodes of the angular integrals
@@ -73,24 +74,69 @@ def _check_cos_t(cos_t) -> float:
     return c
 
 
+@dataclass(frozen=True, eq=False)
+class SingleScattering:
+    """Exact single scattering of one medium channel, optical units: the real coefficients ``sigma_s``,
+    ``sigma_t`` (:func:`real_coefficients`), the anisotropy ``g``, the relative index ``eta``, the angular
+    quadrature's exit angles ``a`` and weights ``w`` on [0, a_c], and the angular factor at them, ``factor`` =
+    sigma_s p(-cos a) (1 - F(cos a)) cos a. Made and checked once (:func:`single_scattering`); its methods are
+    the profile, ring averages and total of eqs. (71)-(72), pure functions of arrays."""
+
+    sigma_s: float
+    sigma_t: float
+    g: float
+    eta: float
+    a: np.ndarray
+    w: np.ndarray
+    factor: np.ndarray
+
+    def profile(self, r_opt, cos_t=1.0):
+        """R1(r) per unit entering power (:func:`single_scattering_profile`); inf at r = 0."""
+        ct = _check_cos_t(cos_t)
+        r = np.asarray(r_opt, dtype=np.float64)
+        f = self.factor * self.w / ct
+        ratio = (1.0 + np.cos(self.a) / ct) / np.sin(self.a)
+        with np.errstate(divide="ignore"):
+            inv = np.where(r > 0, 1.0 / np.where(r > 0, r, 1.0), np.inf)
+        e = np.exp(-self.sigma_t * r[..., None] * ratio)
+        return np.where(r > 0, inv * (e @ f), np.inf)[()]
+
+    def ring(self, lo, hi, cos_t=1.0):
+        """Average of R1 over the ring lo <= r < hi (:func:`single_scattering_ring`)."""
+        ct = _check_cos_t(cos_t)
+        lo, hi = np.broadcast_arrays(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+        a = self.a
+        f = 2.0 * math.pi * self.factor * np.sin(a) * self.w / ct
+        k = self.sigma_t * (1.0 + np.cos(a) / ct)
+        s = np.sin(a)
+        inner = (np.exp(-k * lo[..., None] / s) - np.exp(-k * hi[..., None] / s)) / k
+        return (inner @ f) / (math.pi * (hi * hi - lo * lo))
+
+    def total(self, cos_t=1.0) -> float:
+        """int R1 2 pi r dr per unit entering power (:func:`single_scattering_total`)."""
+        ct = _check_cos_t(cos_t)
+        a = self.a
+        f = 2.0 * math.pi * self.factor * np.sin(a) * self.w / ct
+        return float(f @ (1.0 / (self.sigma_t * (1.0 + np.cos(a) / ct))))
+
+
+def single_scattering(albedo_prime, eta, g=0.0) -> SingleScattering:
+    """The :class:`SingleScattering` of a medium channel (validated: MaterialError outside albedo' in [0, 1],
+    eta in [1, 2.5], g in (-1, 1))."""
+    check_material(albedo_prime, eta)
+    sigma_s, sigma_t = real_coefficients(float(albedo_prime), float(g))
+    a, w = _angles(float(eta))
+    return SingleScattering(sigma_s, sigma_t, float(g), float(eta), a, w, _angular_factor(a, sigma_s, g, float(eta)))
+
+
 def single_scattering_profile(r_opt, *, albedo_prime, eta, g=0.0, cos_t=1.0):
     """R1(r) per unit entering power, optical units (multiply by sigma_t'^2 for mm^-2); inf at r = 0.
 
     ``cos_t`` < 1: the light travels inside at angle acos(cos_t) from the normal, so it first scatters at depth
     z with density (sigma_s / cos_t) exp(-sigma_t z / cos_t) (docs/physics.md eq. (81)); the profile is that of
     this depth density about the entry point, azimuthally averaged with the normal-incidence phase factor
-    (exact for g = 0)."""
-    check_material(albedo_prime, eta)
-    ct = _check_cos_t(cos_t)
-    sigma_s, sigma_t = real_coefficients(float(albedo_prime), float(g))
-    r = np.asarray(r_opt, dtype=np.float64)
-    a, w = _angles(float(eta))
-    f = _angular_factor(a, sigma_s, g, float(eta)) * w / ct
-    ratio = (1.0 + np.cos(a) / ct) / np.sin(a)
-    with np.errstate(divide="ignore"):
-        inv = np.where(r > 0, 1.0 / np.where(r > 0, r, 1.0), np.inf)
-    e = np.exp(-sigma_t * r[..., None] * ratio)
-    return np.where(r > 0, inv * (e @ f), np.inf)[()]
+    (exact for g = 0). :meth:`SingleScattering.profile` of :func:`single_scattering`."""
+    return single_scattering(albedo_prime, eta, g).profile(r_opt, cos_t)
 
 
 def single_scattering_ring(lo, hi, *, albedo_prime, eta, g=0.0, cos_t=1.0):
@@ -99,24 +145,10 @@ def single_scattering_ring(lo, hi, *, albedo_prime, eta, g=0.0, cos_t=1.0):
     In (rho, a): 2 pi r R1 dr dz-weight becomes 2 pi sigma_s sin a cos a p (1 - F) exp(-k rho) drho da with
     k = sigma_t (1 + cos a / cos_t), and rho runs over [lo / sin a, hi / sin a]; ``cos_t`` as
     :func:`single_scattering_profile`."""
-    check_material(albedo_prime, eta)
-    ct = _check_cos_t(cos_t)
-    sigma_s, sigma_t = real_coefficients(float(albedo_prime), float(g))
-    lo, hi = np.broadcast_arrays(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
-    a, w = _angles(float(eta))
-    f = 2.0 * math.pi * _angular_factor(a, sigma_s, g, float(eta)) * np.sin(a) * w / ct
-    k = sigma_t * (1.0 + np.cos(a) / ct)
-    s = np.sin(a)
-    inner = (np.exp(-k * lo[..., None] / s) - np.exp(-k * hi[..., None] / s)) / k
-    return (inner @ f) / (math.pi * (hi * hi - lo * lo))
+    return single_scattering(albedo_prime, eta, g).ring(lo, hi, cos_t)
 
 
 def single_scattering_total(*, albedo_prime, eta, g=0.0, cos_t=1.0):
     """Total singly scattered reflectance int R1 2 pi r dr (per unit entering power; ``cos_t`` as
     :func:`single_scattering_profile`)."""
-    check_material(albedo_prime, eta)
-    ct = _check_cos_t(cos_t)
-    sigma_s, sigma_t = real_coefficients(float(albedo_prime), float(g))
-    a, w = _angles(float(eta))
-    f = 2.0 * math.pi * _angular_factor(a, sigma_s, g, float(eta)) * np.sin(a) * w / ct
-    return float(f @ (1.0 / (sigma_t * (1.0 + np.cos(a) / ct))))
+    return single_scattering(albedo_prime, eta, g).total(cos_t)

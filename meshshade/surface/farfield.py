@@ -42,7 +42,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from meshshade.errors import ParameterError
-from meshshade.kernels.dipole import dipole_cutoff_radius
+from meshshade.kernels.dipole import dipole_cutoff_radii
 from meshshade.materials import Material
 from meshshade.pacing import run_in_blocks
 from meshshade.surface.farfield_loops import (accumulate_pairs, kd_permutation, node_moments, node_ranges,
@@ -298,6 +298,13 @@ def far_field_exitance_pairwise(sources, receivers, material: Material, r_near_m
     return M, {"pairs_exact": int(n_eval), "candidate_pairs": int(n_cand), "seconds": time.perf_counter() - t0}
 
 
+def check_far_tol(far_tol) -> float:
+    """``far_tol`` as a float in (0, 1), the far field's share of the dipole's energy; ParameterError otherwise."""
+    if not (0 < far_tol < 1):
+        raise ParameterError(f"far_tol must lie in (0, 1), got {far_tol}")
+    return float(far_tol)
+
+
 def far_field_radius(material: Material, far_tol: float = DEFAULT_FAR_TOL) -> np.ndarray:
     """(3,) mm: per channel, the radius beyond which the dipole's closed-form tail holds ``far_tol`` of its total.
 
@@ -306,10 +313,5 @@ def far_field_radius(material: Material, far_tol: float = DEFAULT_FAR_TOL) -> np
     it in shadowed regions), so the guaranteed far-field error ``rel_tol`` is about ``rel_tol * far_tol`` of the
     local exitance where the surface is lit.
     """
-    if not (0 < far_tol < 1):
-        raise ParameterError(f"far_tol must lie in (0, 1), got {far_tol}")
-    out = np.empty(3)
-    for c in range(3):
-        ch = material.channel(c)
-        out[c] = dipole_cutoff_radius(far_tol, albedo_prime=ch["albedo_prime"], eta=ch["eta"]) / ch["sigma_t_prime"]
-    return out
+    return dipole_cutoff_radii(check_far_tol(far_tol), sigma_t_prime=material.sigma_t_prime, albedo_prime=material.albedo_prime,
+                               eta=material.eta)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshshade.kernels.dipole import dipole_cutoff_radius
+from meshshade.kernels.dipole import dipole_cutoff_radii
 from meshshade.materials import Material
 from meshshade.progress import kernel_interrupts
 from meshshade.surface.sample_groups import group_samples, expand_far_pairs
@@ -26,11 +26,8 @@ PAIRS_PER_CHUNK = 4_000_000
 
 def cutoff_radii(material: Material, tol: float) -> np.ndarray:
     """(3,) mm: per channel, the radius beyond which the dipole's reflectance is below ``tol`` of its total."""
-    out = np.empty(3)
-    for c in range(3):
-        ch = material.channel(c)
-        out[c] = dipole_cutoff_radius(tol, albedo_prime=ch["albedo_prime"], eta=ch["eta"]) / ch["sigma_t_prime"]
-    return out
+    return dipole_cutoff_radii(tol, sigma_t_prime=material.sigma_t_prime, albedo_prime=material.albedo_prime,
+                               eta=material.eta)
 
 
 def gather(kernel: PairKernel, n_vertices: int, power, cutoff_mm, pairs_iter, source_radius=None,

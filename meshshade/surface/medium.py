@@ -26,8 +26,8 @@ import numpy as np
 
 from meshshade.errors import ParameterError
 from meshshade.materials import Material
-from meshshade.surface.farfield import DEFAULT_FAR_TOL, far_field_radius
-from meshshade.surface.gather import cutoff_radii
+from meshshade.kernels.dipole import dipole_cutoff_radii
+from meshshade.surface.farfield import DEFAULT_FAR_TOL, check_far_tol
 from meshshade.surface.kernel_evaluation import SphereTables
 from meshshade.surface.options import SurfaceOptions
 from meshshade.surface.source_factors import NearFieldFactors, near_field_factors
@@ -62,10 +62,11 @@ class SurfaceMedium:
         self.eta = float(self.medium.eta)
         self.g = float(self.medium.g)
         self.cutoff_tol = float(cutoff_tol)
-        self.cutoff_mm = cutoff_radii(material, self.cutoff_tol)
-        self.check_cutoff_mm = cutoff_radii(material, CHECK_CUTOFF_TOL)
-        self.far_tol = float(far_tol)
-        self.far_mm = far_field_radius(material, self.far_tol)
+        self.far_tol = check_far_tol(far_tol)
+        # the three radii of the dipole's tail (gather.cutoff_radii, farfield.far_field_radius), in one pass
+        self.cutoff_mm, self.check_cutoff_mm, self.far_mm = (
+            dipole_cutoff_radii(tol, sigma_t_prime=self.sigma_t_prime, albedo_prime=self.albedo_prime, eta=self.eta)
+            for tol in (self.cutoff_tol, CHECK_CUTOFF_TOL, self.far_tol))
         for a in (self.cutoff_mm, self.check_cutoff_mm, self.far_mm):
             a.flags.writeable = False
         self.source_model = source_model

@@ -8,16 +8,18 @@ Targets (issue 14, half-space): ring averages within 10 % for 0.1 <= s < 0.5 mm 
 """
 from __future__ import annotations
 
+import cProfile
 import json
 import math
+import pstats
 
 import numpy as np
 import pytest
 from scipy.integrate import quad
 
 from meshshade.kernels import near_field_table as table
-from meshshade.kernels.near_field import (FIT_DOMAIN, incidence_gain, near_field_profile, near_field_ring,
-                                          near_field_sources, near_field_total)
+from meshshade.kernels.near_field import (FIT_DOMAIN, incidence_gain, near_field_model, near_field_profile,
+                                          near_field_ring, near_field_sources, near_field_total)
 from meshshade.materials import Material
 from meshshade.montecarlo.shapes import shape_mc_profile
 
@@ -189,3 +191,23 @@ def test_low_albedo_totals_against_adding_doubling(eta, g):
         diffuse = (float(sample.rt()[0]) - r_spec) / (1.0 - r_spec)   # per unit entering power
         model = float(near_field_total(albedo_prime=a, eta=eta, g=g))
         assert abs(model / diffuse - 1.0) < 0.03, (a, model, diffuse)
+
+
+def test_the_model_checks_its_medium_and_makes_single_scattering_once():
+    """The near-field model's single scattering is a record made with the model (issue 48: per-channel constants
+    computed once): its profile, rings, total and incidence gain neither re-check the medium nor recompute the
+    real coefficients (before, every call of each did both). The medium's model and near_field_model's agree."""
+    medium = Material([1.2, 0.9, 0.6], [0.03, 0.08, 0.2], 1.4, g=0.8).medium
+    model = medium.near_field(2)
+    r = np.linspace(0.01, 5.0, 64)
+    pr = cProfile.Profile()
+    pr.enable()
+    model.profile(r), model.ring(r, r + 0.1), model.total(), model.total(0.7), model.incidence_gain(0.8)
+    pr.disable()
+    called = {name for (_f, _l, name) in pstats.Stats(pr).stats}
+    assert not called & {"check_material", "real_coefficients", "_angles", "_angular_factor"}, called
+    other = near_field_model(float(medium.albedo_prime[2]), 1.4, 0.8)
+    np.testing.assert_allclose(model.profile(r), other.profile(r), rtol=1e-14)
+    # the real coefficients in optical units: sigma_s = sigma_s' / (1 - g) = 3 /mm, sigma_a = 0.2 /mm, over
+    # sigma_t' = 0.8 /mm
+    assert model.single.sigma_t == pytest.approx((0.6 / 0.2 + 0.2) / 0.8, rel=1e-14)

@@ -111,8 +111,8 @@ def test_a_surface_bake_makes_the_record_once_and_every_stage_reads_it(transport
     opts = BakeOptions(model="exact-sphere", surface=SurfaceOptions(transport=transport, source_model="beam"))
     bake(mesh, SKIN, lights, opts)   # compiled code and caches
     material = Material(SKIN.sigma_s_prime, SKIN.sigma_a, SKIN.eta, name="again")
-    names = {"medium.py:__init__", "gather.py:cutoff_radii", "farfield.py:far_field_radius",
-             "kernel_evaluation.py:__init__"}
+    names = {"medium.py:__init__", "dipole.py:dipole_cutoff_radii", "gather.py:cutoff_radii",
+             "farfield.py:far_field_radius", "kernel_evaluation.py:__init__"}
     got = _calls(lambda: bake(mesh, material, lights, opts), names)
-    assert got == {"medium.py:__init__": 1, "gather.py:cutoff_radii": 2,   # the cutoff, the distance check's
-                   "farfield.py:far_field_radius": 1, "kernel_evaluation.py:__init__": 1}, got
+    assert got == {"medium.py:__init__": 1, "dipole.py:dipole_cutoff_radii": 3,   # the cutoff, the distance
+                   "kernel_evaluation.py:__init__": 1}, got                        # check's and the far field's
