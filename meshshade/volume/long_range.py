@@ -37,8 +37,13 @@ __all__ = ["SOURCE_POINTS", "line_rule", "ewald_weight", "lattice_loads", "SIDEW
 
 #: points of the Gauss-Laguerre rule along each refracted ray (exact for the moments of t up to degree 11)
 SOURCE_POINTS = 6
-#: points per axis of the Gauss-Hermite rule of the sideways Gaussian
-SIDEWAYS_POINTS = 2
+#: points per axis of the Gauss-Hermite rule of the sideways Gaussian. The rule must resolve the Gaussian on the
+#: finest cubes (their side equals the spread, resolution.SPREAD_OVER_H0): with 2 points (+-spread) the cubes around
+#: edges of light saw four lumps per entry, and the surface read at the entries (which sit among them) came out low:
+#: a marble block's face at the finest level -23 / -30 / -36 % against adding-doubling (-0.5 / -0.7 / -0.8 % at the
+#: next level); 3 or 5 points put one on the entry itself (+27 % high); 4 points -10 %; 6 points within 2 % (issue 47;
+#: docs/limitations.md). Cost: the 141k head's sources 0.2 -> 0.9 s of a 9-10 s bake.
+SIDEWAYS_POINTS = 6
 #: the entries are loaded in this many fixed ranges, each into its own array (on the worker threads)
 LOAD_BLOCKS = 8
 
