@@ -32,8 +32,8 @@ from meshshade.errors import MaterialError
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.kernels.optics import check_material
 
-__all__ = ["SingleScattering", "single_scattering", "single_scattering_profile", "single_scattering_ring", "single_scattering_total", "hg_phase",
-           "real_coefficients"]
+__all__ = ["SingleScattering", "single_scattering", "single_scattering_profile", "single_scattering_ring",
+           "single_scattering_total", "hg_phase", "real_coefficients"]
 
 #: Gauss-Legendre nodes of the angular integrals
 NODES = 96

@@ -313,5 +313,5 @@ def far_field_radius(material: Material, far_tol: float = DEFAULT_FAR_TOL) -> np
     it in shadowed regions), so the guaranteed far-field error ``rel_tol`` is about ``rel_tol * far_tol`` of the
     local exitance where the surface is lit.
     """
-    return dipole_cutoff_radii(check_far_tol(far_tol), sigma_t_prime=material.sigma_t_prime, albedo_prime=material.albedo_prime,
-                               eta=material.eta)
+    return dipole_cutoff_radii(check_far_tol(far_tol), sigma_t_prime=material.sigma_t_prime,
+                               albedo_prime=material.albedo_prime, eta=material.eta)

@@ -111,27 +111,6 @@ class RemainderTables:
                         PATCH_RADII, DISC_STEPS, log_a0, dlog_a, rows.astype(np.int64), self.disc)
             self._disc_rows[rows] = True
 
-    def near_and_beyond(self, cos_t, near_mm):
-        """(p, 3): int_0^near f plus the energy beyond the radius, per channel, at ``cos_t`` (p,) and radius
-        ``near_mm`` (a number or (p,), mm): what a receiver of irradiance 1 gets from its own neighbourhood and the
-        far tail in eq. (103)."""
-        c = np.atleast_1d(np.asarray(cos_t, dtype=np.float64))
-        r = np.broadcast_to(np.asarray(near_mm, dtype=np.float64), c.shape)
-        out = np.empty((c.size, 3))
-        for k in range(3):
-            u = (np.log(r) - self.log_r0[k]) / self.dlog
-            j = np.clip(u, 0.0, self.n_r[k] - 1.0001).astype(np.int64)
-            w = np.clip(u - j, 0.0, 1.0)
-            val = (1 - w) * self.cum[k][:, j] + w * self.cum[k][:, np.minimum(j + 1, self.n_r[k] - 1)] \
-                + self.rest[k][:, None]                                     # (9, p): at the cos nodes
-            g = self.cos_t[k]
-            t = (np.clip(c, g[0], g[-1]) - g[0]) / (g[1] - g[0])
-            i = np.minimum(t.astype(np.int64), g.size - 2)
-            f = t - i
-            cols = np.arange(c.size)
-            out[:, k] = (1 - f) * val[i, cols] + f * val[i + 1, cols]
-        return out
-
     def totals(self, cos_t):
         """(p, 3): T(theta_t) of each channel at ``cos_t`` (p,) (linear in cos theta_t, clamped to the table)."""
         c = np.asarray(cos_t, dtype=np.float64)
@@ -467,7 +446,7 @@ NEAR_MM = 2.5
 NEAR_SPACINGS = 3.0
 #: the one-by-one zone reaches at most this many mean sampling spacings
 MID_SPACINGS = 6.0
-#: beyond the subtracted zone, a node of the entries' tree whose extent is below THETA times its distance counts as
+#: beyond the one-by-one zone, a node of the entries' tree whose extent is below THETA times its distance counts as
 #: one entry
 THETA = 0.3
 #: entries per leaf of the tree
@@ -498,10 +477,10 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     spacing where that is less, and never more than MID_SPACINGS mean spacings) are summed one by one; beyond, the
     entries' tree is opened until a node's extent is below ``theta`` times its distance (Barnes-Hut: a node's power
     at its power centroid less E(x) times its area at its area centroid), so the cost per receiver grows with the
-    log of the radius over the spacing, not with its square. Every receiver is summed itself: an earlier pass that evaluated the part beyond
-    a reach at one receiver per cube and interpolated it split the pairs at the reach differently for the receiver
-    and the cube's (up to 22 % off at single samples of the 141k head, and a 5e-8 change of scale moved a vertex by
-    13 %); made consistent, it cost what this does."""
+    log of the radius over the spacing, not with its square. Every receiver is summed itself: an earlier pass that
+    evaluated the part beyond a reach at one receiver per cube and interpolated it split the pairs at the reach
+    differently for the receiver and the cube's (up to 22 % off at single samples of the 141k head, and a 5e-8
+    change of scale moved a vertex by 13 %); made consistent, it cost what this does."""
     n = rec["pos"].shape[0]
     ra = _arg(rec["radius"])
     if spacing_mm is None:

@@ -130,9 +130,9 @@ def volume_resolution(material, area_mm2: float, extent_mm, *, h0: float | None 
         h_mat, h_obj = _round_h(h_mat), float(2.0 ** (math.floor(4.0 * math.log2(h_obj)) / 4.0))
         h, why = (h_mat, "material") if h_mat <= h_obj else (h_obj, "object")
         name = getattr(material, "name", None)
+        whose = f"{name}'s " if name else ""
         colour = ("red", "green", "blue")[fast % 3]
-        reason = (f"material: {name + chr(39) + 's ' if name else ''}{colour} decays in {1.0 / kappa[fast]:.3g} mm"
-                  if why == "material" else
+        reason = (f"material: {whose}{colour} decays in {1.0 / kappa[fast]:.3g} mm" if why == "material" else
                   f"object: its thinnest extent {thinnest:.3g} mm over {MIN_CELLS_ACROSS:g}")
         # surface cubes (h0): the surface's area times their band (to where level 2 starts) and a cut layer, over
         # h0^3 (the finer cubes at edges of light come on top, in proportion to the edges' length)

@@ -491,8 +491,9 @@ def principled(name, colour, radius, scale=1.0, ior=1.3):
 def test_slots_of_different_media_bake_as_the_cli_parts(registered, tmp_path):
     """Issue 49: an object whose faces use two materials of different media, baked "From the object's material",
     equals the command-line bake of the same world-space mesh with its faces in two usemtl parts, the first slot's
-    medium for the rest and the second's for its part, each given the coefficients the test converts by hand (radius x scale x mm per unit = 1/sigma_t'; the albedo from the Base
-    Color by the model's own reflectance, eq. (106)); an image on one of them is refused in one line."""
+    medium for the rest and the second's for its part, each given the coefficients the test converts by hand
+    (radius x scale x mm per unit = 1/sigma_t'; the albedo from the Base Color by the model's own reflectance,
+    eq. (106)); an image on one of them is refused in one line."""
     from meshshade.kernels.painted_reflectance import albedo_for_reflectance
 
     sc = bpy.context.scene

@@ -2,8 +2,8 @@
 reflectance: the reference is adding-doubling (iadpython, an independent solver: a slab 400 optical depths thick,
 index-matched below, its specular part taken off), per unit entering power times (1 - F(0)).
 
-Skin1 meets it (-0.3 / +0.4 / -2.3 %); so does marble (reduced albedo 0.999, decay lengths 4-8.5 mm): -0.5 / -0.7
-/ -0.8 % on the 80 x 80 x 40 mm block (-1.7 / -1.8 / -1.9 % on a 120 x 120 x 60 mm one), since eq. (103)'s
+Skin1 meets it (0.0 / +1.1 / -1.8 %); so does marble (reduced albedo 0.999, decay lengths 4-8.5 mm): -0.3 / -0.2
+/ -0.15 % on the 80 x 80 x 40 mm block (-0.5 / -0.7 / -0.8 % with the 2-point sideways rule), since eq. (103)'s
 subtraction covers every pair. Before, it covered the pairs
 within 2.5 mm of the receiver only and left the rest to the sampled sum, whose quadrature of marble's long f missed
 by -0.08 of the receiver's irradiance: the lit centre read -9.9 / -11.9 / -13.6 % (80 x 80 x 40 mm), the deficit
