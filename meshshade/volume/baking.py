@@ -23,7 +23,7 @@ __all__ = ["VolumeModel", "VolumeBake", "VOLUME_STAGES"]
 
 #: the volume bake's stages in order, with their rough shares of its time (the progress bar's units)
 VOLUME_STAGES = {"volume sampling": 1, "near-field tables": 1, "rays": 1, "volume lattice": 3, "volume operator": 2,
-                 "volume multigrid": 2, "volume sources": 1, "volume solve": 3, "near field": 3}
+                 "volume multigrid": 2, "volume sources": 1, "volume solve": 3, "near field": 3, "uncollided": 1}
 
 
 class VolumeBake(NamedTuple):
@@ -111,7 +111,7 @@ def _exitance(vt, lights, backend, clock, on_stage=None) -> VolumeBake:
     clock.lap("rays")
     if on_stage is not None:
         on_stage("rays")
-    Ms, vstats = vt.sample_exitance(samples)
+    Ms, vstats = vt.sample_exitance(samples, scene)
     clock.charge(vstats.pop("timings"))
     stats = {"entry_samples": len(samples), "cutoff_mm": vt.tables.radius_mm.tolist(), **samples.stats,
              **vt.stats, **vstats, "transport": "volume", "near_field": "beam"}

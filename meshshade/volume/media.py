@@ -92,6 +92,15 @@ class VaryingMedium:
         """(p, 3): eq. (103) of the point entries ``src`` at ``points`` (receivers ``rec``), no coarse far part."""
         raise NotImplementedError
 
+    def extinction(self):
+        """(3,) 1/mm: the reduced extinction sigma_t' where it is the same everywhere, else None (then
+        :meth:`extinction_at`): what the unscattered light crossing the object sees (eq. (130))."""
+        raise NotImplementedError
+
+    def extinction_at(self, points):
+        """(p, 3) 1/mm: the reduced extinction sigma_t' at ``points`` (p, 3) of the volume."""
+        raise NotImplementedError
+
 
 # ------------------------------------------------------------------------------------------------ painted
 class PaintedMedium(VaryingMedium):
@@ -159,6 +168,13 @@ class PaintedMedium(VaryingMedium):
     def point_near_field(self, src, rec, points):
         parts = [remainder_exitance(tab, src, rec)[0] for tab in self.tables_at]
         return self._at_receiver_albedo(parts, self.medium_at(points)[0])
+
+    def extinction(self):
+        # the paint keeps the base's mean free path (eq. (106)): sigma_t' is the base's everywhere
+        return np.asarray(self.material.sigma_t_prime, dtype=np.float64)
+
+    def extinction_at(self, points):
+        return np.broadcast_to(self.extinction(), (len(points), 3))
 
     def _at_receiver_albedo(self, parts, albedo):
         """(p, 3): the near fields ``parts`` (one (p, 3) per node) interpolated at each receiver's ``albedo``
@@ -273,6 +289,14 @@ class PartsMedium(VaryingMedium):
         D = np.stack([np.asarray(m.medium.D, dtype=np.float64) for m in self.media])[k]
         sig_a = np.stack([np.asarray(m.sigma_a, dtype=np.float64) for m in self.media])[k]
         return D, sig_a
+
+    def extinction(self):
+        st = np.stack([np.asarray(m.sigma_t_prime, dtype=np.float64) for m in self.media])
+        return st[0] if np.all(st == st[0]) else None
+
+    def extinction_at(self, points):
+        st = np.stack([np.asarray(m.sigma_t_prime, dtype=np.float64) for m in self.media])
+        return st[self.medium_at(points)]
 
     def entry_medium(self, samples):
         """(k,) int: the medium where each entry enters (its sampling vertex's; a beam's nearest vertex's)."""

@@ -24,11 +24,15 @@ class VolumeOptions:
     solve_rtol : float in (0, 0.1]
         The multigrid conjugate gradients' relative residual per channel
         (:data:`~meshshade.volume.multigrid.SOLVE_RTOL`: the exitance moves by about this share of its peak).
+    uncollided : bool
+        Whether the light that crosses a thin part before it scatters leaves on the far side (default True,
+        docs/physics.md §15.6; False: diffusion and the near field alone, for comparison).
     """
 
     h0: float | None = None
     budget: int = DEFAULT_BUDGET
     solve_rtol: float = SOLVE_RTOL
+    uncollided: bool = True
 
     def __post_init__(self):
         h0 = self.h0
@@ -40,3 +44,5 @@ class VolumeOptions:
         r = self.solve_rtol
         if not (isinstance(r, (int, float)) and not isinstance(r, bool) and 0.0 < r <= 0.1):
             raise ParameterError(f"the volume's solve tolerance solve_rtol must lie in (0, 0.1], got {r!r}")
+        if not isinstance(self.uncollided, bool):
+            raise ParameterError(f"the volume's uncollided must be True or False, got {self.uncollided!r}")

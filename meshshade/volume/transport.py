@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 from meshshade.errors import MeshshadeError
 from meshshade.kernels.fresnel import refract_in
 from meshshade.progress import kernel_interrupts
+from meshshade.raycast import make_scene
 from meshshade.volume.cutfem import assemble
 from meshshade.volume.inside import SurfaceVolume
 from meshshade.volume.lattice import build_lattice
@@ -41,6 +42,7 @@ from meshshade.volume.remainder import RemainderTables, longest_edges, remainder
 from meshshade.volume.options import VolumeOptions
 from meshshade.volume.resolution import volume_resolution
 from meshshade.volume.surface import SamplingSurface
+from meshshade.volume.uncollided import DEPTH_POINTS, uncollided_exitance
 
 __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0", "NEAR_FIELD_NODES"]
 
@@ -219,10 +221,11 @@ class VolumeTransport:
         Ms, stats = self.sample_exitance(samples)
         return self.to_vertices(Ms), stats
 
-    def sample_exitance(self, samples):
+    def sample_exitance(self, samples, scene=None):
         """(M (n_s, 3) W/mm^2 at the sampling surface's vertices, stats with ``timings``): the solution itself,
         P1 on the sampling surface: the mesh's vertices read it at their points (:meth:`to_vertices`), textures and
-        per-pixel renders between them (:meth:`meshshade.volume.surface.SamplingSurface.locate`)."""
+        per-pixel renders between them (:meth:`meshshade.volume.surface.SamplingSurface.locate`). ``scene``: the
+        sampling surface's ray scene (made here if None) for the light crossing thin parts."""
         mat, surf = self.material, self.surface.samples
         stats = {}
         if len(samples) == 0:
@@ -265,11 +268,45 @@ class VolumeTransport:
         stats["volume_negative_clamped"] = neg.sum(axis=0).tolist()
         stats["volume_negative_worst"] = [float(max(0.0, -M[:, c].min()) / peak[c]) for c in range(3)]
         M[neg] = 0.0
+        if self.options.uncollided:
+            t = time.perf_counter()
+            Mu, ustats = self.uncollided(samples, w, scene)
+            M += Mu
+            stats.update(ustats)
+            _lap(timings, "uncollided", t, on_stage)
+        elif on_stage is not None:           # not asked for: the stage is over at once (progress reaches its end)
+            on_stage("uncollided")
         total = np.maximum(samples.power.sum(), 1e-300)
         stats.update({"volume_dropped_source_power": [round(float(d / total), 6) for d in dropped],
                       "near_field_pairs": int(pairs), "volume_solve_iterations": its.tolist(),
                       "volume_outside_lattice": int(outside), "timings": timings})
         return M, stats
+
+    def uncollided(self, samples, w, scene=None):
+        """(M_u (n_s, 3) W/mm^2 at the sampling surface's vertices, stats): the entering light along the refracted
+        directions ``w`` that leaves unscattered (eqs. (130)-(131), :mod:`meshshade.volume.uncollided`)."""
+        surf = self.surface.samples
+        if scene is None:
+            scene = make_scene(surf.vertices, surf.faces)
+        ext = self.medium.extinction() if self.medium is not None else np.asarray(self.material.sigma_t_prime)
+        depth = None
+        if ext is None:                      # parts of different extinction: a midpoint rule along each segment
+            medium = self.medium
+
+            def depth(o, d, L):
+                u = (np.arange(DEPTH_POINTS) + 0.5) / DEPTH_POINTS
+                pts = o[:, None, :] + (L[:, None] * u[None, :])[:, :, None] * d[:, None, :]
+                sig = medium.extinction_at(pts.reshape(-1, 3)).reshape(len(o), DEPTH_POINTS, 3)
+                return sig.mean(axis=1) * L[:, None]
+            depth.sigma_min = np.min([np.asarray(m.sigma_t_prime) for m in self.medium.media], axis=0)
+        closed = bool(self.mesh.defects.is_closed) and self.mesh.defects.n_components == 1
+        sides = None if closed else (lambda p: self.inside.winding(p) > 0.5)
+        M, st = uncollided_exitance(scene, surf.vertex_areas, samples.positions, samples.normals, w, samples.power,
+                                    float(self.material.eta), sigma_t_prime=ext, optical_depth=depth, sides=sides)
+        total = np.maximum(samples.power.sum(), 1e-300)
+        return M, {"volume_uncollided_power": [round(float(x / total), 6) for x in st["left"]],
+                   "volume_uncollided_lost": [round(float(x / total), 6) for x in st["lost"]],
+                   "volume_uncollided_rays": int(st["rays"])}
 
     def point_entries_correction(self, samples, index, points, normals, radius):
         """(p, 3) W/mm^2: eq. (103) of the point entries ``index`` of ``samples`` (beams) at ``points`` (p, 3) with

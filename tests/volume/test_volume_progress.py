@@ -22,7 +22,7 @@ def test_each_stage_is_reported(monkeypatch, capsys):
     lines = [x for x in capsys.readouterr().err.splitlines() if x.startswith("meshshade: bake:")]
     assert set(res.timings) == set(VOLUME_STAGES)                  # every stage ran and was timed
     named = [x.rsplit("[", 1)[1].rstrip("]") for x in lines]
-    assert named == list(VOLUME_STAGES)[1:] + ["near field"]        # the next stage, then the last again
+    assert named == list(VOLUME_STAGES)[1:] + ["uncollided"]        # the next stage, then the last again
     assert "100 %" in lines[-1]
     bake(mesh, Material.preset("skin1"), sun, reuse=res.volume)
     assert capsys.readouterr().err == ""
