@@ -42,7 +42,7 @@ from meshshade.volume.remainder import RemainderTables, longest_edges, remainder
 from meshshade.volume.options import VolumeOptions
 from meshshade.volume.resolution import volume_resolution
 from meshshade.volume.surface import SamplingSurface
-from meshshade.volume.uncollided import DEPTH_POINTS, uncollided_exitance
+from meshshade.volume.uncollided import DEPTH_POINTS, FLOOR, PREFILTER_MARGIN, face_entries, uncollided_exitance
 
 __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0", "NEAR_FIELD_NODES"]
 
@@ -270,7 +270,7 @@ class VolumeTransport:
         M[neg] = 0.0
         if self.options.uncollided:
             t = time.perf_counter()
-            Mu, ustats = self.uncollided(samples, w, scene)
+            Mu, ustats = self.uncollided(samples, scene)
             M += Mu
             stats.update(ustats)
             _lap(timings, "uncollided", t, on_stage)
@@ -282,9 +282,10 @@ class VolumeTransport:
                       "volume_outside_lattice": int(outside), "timings": timings})
         return M, stats
 
-    def uncollided(self, samples, w, scene=None):
-        """(M_u (n_s, 3) W/mm^2 at the sampling surface's vertices, stats): the entering light along the refracted
-        directions ``w`` that leaves unscattered (eqs. (130)-(131), :mod:`meshshade.volume.uncollided`)."""
+    def uncollided(self, samples, scene=None):
+        """(M_u (n_s, 3) W/mm^2 at the sampling surface's vertices, stats): the light entering at ``samples`` that
+        leaves unscattered (eqs. (130)-(131), :mod:`meshshade.volume.uncollided`), each vertex's entry split over
+        its faces as the Monte Carlo's photons enter (:func:`~meshshade.volume.uncollided.face_entries`)."""
         surf = self.surface.samples
         if scene is None:
             scene = make_scene(surf.vertices, surf.faces)
@@ -301,12 +302,24 @@ class VolumeTransport:
             depth.sigma_min = np.min([np.asarray(m.sigma_t_prime) for m in self.medium.media], axis=0)
         closed = bool(self.mesh.defects.is_closed) and self.mesh.defects.n_components == 1
         sides = None if closed else (lambda p: self.inside.winding(p) > 0.5)
-        M, st = uncollided_exitance(scene, surf.vertex_areas, samples.positions, samples.normals, w, samples.power,
-                                    float(self.material.eta), sigma_t_prime=ext, optical_depth=depth, sides=sides)
+        eta = float(self.material.eta)
+        # only the entries whose own ray can carry light across (a lower bound of its extinction, a margin of
+        # PREFILTER_MARGIN below the floor) are split over their faces and followed: most end in a thick part
+        w = refract_in(samples.directions, samples.normals, eta)
+        first = scene.first_hit(scene.offset_origins(samples.positions, samples.normals, sign=-1.0), w)
+        sig_min = ext if ext is not None else depth.sigma_min
+        reach = first.hit & (np.exp(-np.where(first.hit, first.t, np.inf) * float(np.min(sig_min)))
+                             >= PREFILTER_MARGIN * FLOOR)
+        sel = np.flatnonzero(reach)
+        pos, nrm, win, pw = face_entries(surf.vertices, surf.faces, samples.vertex[sel], samples.positions[sel],
+                                         samples.directions[sel], samples.normals[sel], samples.power[sel], eta)
+        M, st = uncollided_exitance(scene, surf.vertex_areas, pos, nrm, win, pw, eta, sigma_t_prime=ext,
+                                    optical_depth=depth, sides=sides)
         total = np.maximum(samples.power.sum(), 1e-300)
         return M, {"volume_uncollided_power": [round(float(x / total), 6) for x in st["left"]],
                    "volume_uncollided_lost": [round(float(x / total), 6) for x in st["lost"]],
-                   "volume_uncollided_rays": int(st["rays"])}
+                   "volume_uncollided_rays": int(st["rays"] + len(samples)),
+                   "volume_uncollided_entries": int(sel.size)}
 
     def point_entries_correction(self, samples, index, points, normals, radius):
         """(p, 3) W/mm^2: eq. (103) of the point entries ``index`` of ``samples`` (beams) at ``points`` (p, 3) with

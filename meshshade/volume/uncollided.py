@@ -7,27 +7,32 @@ surface again, P exp(-sigma_t' L), leaves there (or is reflected back in, Fresne
 meets the surface again; across a part a few mean free paths thick (an ear, a finger, a thin wall) in a medium
 that absorbs much of what it scatters (ketchup's green and blue), it is most of the light on the far side.
 
-:func:`uncollided_exitance` follows each entry's refracted ray with Embree: at each face it meets, the unscattered
-power (eq. (130)) leaves with the Fresnel transmittance from inside and the rest is reflected and followed on, up
-to ``MAX_EVENTS`` faces or until under ``FLOOR`` of its start; what leaves is put on the hit face's corners by the
-exit point's barycentrics over the corners' areas (eq. (131)), as the Monte Carlo tallies its exits. Faces with the
-medium on both sides (parts overlapping, a fin) are crossed without an event and a ray that has left the medium
-through a hole is lost, both decided by the winding number on either side of the face (as the Monte Carlo's walk
-surface decides them, eq. (127)) where the surface is not one closed part. Extinction is the similar medium's
-sigma_t' (the diffusion's and the sources', so that sources and this term share the entering power exactly); in a
-medium varying over the object, its optical depth along each segment by a midpoint rule. No I/O.
+:func:`face_entries` splits each vertex's entry over the faces around it, as the Monte Carlo's photons enter
+(refracted by each face's own normal); :func:`uncollided_exitance` follows each entry's refracted ray with Embree:
+at each face it meets, the unscattered power (eq. (130)) leaves with the Fresnel transmittance from inside and the
+rest is reflected and followed on, up to ``MAX_EVENTS`` faces or until under ``FLOOR`` of its start; what leaves is
+put on the hit face's corners by the exit point's barycentrics over the corners' areas (eq. (131)), as the Monte
+Carlo tallies its exits. Faces with the medium on both sides (parts overlapping, a fin) are crossed without an
+event and a ray that has left the medium through a hole is lost, both decided by the winding number on either side
+of the face (as the Monte Carlo's walk surface decides them, eq. (127)) where the surface is not one closed part.
+Extinction is the similar medium's sigma_t' (the diffusion's and the sources', so that sources and this term share
+the entering power exactly); in a medium varying over the object, its optical depth along each segment by a
+midpoint rule. No I/O.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from meshshade.kernels.fresnel import fresnel_reflectance
+from meshshade.kernels.fresnel import fresnel_reflectance, fresnel_transmittance_entry, refract_in
 
-__all__ = ["uncollided_exitance", "FLOOR", "MAX_EVENTS", "DEPTH_POINTS"]
+__all__ = ["uncollided_exitance", "face_entries", "FLOOR", "PREFILTER_MARGIN", "MAX_EVENTS", "DEPTH_POINTS"]
 
 #: a ray is followed until its largest channel's power falls under this share of its entering power (the rest is
-#: booked as absorbed; the Monte Carlo's roulette starts at 1e-4 of a photon's weight)
-FLOOR = 1e-6
+#: booked as absorbed; the Monte Carlo's roulette starts at the same 1e-4 of a photon's weight)
+FLOOR = 1e-4
+#: an entry is split over its faces only where its own ray keeps more than this share of FLOOR (by the least
+#: extinction over the channels) at the face it meets first
+PREFILTER_MARGIN = 1e-2
 #: faces a ray meets at most (each either an exit with a Fresnel reflection back in, or crossed); what is left
 #: after the last is booked as lost
 MAX_EVENTS = 16
@@ -125,3 +130,46 @@ def uncollided_exitance(scene, vertex_areas, positions, normals, directions, pow
     areas = np.asarray(vertex_areas, dtype=np.float64)
     M = np.where(areas[:, None] > 0.0, deposit / np.where(areas > 0.0, areas, 1.0)[:, None], 0.0)
     return M, stats
+
+
+def face_entries(vertices, faces, vertex, positions, directions, normals, power, eta):
+    """(positions (q, 3), normals (q, 3), refracted directions (q, 3), power (q,)): the entries at vertices split
+    over their faces, as the Monte Carlo's photons enter (eq. (68)). Entry ``i`` at ``vertex[i]`` becomes one entry
+    per face of that vertex, at the centroid of the vertex's third of the face (2/3 the vertex, 1/6 each other
+    corner), refracted by the face's geometric normal (turned to the vertex normal's side), with the share of
+    ``power[i]`` of the face's A_f/3 cos_f F_t(cos_f) (cos_f of the light's ``directions[i]`` on the face; none
+    where the face turns away). A point entry (``vertex[i]`` = -1, a beam's hit) and an entry none of whose faces
+    faces the light are kept as they are (at ``positions[i]``, refracted by ``normals[i]``). ``vertices`` (n, 3),
+    ``faces`` (m, 3) the surface's; the rest per entry (k,)."""
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64)
+    vertex = np.asarray(vertex, dtype=np.int64)
+    at_v = np.flatnonzero(vertex >= 0)
+    inc_v, inc_f = F.ravel(), np.repeat(np.arange(F.shape[0]), 3)          # (vertex, face) incidences
+    order = np.argsort(inc_v, kind="stable")
+    inc_f = inc_f[order]
+    first = np.searchsorted(inc_v[order], np.arange(V.shape[0] + 1))
+    v = vertex[at_v]
+    count = first[v + 1] - first[v]
+    owner = np.repeat(np.arange(at_v.size), count)                        # each (entry, face) pair's entry
+    offs = np.arange(owner.size) - np.repeat(np.cumsum(count) - count, count)
+    f = inc_f[np.repeat(first[v], count) + offs]
+    tri = V[F[f]]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = 0.5 * np.linalg.norm(n, axis=1)
+    n = n / np.where(area > 0.0, 2.0 * area, 1.0)[:, None]
+    e = at_v[owner]
+    n *= np.where(np.einsum("ij,ij->i", n, normals[e]) < 0.0, -1.0, 1.0)[:, None]
+    d = directions[e]
+    cos = np.clip(-np.einsum("ij,ij->i", d, n), 0.0, 1.0)
+    weight = area / 3.0 * cos * fresnel_transmittance_entry(cos, eta)
+    total = np.bincount(owner, weights=weight, minlength=at_v.size)
+    keep = (total[owner] > 0.0) & (weight > 0.0)
+    share = weight[keep] / total[owner][keep] * power[e][keep]
+    split = np.zeros(len(vertex), dtype=bool)
+    split[e[keep]] = True
+    whole = np.flatnonzero(~split)
+    return (np.concatenate([V[v[owner]][keep] / 2.0 + tri[keep].sum(axis=1) / 6.0, positions[whole]]),
+            np.concatenate([n[keep], normals[whole]]),
+            np.concatenate([refract_in(d[keep], n[keep], eta), refract_in(directions[whole], normals[whole], eta)]),
+            np.concatenate([share, power[whole]]))

@@ -26,7 +26,7 @@ from meshshade.light import DirectionalLight, entry_samples
 from meshshade.materials import Material
 from meshshade.raycast import make_scene
 from meshshade.volume.inside import SurfaceVolume
-from meshshade.volume.uncollided import uncollided_exitance
+from meshshade.volume.uncollided import FLOOR, face_entries, uncollided_exitance
 
 ETA = 1.4
 
@@ -67,7 +67,8 @@ def test_a_slab_lets_the_unscattered_light_through_as_the_series_of_reflections(
     V, F = _slab(20.0, height, 4)
     mesh, pos, n, d, power = _top_entries(V, F, height)
     scene = make_scene(V, F)
-    M, stats = uncollided_exitance(scene, mesh.vertex_areas, pos, n, d, power, ETA, sigma_t_prime=np.full(3, sigma))
+    M, stats = uncollided_exitance(scene, mesh.vertex_areas, pos, n, d, power, ETA, sigma_t_prime=np.full(3, sigma),
+                                   floor=1e-15)
     r = _fresnel(1.0, ETA, 1.0)
     tau = sigma * height
     back = (1 - r) * math.exp(-tau) / (1 - r * r * math.exp(-2 * tau))
@@ -81,6 +82,9 @@ def test_a_slab_lets_the_unscattered_light_through_as_the_series_of_reflections(
     # every watt is accounted for: what left plus what the slab absorbed on the way
     absorbed = power.sum() * (1 - math.exp(-tau)) * (1 + r * math.exp(-tau)) / (1 - r * r * math.exp(-2 * tau))
     np.testing.assert_allclose(stats["left"] + absorbed, power.sum(), rtol=1e-4)
+    # the default floor stops a ray under FLOOR of its power: what it leaves out is less than that
+    M_d, _ = uncollided_exitance(scene, mesh.vertex_areas, pos, n, d, power, ETA, sigma_t_prime=np.full(3, sigma))
+    assert np.all(np.abs(M_d[top] - M[top]) <= FLOOR * 1.0) and np.all(M_d[top] <= M[top])
 
 
 def test_a_sphere_lets_through_its_chords_light_integrated_over_the_disc():
@@ -142,6 +146,47 @@ def test_faces_with_the_medium_on_both_sides_are_crossed_and_a_hole_lets_light_o
     assert so["left"][0] < 0.1 * power.sum() * math.exp(-sigma * 1.2)
 
 
+def test_face_entries_split_each_vertex_s_power_over_its_lit_faces_as_photons_enter():
+    """Each vertex's entry becomes one per face facing the light, at the centroid of the vertex's third of it,
+    refracted by the face's own normal, their powers in the ratio A_f/3 cos_f F_t(cos_f) and summing to the
+    vertex's; a beam's point entry is kept as it is."""
+    ico = trimesh.creation.icosphere(subdivisions=2, radius=5.0)
+    V, F = np.asarray(ico.vertices), np.asarray(ico.faces)
+    mesh = Mesh.from_arrays(V, F)
+    sun = np.array([0.3, -0.4, -0.866]) / np.linalg.norm([0.3, -0.4, -0.866])
+    v = np.flatnonzero(mesh.vertex_normals @ -sun > 0.2)
+    k = v.size
+    vertex = np.concatenate([v, [-1]])
+    positions = np.concatenate([V[v], [[0.0, 0.0, 5.0]]])
+    normals = np.concatenate([mesh.vertex_normals[v], [[0.0, 0.0, 1.0]]])
+    directions = np.tile(sun, (k + 1, 1))
+    power = np.linspace(1.0, 2.0, k + 1)
+    pos, nrm, win, pw = face_entries(V, F, vertex, positions, directions, normals, power, ETA)
+    assert math.isclose(pw.sum(), power.sum(), rel_tol=1e-12)
+    # the beam's entry, last of the kept ones, as it was
+    np.testing.assert_array_equal(pos[-1], positions[-1])
+    assert pw[-1] == power[-1]
+    # one vertex's split, written out from its faces
+    i = 7
+    faces = np.flatnonzero(np.any(F == v[i], axis=1))
+    tri = V[F[faces]]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    a = 0.5 * np.linalg.norm(n, axis=1)
+    n /= 2 * a[:, None]
+    cos = n @ -sun
+    t = np.array([1.0 - _fresnel(c, 1.0, ETA) for c in cos])
+    share = a / 3 * cos * t * (cos > 0)
+    want_pos = (2.0 / 3.0) * V[v[i]] + (tri.sum(axis=1) - V[v[i]]) / 6.0
+    got = {tuple(np.round(p, 9)): (q, d) for p, q, d in zip(pos, pw, win)}
+    for p_, s_, n_ in zip(want_pos, share, n):
+        if s_ <= 0:
+            continue
+        q, d = got[tuple(np.round(p_, 9))]
+        assert math.isclose(q, s_ / share.sum() * power[i], rel_tol=1e-9)
+        sin_t = np.linalg.norm(np.cross(d, n_))                      # Snell at the face's own normal
+        assert math.isclose(sin_t * ETA, np.linalg.norm(np.cross(sun, n_)), rel_tol=1e-9)
+
+
 @pytest.mark.slow
 def test_a_thin_ketchup_slab_transmits_what_adding_doubling_transmits():
     """A 20 x 20 x 2 mm box of ketchup under a sun at normal incidence: the exitance at the middle of its far face
@@ -189,8 +234,7 @@ def test_parts_of_different_extinction_take_each_part_s_along_the_ray():
     scene = make_scene(S.vertices, S.faces)
     smp = entry_samples(S.vertices, S.faces, S.vertex_normals, S.vertex_areas,
                         [DirectionalLight((-1.0, 0.0, 0.0), 1.0)], scene=scene, eta=float(skin.eta))
-    w = refract_in(smp.directions, smp.normals, float(skin.eta))
-    M, stats = vt.uncollided(smp, w, scene)
+    M, stats = vt.uncollided(smp, scene)
     a, b = np.asarray(skin.sigma_t_prime), np.asarray(ketchup.sigma_t_prime)
 
     def exact(o, d, L):
@@ -204,8 +248,9 @@ def test_parts_of_different_extinction_take_each_part_s_along_the_ray():
         return np.outer(L_pos, a) + np.outer(L - L_pos, b)
     exact.sigma_min = np.minimum(a, b)
     inside = vt.inside
-    M_ref, ref = uncollided_exitance(scene, S.vertex_areas, smp.positions, smp.normals, w, smp.power,
-                                     float(skin.eta), optical_depth=exact,
+    pos, nrm, win, pw = face_entries(S.vertices, S.faces, smp.vertex, smp.positions, smp.directions, smp.normals,
+                                     smp.power, float(skin.eta))
+    M_ref, ref = uncollided_exitance(scene, S.vertex_areas, pos, nrm, win, pw, float(skin.eta), optical_depth=exact,
                                      sides=lambda p: inside.winding(p) > 0.5)
     total = smp.power.sum()
     np.testing.assert_allclose(stats["volume_uncollided_power"], ref["left"] / total, rtol=0.02, atol=1e-6)
