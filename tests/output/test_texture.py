@@ -109,10 +109,11 @@ def test_coarse_ball_texture_matches_the_exact_solution_between_vertices(ball_re
 
 
 def test_without_refinement_texels_are_the_vertex_bake_where_lights_enter_at_vertices():
-    mesh = Mesh.from_arrays(*icosphere(5.0, 3))
+    mesh = Mesh.from_arrays(*icosphere(5.0, 4))          # edges of 0.35 mm: finer than h0, the surface not split
     uv = spherical_uv(mesh.vertices, mesh.faces)
     tex = bake_texture(mesh, SKIN, SUN, uv=uv, size=128, padding=0, refine=1)
     plain = bake(mesh, SKIN, SUN)
+    assert plain.stats["volume_samples_split"] is False
     np.testing.assert_allclose(tex.vertex_radiance, plain.radiance, rtol=1e-9, atol=1e-15)
     texel, face, bary = texel_points(uv, 128)
     interp = np.maximum(np.einsum("ij,ijk->ik", bary, plain.radiance[mesh.faces[face]]), 0.0)
