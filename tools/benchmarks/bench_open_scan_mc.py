@@ -206,8 +206,8 @@ def _errors(M, R, sel, signed: bool = False):
 
 
 def hand_with_holes():
-    """(mesh, skin1, the sun) of the hand at 190 mm with six holes (mesh_defects' ``holes6``), or None without the
-    shared meshes."""
+    """(mesh, skin1, the sun, the holes' points) of the hand at 190 mm with six holes (mesh_defects' ``holes6``; the
+    points where they were cut), or None without the shared meshes."""
     got = bench.scene_arrays("hand190")
     if got is None:
         return None
@@ -216,14 +216,14 @@ def hand_with_holes():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         mesh = Mesh.from_arrays(d.vertices, d.faces)
-    return mesh, Material.preset("skin1"), DirectionalLight(sun, 1.0)
+    return mesh, Material.preset("skin1"), DirectionalLight(sun, 1.0), d.points
 
 
 def hand_row(reference_photons: int, photons: int) -> dict:
     got = hand_with_holes()
     if got is None:
         return {"row": "open_scan_mc", "skipped": f"{bench.SHARED} not found"}
-    mesh, mat, light = got
+    mesh, mat, light, holes = got
     t = time.perf_counter()
     res = bake(mesh, mat, [light])
     t_bake = time.perf_counter() - t
@@ -247,7 +247,7 @@ def hand_row(reference_photons: int, photons: int) -> dict:
            "lid_exit_%": [round(100.0 * float(x), 3) for x in ref.lid_power / ref.incident_power]}
     sets = {"lit_all": referenced & lit, "lit_rims": referenced & lit & near_rim}
     for D in (10.0, 25.0):
-        sets[f"lit_beyond_{int(D)}mm"] = md.far_from(mesh.vertices, d.points, D) & referenced & lit
+        sets[f"lit_beyond_{int(D)}mm"] = md.far_from(mesh.vertices, holes, D) & referenced & lit
     for name, sel in sets.items():
         B = np.asarray(res.patch_averaged())
         row[name] = {"bake": _errors(B, R, sel), "mc": _errors(np.asarray(mc.radiance), R, sel),

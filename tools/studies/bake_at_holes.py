@@ -60,7 +60,7 @@ def main(argv=None) -> int:
     if got is None:
         print(json.dumps({"row": "bake_at_holes", "skipped": f"{bench.SHARED} not found"}))
         return 0
-    mesh, mat, light = got
+    mesh, mat, light, _ = got
     B = np.asarray(bake(mesh, mat, [light]).patch_averaged())
     o = MCOptions(photons=int(args.photons), seed=5, beam_distances=False)
     import meshshade.montecarlo.simulation as simulation
