@@ -54,7 +54,7 @@ def uncollided_exitance(scene, vertex_areas, positions, normals, directions, pow
     sides : None where every face is the medium's boundary (one closed part), else ``sides(points) -> (p,) bool``,
         whether each point is in the medium (the winding number above 1/2)
     Returns M and stats: ``left`` (3,) W leaving, ``lost`` (3,) W through holes or after ``max_events``,
-    ``rays`` cast, ``events``.
+    ``rays`` cast.
     """
     V, F = scene.vertices, scene.faces
     positions = np.asarray(positions, dtype=np.float64)
@@ -62,7 +62,7 @@ def uncollided_exitance(scene, vertex_areas, positions, normals, directions, pow
     power = np.asarray(power, dtype=np.float64)
     n_v = V.shape[0]
     deposit = np.zeros((n_v, 3))
-    stats = {"left": np.zeros(3), "lost": np.zeros(3), "rays": 0, "events": 0}
+    stats = {"left": np.zeros(3), "lost": np.zeros(3), "rays": 0}
     if sigma_t_prime is not None:
         sig_min = np.asarray(sigma_t_prime, dtype=np.float64)
     else:
@@ -92,7 +92,6 @@ def uncollided_exitance(scene, vertex_areas, positions, normals, directions, pow
         w = w * np.exp(-tau)                                         # eq. (130)
         alive = np.max(w, axis=1) >= cut
         d, w, cut, face, bary, pts = d[alive], w[alive], cut[alive], face[alive], bary[alive], pts[alive]
-        stats["events"] += int(d.shape[0])
         n = np.cross(V[F[face, 1]] - V[F[face, 0]], V[F[face, 2]] - V[F[face, 0]])
         n /= np.linalg.norm(n, axis=1, keepdims=True)
         cos = np.einsum("ij,ij->i", d, n)
@@ -123,8 +122,9 @@ def uncollided_exitance(scene, vertex_areas, positions, normals, directions, pow
         w = np.where(cross[:, None], w, R[:, None] * w)
         d_new = np.where(cross[:, None], d, d - 2.0 * cos[:, None] * n)
         alive = np.max(w, axis=1) >= cut
-        o = np.where(cross[alive, None], scene.offset_origins(pts[alive], d[alive], sign=1.0),
-                     scene.offset_origins(pts[alive], n[alive], sign=-1.0))
+        # a crossed face is left along the ray, a reflection starts just inside the face
+        step = np.where(cross[:, None], d, -n)[alive]
+        o = scene.offset_origins(pts[alive], step, sign=1.0)
         d, w, cut = d_new[alive], w[alive], cut[alive]
     stats["lost"] += w.sum(axis=0)                                   # past the last event
     areas = np.asarray(vertex_areas, dtype=np.float64)
