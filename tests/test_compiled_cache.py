@@ -59,7 +59,8 @@ print(json.dumps(out))
 
 def _env(tmp_path: Path, pythonpath: Path, **extra) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", MARKER)}
-    env.update(PYTHONPATH=str(pythonpath), XDG_CACHE_HOME=str(tmp_path / "xdg"), **extra)
+    # no bytecode: an edit within the same second and of the same size would otherwise import the stale .pyc
+    env.update(PYTHONPATH=str(pythonpath), XDG_CACHE_HOME=str(tmp_path / "xdg"), PYTHONDONTWRITEBYTECODE="1", **extra)
     return env
 
 
