@@ -337,8 +337,22 @@ def _fill_index(index, lo, level, ijk, c0, c1):
                     index[i, j, k] = c
 
 
-#: corners closer to the surface than this fraction of the finest spacing are taken as just inside it
+#: corners closer to the surface than this fraction of the finest spacing are taken as just outside it
+#: (:func:`snap_corner_depths`)
 CORNER_SNAP = 1e-4
+
+
+def snap_corner_depths(depth, h0: float):
+    """``depth`` with the corners nearer the surface than ``CORNER_SNAP * h0`` put that far outside it.
+
+    Faces on the lattice's planes (a box at round coordinates) put corners on the surface, where the distance and
+    the winding number's side are rounding: a hair outside, every cube on the inside has those corners on its cut
+    (the cut surface, a hair inside the face, carries the face's boundary term), and a cube on the outside has no
+    corner inside and is dropped, whatever the rounding. Put a hair inside, the inside cube was uncut and the outside
+    one dropped, and the face lost its boundary (a box of apple 100 x 100 x 20 mm at the origin read +43 % in the
+    middle of its lit face, its cut surface 12,800 of 28,000 mm^2). The surface moves by at most 1e-4 h0."""
+    tiny = CORNER_SNAP * float(h0)
+    return np.where(np.abs(depth) < tiny, -tiny, depth)
 
 
 def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict | None = None) -> Lattice:
@@ -430,6 +444,7 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
             need[ids[s8.any(axis=1) & ~s8.all(axis=1)].ravel()] = True
     if need.any():
         cd[need] = depth(pts[need], bnd, sign=np.where(inside[need], 1, -1).astype(np.int8))
+    cd = snap_corner_depths(cd, h0)          # before the cubes are kept or dropped by their corners' sides
     evaluated += n_corners
     keep0 = cd[fine_ids].max(axis=1) > 0.0 if fine_ids.size else np.zeros(0, dtype=bool)
     kept[0] = cand[keep0]
@@ -509,10 +524,9 @@ def _finish(grading, level, ijk, depth, known_grid, known_depth, h_cut):
     if queries and depth is not None:
         dep[ask] = depth(nodes[ask], bound)
     dep[np.isnan(dep)] = bound
-    # a corner on the surface (faces on the lattice's planes: boxes at round coordinates) is put a hair inside,
-    # so that rounding of the input's coordinates (a float32 file, other units) does not flip it from side to side
-    tiny = CORNER_SNAP * h0
-    dep = np.where(np.abs(dep) < tiny, tiny, dep)
+    # a corner on the surface (faces on the lattice's planes: boxes at round coordinates) is put a hair outside,
+    # so that rounding (of the distance, the winding number, a float32 file's coordinates) does not decide its side
+    dep = snap_corner_depths(dep, h0)
     t2 = time.perf_counter()
     hanging, parents = _hanging_nodes(grid, level, ijk)
     shape = tuple(int(x) for x in hi - lo)
