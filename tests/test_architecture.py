@@ -103,8 +103,9 @@ PRIVATE_ALLOWED: dict = {}
 
 #: the most parameters a function takes (rule (h))
 MAX_PARAMS = 12
-#: numba's compilers (under ``numba.``): what they decorate or wrap is a compiled loop, outside rule (h)
-COMPILERS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stencil", "generated_jit"}
+#: numba's compilers (under ``numba.``): what they decorate or wrap is a compiled loop, outside rule (h) (``overload``:
+#: the function it overloads is compiled into its callers)
+COMPILERS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stencil", "generated_jit", "overload"}
 #: why a public entry point may take more: its options are keyword-only, named at every call
 PUBLIC_OPTIONS = "a public entry point whose options are keyword-only (each named at every call, none positional)"
 #: (module path, function qualname) -> why it may take more than MAX_PARAMS parameters

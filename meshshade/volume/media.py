@@ -158,16 +158,11 @@ class PaintedMedium(VaryingMedium):
         return loads, dropped
 
     def near_field(self, src, rec, spacing_mm):
-        parts, pairs = [], 0
-        for tab in self.tables_at:
-            Mf, n = remainder_exitance(tab, src, rec, spacing_mm=spacing_mm)
-            parts.append(Mf)
-            pairs += n
-        return self._at_receiver_albedo(parts, self.sample_albedo), pairs
+        return remainder_exitance(self.tables_at, src, rec, spacing_mm=spacing_mm,
+                                  blend=self._blend(self.sample_albedo))
 
     def point_near_field(self, src, rec, points):
-        parts = [remainder_exitance(tab, src, rec)[0] for tab in self.tables_at]
-        return self._at_receiver_albedo(parts, self.medium_at(points)[0])
+        return remainder_exitance(self.tables_at, src, rec, blend=self._blend(self.medium_at(points)[0]))[0]
 
     def extinction(self):
         # the paint keeps the base's mean free path (eq. (106)): sigma_t' is the base's everywhere
@@ -176,23 +171,18 @@ class PaintedMedium(VaryingMedium):
     def extinction_at(self, points):
         return np.broadcast_to(self.extinction(), (len(points), 3))
 
-    def _at_receiver_albedo(self, parts, albedo):
-        """(p, 3): the near fields ``parts`` (one (p, 3) per node) interpolated at each receiver's ``albedo``
-        (p, 3) per channel, linearly in log10(1 - alpha') (eq. (108))."""
-        if len(parts) == 1:
-            return parts[0]
+    def _blend(self, albedo):
+        """(node (p, 3), weight (p, 3)): each receiver's place between the tabulated albedos per channel, linear in
+        log10(1 - alpha') (eq. (108)); the near field is summed with both tables in one pass
+        (:func:`meshshade.volume.remainder.remainder_exitance`)."""
+        k = len(self.tables_at)
+        if k == 1:
+            return np.zeros(albedo.shape, dtype=np.int64), np.zeros(albedo.shape)
         x = np.log10(1.0 - albedo)
-        out = np.zeros_like(parts[0])
-        nodes = self._node_x
-        index = np.arange(len(parts), dtype=np.float64)
-        for c in range(3):
-            u = np.interp(x[:, c], nodes[:, c], index)          # the nodes increase in x (albedo falling)
-            j = np.minimum(np.floor(u).astype(np.int64), len(parts) - 2)
-            f = u - j
-            stack = np.stack([P[:, c] for P in parts], axis=1)
-            rows = np.arange(stack.shape[0])
-            out[:, c] = (1.0 - f) * stack[rows, j] + f * stack[rows, j + 1]
-        return out
+        index = np.arange(k, dtype=np.float64)
+        u = np.stack([np.interp(x[:, c], self._node_x[:, c], index) for c in range(3)], axis=1)
+        node = np.minimum(np.floor(u).astype(np.int64), k - 2)      # the nodes increase in x (albedo falling)
+        return node, u - node
 
 
 # ------------------------------------------------------------------------------------------------ parts

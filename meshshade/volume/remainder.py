@@ -30,9 +30,13 @@ blocks of pairs by the pacing threads. No I/O.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numba
 import numpy as np
+from numba.core import types
+from numba.core.errors import NumbaIRAssumptionWarning
+from numba.extending import overload
 
 from meshshade.kernels.robin_halfspace import robin_smoothed_exitances
 from meshshade.pacing import run_in_blocks
@@ -287,10 +291,11 @@ def _disc_table(f, cum, rest, n_r, log_r0, dlog, th_x, th_w, patch_radii, steps,
 
 
 @numba.njit(cache=True, inline="always")
-def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a):
+def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node, rec_blend, r):
     """f of the three channels at distance d for an entry of cos theta_t, averaged over a disc of radius a when
     d < PATCH_RADII a (interpolated in the disc table: ln a, d / a and cos theta_t); the logarithms and the disc
-    table's cell are shared by the channels."""
+    table's cell are shared by the channels. One table (``rec_node``, ``rec_blend`` and ``r`` are not read:
+    :func:`_pair_kernel`)."""
     k0 = k1 = k2 = 0.0
     if d <= 0.0 and a <= 0.0:
         return k0, k1, k2
@@ -343,18 +348,99 @@ def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog
     return k0, k1, k2
 
 
+@numba.njit(cache=True, inline="always")
+def _kernel3_blend(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node,
+                   rec_blend, r):
+    """:func:`_kernel3` over several tables (their arrays with a leading table axis): channel c of receiver r
+    reads table rec_node[r, c], blended with the next table by the weight rec_blend[r, c] (a painted receiver's
+    albedo between two tabulated ones, eq. (108)); the logarithms and the disc table's cell are shared by the
+    channels and the tables."""
+    k0 = k1 = k2 = 0.0
+    if d <= 0.0 and a <= 0.0:
+        return k0, k1, k2
+    disc = a > 0.0 and d < patch_radii * a
+    i, wi, j, wj, ld = 0, 0.0, 0, 0.0, 0.0
+    if disc:
+        u = (math.log(a) - log_a0) / dlog_a
+        na = dtab.shape[3]
+        if u >= na - 1:
+            i, wi = na - 2, 1.0
+        elif u > 0.0:
+            i = int(u)
+            wi = u - i
+        steps = dtab.shape[4] - 1
+        v = d / (patch_radii * a) * steps
+        j = min(int(v), steps - 1)
+        wj = v - j
+    else:
+        ld = math.log(max(d, 1e-300))
+    for c in range(3):
+        val = 0.0
+        for q in range(2):
+            t = rec_node[r, c] + q
+            wq = 1.0 - rec_blend[r, c] if q == 0 else rec_blend[r, c]
+            if (q == 1 and wq == 0.0) or d > radius[t, c]:
+                continue
+            g = cosg[t, c]
+            ct = min(max(cos_t, g[0]), g[g.size - 1])
+            k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
+            frac = (ct - g[k]) / (g[k + 1] - g[k])
+            if disc:
+                for kk, wk in ((k, 1.0 - frac), (k + 1, frac)):
+                    lo = (1.0 - wj) * dtab[t, c, kk, i, j] + wj * dtab[t, c, kk, i, j + 1]
+                    hi = (1.0 - wj) * dtab[t, c, kk, i + 1, j] + wj * dtab[t, c, kk, i + 1, j + 1]
+                    val += wq * wk * ((1.0 - wi) * lo + wi * hi)
+            else:
+                u = (ld - log_r0[t, c]) / dlog
+                if u >= n_r[t, c] - 1:
+                    continue
+                jj, w = 0, 0.0
+                if u > 0.0:
+                    jj = int(u)
+                    w = u - jj
+                lo = (1.0 - w) * f[t, c, k, jj] + w * f[t, c, k, jj + 1]
+                hi = (1.0 - w) * f[t, c, k + 1, jj] + w * f[t, c, k + 1, jj + 1]
+                val += wq * ((1.0 - frac) * lo + frac * hi)
+        if c == 0:
+            k0 = val
+        elif c == 1:
+            k1 = val
+        else:
+            k2 = val
+    return k0, k1, k2
+
+
+def _pair_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node,
+                 rec_blend, r):
+    """f of the three channels for one pair: :func:`_kernel3` when ``rec_node`` is None (one table), else
+    :func:`_kernel3_blend`. In compiled code the choice is made by the argument's type (the overload below), so
+    :func:`_traverse` compiles as two specialisations, each with only its own kernel inlined (one loop holding both
+    ran the one-table sum 30 % slower)."""
+    kernel = _kernel3 if rec_node is None else _kernel3_blend
+    return kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node,
+                  rec_blend, r)
+
+
+@overload(_pair_kernel, inline="always")
+def _pair_kernel_typed(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node,
+                       rec_blend, r):
+    return (_kernel3 if isinstance(rec_node, types.NoneType) else _kernel3_blend).py_func
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_pos, src_n, src_p, src_area, src_a,
               src_cos, src_light, f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
-              rec_near, theta, out, counts, r_lo, r_hi):
+              rec_near, rec_node, rec_blend, theta, out, counts, r_lo, r_hi):
     """Receivers r_lo:r_hi: eq. (103)'s pair sum over the entries, every pair with its weight P_j - E_l(x) A_j.
     Entries within ``rec_near[r]`` of receiver r one by one; beyond, nodes whose extent over distance is below
     ``theta`` (and whose normals agree) as one entry of their total power at their power centroid less the
     receiver's irradiance times their area at their area centroid (one light: a receiver of several lights opens
-    the nodes), the rest one by one."""
+    the nodes), the rest one by one. Receiver r reads the tables rec_node[r] blended by rec_blend[r]
+    (:func:`_kernel3_blend`, the tables' arrays with a leading axis); ``rec_node`` None: one table
+    (:func:`_kernel3`), chosen by type (:func:`_pair_kernel`)."""
     rmax = 0.0
-    for c in range(3):
-        rmax = max(rmax, radius[c])
+    for v in radius.ravel():
+        rmax = max(rmax, v)
     stack = np.zeros(256, np.int64)
     for r in range(r_lo, r_hi):
         x0, x1, x2 = rec_pos[r, 0], rec_pos[r, 1], rec_pos[r, 2]
@@ -395,14 +481,14 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                 if ex < theta * min(dc, da):
                     if agg[nd, 5] * rec_n[r, 0] + agg[nd, 6] * rec_n[r, 1] + agg[nd, 7] * rec_n[r, 2] > 0.0:
                         if agg[nd, 0] > 0.0:
-                            v0, v1, v2 = _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
-                                                  dlog_a, agg[nd, 4], dc, 0.0)
+                            v0, v1, v2 = _pair_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
+                                                      dlog_a, agg[nd, 4], dc, 0.0, rec_node, rec_blend, r)
                             a0 += agg[nd, 0] * v0
                             a1 += agg[nd, 0] * v1
                             a2 += agg[nd, 0] * v2
                         if sub_w > 0.0:
-                            v0, v1, v2 = _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
-                                                  dlog_a, agg[nd, 13], da, 0.0)
+                            v0, v1, v2 = _pair_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
+                                                      dlog_a, agg[nd, 13], da, 0.0, rec_node, rec_blend, r)
                             a0 -= sub_w * v0
                             a1 -= sub_w * v1
                             a2 -= sub_w * v2
@@ -425,8 +511,8 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                 if w == 0.0:
                     continue
                 a = src_a[j] if src_a[j] > 0.0 else rec_a[r]
-                v0, v1, v2 = _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
-                                      src_cos[j], d, a)
+                v0, v1, v2 = _pair_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
+                                          src_cos[j], d, a, rec_node, rec_blend, r)
                 a0 += w * v0
                 a1 += w * v1
                 a2 += w * v2
@@ -460,9 +546,26 @@ def _arg(a, dtype=np.float64):
     return np.require(a, dtype=dtype, requirements=("C", "W"))
 
 
-def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NEAR_MM, theta: float = THETA,
-                       spacing_mm: float | None = None):
+def _stacked(tables):
+    """The tables' arrays with a leading axis over ``tables`` (the kernels' reach padded to the longest)."""
+    if len(tables) == 1:
+        tb = tables[0]
+        return (tb.f[None], tb.disc[None], tb.cos_t[None], tb.n_r[None], tb.log_r0[None], tb.radius_mm[None])
+    n = max(tb.f.shape[2] for tb in tables)
+    f = np.zeros((len(tables), 3, _N_COS, n))
+    for k, tb in enumerate(tables):
+        f[k, :, :, :tb.f.shape[2]] = tb.f
+    return (f, *(np.stack([getattr(tb, a) for tb in tables]) for a in ("disc", "cos_t", "n_r", "log_r0", "radius_mm")))
+
+
+def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: float = THETA,
+                       spacing_mm: float | None = None, blend=None):
     """Eq. (103) at the receivers: ((n, 3) W/mm^2, pair evaluations).
+
+    ``tables``: a :class:`RemainderTables`, or a sequence of them with ``blend`` = (node (n, 3) int, weight (n, 3)):
+    receiver r's channel c then takes (1 - w) f_node + w f_node+1 (a painted medium's receiver albedo between two
+    tabulated ones, eq. (108)), every pair evaluated with both in one pass over the entries (the same sums as one
+    pass per table interpolated afterwards, to rounding, at the cost of one pass).
 
     ``src``: dict of entry arrays ``pos`` (k, 3) mm, ``normal`` (k, 3), ``power`` (k,) W, ``area`` (k,) mm^2
     (0 for point entries), ``cos_t`` (k,), ``light`` (k,) int. ``rec``: ``pos`` (n, 3), ``normal`` (n, 3),
@@ -491,12 +594,30 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
         # vertices' patches have its area pi a^2 (edge sqrt(2 pi / sqrt 3) a)
         own = rec["spacing"] if "spacing" in rec else math.sqrt(2.0 * math.pi / math.sqrt(3.0)) * ra
         sub = np.clip(NEAR_SPACINGS * np.asarray(own, dtype=np.float64), 1e-3 * mid_mm, mid_mm)
+    tables = [tables] if isinstance(tables, RemainderTables) else list(tables)
+    if blend is None:
+        if len(tables) != 1:
+            raise ValueError("several tables need the receivers' blend (node, weight)")
+        node = weight = None
+    else:
+        node, weight = _arg(blend[0], np.int64), _arg(blend[1])
+        if node.shape != (n, 3) or weight.shape != (n, 3) or node.min(initial=0) < 0 or \
+                node.max(initial=0) > max(len(tables) - 2, 0) or (len(tables) == 1 and np.any(weight != 0.0)):
+            raise ValueError("blend: node (n, 3) in 0..len(tables) - 2 and weight (n, 3), 0 with one table")
     out = np.zeros((n, 3))
     E, rc = _arg(rec["E"]), np.asarray(rec["cos_t"], dtype=np.float64)
     for l in range(E.shape[1]):
         lit = E[:, l] > 0
         if lit.any():          # every pair within the table carries the subtraction: the receiver gets E T
-            out[lit] += E[lit, l, None] * tables.totals(rc[lit, l])
+            if node is None:
+                T = tables[0].totals(rc[lit, l])
+            else:
+                Tk = np.stack([tb.totals(rc[lit, l]) for tb in tables])            # (K, p, 3)
+                nl, wl, rows = node[lit], weight[lit], np.arange(int(lit.sum()))
+                T = np.stack([(1.0 - wl[:, c]) * Tk[nl[:, c], rows, c]
+                              + wl[:, c] * Tk[np.minimum(nl[:, c] + 1, len(tables) - 1), rows, c]
+                              for c in range(3)], axis=1)
+            out[lit] += E[lit, l, None] * T
     k = src["pos"].shape[0]
     if k == 0:
         return out, 0
@@ -507,16 +628,29 @@ def remainder_exitance(tables: RemainderTables, src, rec, *, near_mm: float = NE
     area = _arg(src["area"])
     perm, lo, hi, child, box, agg = _build_tree(pos, pw, nrm, cos_s, LEAF, area)
     disc = np.sqrt(np.maximum(area, 0.0) / math.pi)
-    tables.ensure_discs(np.concatenate([disc, ra]))
+    for tb in tables:
+        tb.ensure_discs(np.concatenate([disc, ra]))
     light = _arg(src["light"], np.int64)
-    tabs = (tables.f, tables.disc, tables.cos_t, tables.n_r, tables.log_r0, tables.dlog, tables.radius_mm,
+    if node is None:          # one table: its own arrays (the one-table specialisation of _traverse)
+        tb = tables[0]
+        f, dtab, cosg, n_r, log_r0, radius = tb.f, tb.disc, tb.cos_t, tb.n_r, tb.log_r0, tb.radius_mm
+    else:
+        f, dtab, cosg, n_r, log_r0, radius = (_arg(x, x.dtype) for x in _stacked(tables))
+    tabs = (f, dtab, cosg, n_r, log_r0, tables[0].dlog, radius,
             PATCH_RADII, math.log(DISC_A[0]), math.log(DISC_A[1] / DISC_A[0]) / (DISC_A[2] - 1))
     rp = _arg(rec["pos"])
     rn = _arg(rec["normal"])
     counts = np.zeros(n, dtype=np.int64)
     sub = _arg(sub)
-    run_in_blocks(lambda a, b: _traverse(rp, rn, ra, E, perm, lo, hi, child, box, agg, pos, nrm, pw, area, disc,
-                                         cos_s, light, *tabs, sub, float(theta), out, counts, a, b), n)
+    args = (rp, rn, ra, E, perm, lo, hi, child, box, agg, pos, nrm, pw, area, disc, cos_s, light, *tabs, sub, node,
+            weight, float(theta), out, counts)
+    with warnings.catch_warnings():
+        # compiled (or loaded) here, on this thread, before the workers run it: inlining the overload of
+        # _pair_kernel trips numba's pedantic SSA check (NumbaIRAssumptionWarning, "variable ... is not in
+        # scope"), a warning about numba's own IR; the code is the plain kernels' (the tests: bit for bit)
+        warnings.simplefilter("ignore", NumbaIRAssumptionWarning)
+        _traverse(*args, 0, 0)
+    run_in_blocks(lambda a, b: _traverse(*args, a, b), n)
     return out, int(counts.sum())
 
 

@@ -99,3 +99,29 @@ def test_far_approximations_against_every_pair():
     assert pairs_fast < 0.1 * pairs_exact                           # measured 8.7 %
     assert err.max() < 5e-3, err.max(axis=0)                        # measured 0.14 / 0.22 / 0.16 % (the shadow edge)
     assert err.mean() < 1.5e-3, err.mean(axis=0)                    # measured 0.05 / 0.08 / 0.05 %
+
+
+def test_blended_tables_in_one_pass_are_each_tables_pass_interpolated():
+    # a painted receiver between two tabulated albedos (eq. (108)): one pass evaluating both tables per pair must
+    # give what one pass per table gives, interpolated at the receiver afterwards (the sums are linear in f)
+    rng = np.random.default_rng(11)
+    src, rec = bumpy_lit_surface(rng)
+    tables = [RemainderTables(Material(a * SKIN.sigma_t_prime, (1 - a) * SKIN.sigma_t_prime, SKIN.eta), 0.4)
+              for a in (np.array([0.99, 0.95, 0.9]), np.array([0.9, 0.6, 0.5]), np.array([0.5, 0.2, 0.1]))]
+    n = rec["pos"].shape[0]
+    node = rng.integers(0, 2, size=(n, 3))
+    weight = rng.random((n, 3))
+    weight[::7] = 0.0                                 # some receivers exactly on a table
+    parts = [remainder_exitance(tb, src, rec)[0] for tb in tables]
+    rows = np.arange(n)[:, None]
+    chan = np.arange(3)[None, :]
+    stack = np.stack(parts)                           # (3 tables, n, 3)
+    expected = (1.0 - weight) * stack[node, rows, chan] + weight * stack[node + 1, rows, chan]
+    got, pairs = remainder_exitance(tables, src, rec, blend=(node, weight))
+    assert pairs > 0
+    np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+    # one table and no blend is the plain call, bit for bit
+    one, _ = remainder_exitance([tables[1]], src, rec, blend=(np.zeros((n, 3), int), np.zeros((n, 3))))
+    np.testing.assert_array_equal(one, parts[1])
+    with pytest.raises(ValueError, match="blend"):
+        remainder_exitance(tables, src, rec)
