@@ -64,7 +64,8 @@ def _loads(pos, refracted, normal, power, t, w, gx, gw, spread, h0, index, lo, l
            dropped, p_lo, p_hi):
     """Nodal loads (N, k) of the sources of entries p_lo:p_hi: per channel c, depth points t[c] (mm) with
     strengths w[c] (times the entry's power), each spread over the Gauss-Hermite nodes gx (weights gw) in the
-    plane normal to ``normal``; ``dropped[c]`` collects power that fell outside the lattice."""
+    plane normal to ``normal``; ``power`` (p, k): each entry's power per channel; ``dropped[c]`` collects power
+    that fell outside the lattice."""
     k_ch, n_t = t.shape
     n_g = gx.size
     for p in range(p_lo, p_hi):
@@ -85,7 +86,7 @@ def _loads(pos, refracted, normal, power, t, w, gx, gw, spread, h0, index, lo, l
                 cz = pos[p, 2] + t[c, j] * refracted[p, 2]
                 for a in range(n_g):
                     for b in range(n_g):
-                        q = power[p] * w[c, j] * gw[a] * gw[b]
+                        q = power[p, c] * w[c, j] * gw[a] * gw[b]
                         if q == 0.0:
                             continue
                         px = cx + spread * (gx[a] * e1x + gx[b] * e2x)
@@ -116,9 +117,10 @@ def _find(px, py, pz, h0, index, lo):
 
 def lattice_loads(lattice, positions, refracted, normals, power, depths_mm, strengths, spread_mm):
     """(N, k) nodal loads W and (k,) power dropped outside the lattice, for entries at ``positions`` (p, 3) mm
-    entering along ``refracted`` (p, 3) with ``power`` (p,) W: per channel, points at ``depths_mm`` (k, n) along
-    the ray with ``strengths`` (k, n) (the rule's weights times each channel's Ewald weight), spread sideways by
-    a Gaussian of ``spread_mm`` in the plane normal to ``normals``."""
+    entering along ``refracted`` (p, 3) with ``power`` (p,) W, or (p, k) per channel (a medium that varies from
+    entry to entry): per channel, points at ``depths_mm`` (k, n) along the ray with ``strengths`` (k, n) (the
+    rule's weights times each channel's Ewald weight), spread sideways by a Gaussian of ``spread_mm`` in the plane
+    normal to ``normals``."""
     depths_mm = np.ascontiguousarray(np.atleast_2d(depths_mm), dtype=np.float64)
     strengths = np.ascontiguousarray(np.atleast_2d(strengths), dtype=np.float64)
     if depths_mm.shape != strengths.shape:
@@ -130,8 +132,14 @@ def lattice_loads(lattice, positions, refracted, normals, power, depths_mm, stre
         gw = gw / gw.sum()
     else:
         gx, gw = np.zeros(1), np.ones(1)
-    args = [np.ascontiguousarray(a, dtype=np.float64) for a in (positions, refracted, normals, power)]
+    args = [np.ascontiguousarray(a, dtype=np.float64) for a in (positions, refracted, normals)]
     n = args[0].shape[0]
+    power = np.asarray(power, dtype=np.float64)
+    if power.ndim == 1:
+        power = power[:, None]
+    if power.shape[0] != n or power.shape[1] not in (1, k):
+        raise MeshshadeError("the entries' power must be (entries,) or (entries, channels)")
+    args.append(np.ascontiguousarray(np.broadcast_to(power, (n, k))))
     # LOAD_BLOCKS fixed ranges of entries, each into its own nodal array, summed in order: the same loads for any
     # number of threads
     blocks = min(LOAD_BLOCKS, max(1, n // 4096))

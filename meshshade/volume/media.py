@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 
 from meshshade.kernels.painted_reflectance import albedo_for_reflectance
 from meshshade.painted import PaintedMaterial
+from meshshade.pacing import default_threads
 from meshshade.volume.long_range import ewald_weight, lattice_loads, line_rule
 from meshshade.volume.remainder import RemainderTables, remainder_exitance
 from meshshade.volume.resolution import REFINE_EFOLDS
@@ -135,7 +136,7 @@ class PaintedMedium(VaryingMedium):
     def medium_at(self, points):
         """(alpha' (p, 3), D (p, 3) mm, sigma_a (p, 3) 1/mm) at ``points``: that of the nearest sampling vertex
         (d'Eon's D = (2 - alpha') / (3 sigma_t'))."""
-        _, i = self._tree.query(points)
+        _, i = self._tree.query(points, workers=default_threads())
         a = self.sample_albedo[i]
         st = self.material.sigma_t_prime
         return a, (2.0 - a) / (3.0 * st), (1.0 - a) * st
@@ -146,16 +147,11 @@ class PaintedMedium(VaryingMedium):
 
     def entry_loads(self, lattice, samples, w, spread):
         a, D, sig_a = self.medium_at(samples.positions)
-        st = self.material.sigma_t_prime
+        st = np.asarray(self.material.sigma_t_prime, dtype=np.float64)
         x, q = line_rule(1.0)
-        loads = np.zeros((lattice.n_nodes, 3))
-        dropped = np.zeros(3)
-        for c in range(3):
-            power = samples.power * a[:, c] * ewald_weight(np.sqrt(sig_a[:, c] / D[:, c]), spread)
-            lc, dc = lattice_loads(lattice, samples.positions, w, samples.normals, power,
-                                   x[None, :] / float(st[c]), q[None, :], spread)
-            loads[:, c], dropped[c] = lc[:, 0], dc[0]
-        return loads, dropped
+        power = samples.power[:, None] * a * ewald_weight(np.sqrt(sig_a / D), spread)     # (p, 3): per channel
+        return lattice_loads(lattice, samples.positions, w, samples.normals, power, x[None, :] / st[:, None],
+                             np.broadcast_to(q, (3, q.size)), spread)
 
     def near_field(self, src, rec, spacing_mm):
         return remainder_exitance(self.tables_at, src, rec, spacing_mm=spacing_mm,
