@@ -313,35 +313,7 @@ def _pair_cell(d, a, patch_radii, log_a0, dlog_a, na, steps):
 
 
 @numba.njit(cache=True, inline="always")
-def _table_lookup(f, dtab, g, n_r, log_r0, dlog, c, cos_t, disc, i, wi, j, wj, ld):
-    """f of one table's channel c (``f`` (3, 9, n), ``dtab`` its disc averages, ``g`` its cos theta_t nodes, ``n_r``
-    and ``log_r0`` its reach and offset) at an entry of cos theta_t: from the disc table's cell (i, wi, j, wj) when
-    ``disc``, else at ln distance ``ld``; 0 beyond the table."""
-    ct = min(max(cos_t, g[0]), g[g.size - 1])
-    k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
-    frac = (ct - g[k]) / (g[k + 1] - g[k])
-    if disc:
-        val = 0.0
-        for kk, wk in ((k, 1.0 - frac), (k + 1, frac)):
-            lo = (1.0 - wj) * dtab[c, kk, i, j] + wj * dtab[c, kk, i, j + 1]
-            hi = (1.0 - wj) * dtab[c, kk, i + 1, j] + wj * dtab[c, kk, i + 1, j + 1]
-            val += wk * ((1.0 - wi) * lo + wi * hi)
-        return val
-    u = (ld - log_r0) / dlog
-    if u >= n_r - 1:
-        return 0.0
-    jj, w = 0, 0.0
-    if u > 0.0:
-        jj = int(u)
-        w = u - jj
-    lo = (1.0 - w) * f[c, k, jj] + w * f[c, k, jj + 1]
-    hi = (1.0 - w) * f[c, k + 1, jj] + w * f[c, k + 1, jj + 1]
-    return (1.0 - frac) * lo + frac * hi
-
-
-@numba.njit(cache=True, inline="always")
-def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node, rec_blend,
-             r):
+def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node, rec_blend, r):
     """f of the three channels at distance d for an entry of cos theta_t, averaged over a disc of radius a when
     d < PATCH_RADII a (interpolated in the disc table: ln a, d / a and cos theta_t); the logarithms and the disc
     table's cell are shared by the channels. One table (``rec_node``, ``rec_blend`` and ``r`` are not read:
@@ -353,7 +325,27 @@ def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog
     for c in range(3):
         if d > radius[c]:
             continue
-        val = _table_lookup(f, dtab, cosg[c], n_r[c], log_r0[c], dlog, c, cos_t, disc, i, wi, j, wj, ld)
+        g = cosg[c]
+        ct = min(max(cos_t, g[0]), g[g.size - 1])
+        k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
+        frac = (ct - g[k]) / (g[k + 1] - g[k])
+        val = 0.0
+        if disc:
+            for kk, wk in ((k, 1.0 - frac), (k + 1, frac)):
+                lo = (1.0 - wj) * dtab[c, kk, i, j] + wj * dtab[c, kk, i, j + 1]
+                hi = (1.0 - wj) * dtab[c, kk, i + 1, j] + wj * dtab[c, kk, i + 1, j + 1]
+                val += wk * ((1.0 - wi) * lo + wi * hi)
+        else:
+            u = (ld - log_r0[c]) / dlog
+            if u >= n_r[c] - 1:
+                continue
+            jj, w = 0, 0.0
+            if u > 0.0:
+                jj = int(u)
+                w = u - jj
+            lo = (1.0 - w) * f[c, k, jj] + w * f[c, k, jj + 1]
+            hi = (1.0 - w) * f[c, k + 1, jj] + w * f[c, k + 1, jj + 1]
+            val = (1.0 - frac) * lo + frac * hi
         if c == 0:
             k0 = val
         elif c == 1:
@@ -379,10 +371,28 @@ def _kernel3_blend(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0
         for q in range(2):
             t = rec_node[r, c] + q
             wq = 1.0 - rec_blend[r, c] if q == 0 else rec_blend[r, c]
-            if (q == 1 and wq == 0.0) or d > radius[t, c]:
+            if wq == 0.0 or d > radius[t, c]:
                 continue
-            val += wq * _table_lookup(f[t], dtab[t], cosg[t, c], n_r[t, c], log_r0[t, c], dlog, c, cos_t, disc, i,
-                                      wi, j, wj, ld)
+            g = cosg[t, c]
+            ct = min(max(cos_t, g[0]), g[g.size - 1])
+            k = min(int((ct - g[0]) / (g[1] - g[0])), g.size - 2)
+            frac = (ct - g[k]) / (g[k + 1] - g[k])
+            if disc:
+                for kk, wk in ((k, 1.0 - frac), (k + 1, frac)):
+                    lo = (1.0 - wj) * dtab[t, c, kk, i, j] + wj * dtab[t, c, kk, i, j + 1]
+                    hi = (1.0 - wj) * dtab[t, c, kk, i + 1, j] + wj * dtab[t, c, kk, i + 1, j + 1]
+                    val += wq * wk * ((1.0 - wi) * lo + wi * hi)
+            else:
+                u = (ld - log_r0[t, c]) / dlog
+                if u >= n_r[t, c] - 1:
+                    continue
+                jj, w = 0, 0.0
+                if u > 0.0:
+                    jj = int(u)
+                    w = u - jj
+                lo = (1.0 - w) * f[t, c, k, jj] + w * f[t, c, k, jj + 1]
+                hi = (1.0 - w) * f[t, c, k + 1, jj] + w * f[t, c, k + 1, jj + 1]
+                val += wq * ((1.0 - frac) * lo + frac * hi)
         if c == 0:
             k0 = val
         elif c == 1:
