@@ -170,10 +170,11 @@ class PaintedMedium(VaryingMedium):
     def _blend(self, albedo):
         """(node (p, 3), weight (p, 3)): each receiver's place between the tabulated albedos per channel, linear in
         log10(1 - alpha') (eq. (108)); the near field is summed with both tables in one pass
-        (:func:`meshshade.volume.remainder.remainder_exitance`)."""
+        (:func:`meshshade.volume.remainder.remainder_exitance`). None for a uniform paint (one table: the
+        homogeneous sum)."""
         k = len(self.tables_at)
         if k == 1:
-            return np.zeros(albedo.shape, dtype=np.int64), np.zeros(albedo.shape)
+            return None
         x = np.log10(1.0 - albedo)
         index = np.arange(k, dtype=np.float64)
         u = np.stack([np.interp(x[:, c], self._node_x[:, c], index) for c in range(3)], axis=1)

@@ -313,7 +313,8 @@ def _pair_cell(d, a, patch_radii, log_a0, dlog_a, na, steps):
 
 
 @numba.njit(cache=True, inline="always")
-def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node, rec_blend, r):
+def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node, rec_blend,
+             r):
     """f of the three channels at distance d for an entry of cos theta_t, averaged over a disc of radius a when
     d < PATCH_RADII a (interpolated in the disc table: ln a, d / a and cos theta_t); the logarithms and the disc
     table's cell are shared by the channels. One table (``rec_node``, ``rec_blend`` and ``r`` are not read:
@@ -540,9 +541,6 @@ def _arg(a, dtype=np.float64):
 
 def _stacked(tables):
     """The tables' arrays with a leading axis over ``tables`` (the kernels' reach padded to the longest)."""
-    if len(tables) == 1:
-        tb = tables[0]
-        return (tb.f[None], tb.disc[None], tb.cos_t[None], tb.n_r[None], tb.log_r0[None], tb.radius_mm[None])
     n = max(tb.f.shape[2] for tb in tables)
     f = np.zeros((len(tables), 3, _N_COS, n))
     for k, tb in enumerate(tables):
@@ -596,6 +594,8 @@ def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: flo
         if node.shape != (n, 3) or weight.shape != (n, 3) or node.min(initial=0) < 0 or \
                 node.max(initial=0) > max(len(tables) - 2, 0) or (len(tables) == 1 and np.any(weight != 0.0)):
             raise ValueError("blend: node (n, 3) in 0..len(tables) - 2 and weight (n, 3), 0 with one table")
+        if len(tables) == 1:              # every weight 0: the one-table sum
+            node = weight = None
     out = np.zeros((n, 3))
     E, rc = _arg(rec["E"]), np.asarray(rec["cos_t"], dtype=np.float64)
     for l in range(E.shape[1]):
