@@ -258,23 +258,39 @@ def principled_slot(mat) -> PrincipledSlot:
     base = node.inputs["Base Color"]
     colour, image = None, None
     if base.is_linked:
-        src = base.links[0].from_node
-        if src.type != "TEX_IMAGE" or src.image is None:
-            raise MeshshadeError(f"material {mat.name!r}: its Base Color comes from a {src.type} node; meshshade "
-                                 "reads a constant colour or an Image Texture")
-        img = src.image
-        image = bpy.path.abspath(img.filepath, library=img.library)
-        if img.packed_file is not None or not image or not Path(image).is_file():
-            raise MeshshadeError(f"material {mat.name!r}: the image {img.name!r} is not a file on disk (unpack or "
-                                 "save it)")
+        image, _ = _image_file(mat, base, "Base Color", "a constant colour")
     else:
         colour = tuple(float(x) for x in base.default_value[:3])
-    radius = tuple(float(x) for x in node.inputs["Subsurface Radius"].default_value[:3])
+    radius_in = node.inputs["Subsurface Radius"]
+    radius = tuple(float(x) for x in radius_in.default_value[:3])
     scale_in = _input(node, "Subsurface Scale")
     weight_in = _input(node, "Subsurface Weight", "Subsurface")
+    radius_image = scale_image = None
+    is_data = True
+    if radius_in.is_linked:
+        radius_image, is_data = _image_file(mat, radius_in, "Subsurface Radius", "a constant radius")
+    if scale_in is not None and scale_in.is_linked:
+        scale_image, is_data = _image_file(mat, scale_in, "Subsurface Scale", "a constant scale")
     return PrincipledSlot(mat.name, colour, image, radius, float(scale_in.default_value) if scale_in else 1.0,
                           float(_input(node, "IOR").default_value),
-                          float(weight_in.default_value) if weight_in else 1.0)
+                          float(weight_in.default_value) if weight_in else 1.0, radius_image=radius_image,
+                          scale_image=scale_image, radius_image_is_data=is_data)
+
+
+def _image_file(mat, socket, what: str, instead: str) -> tuple[str, bool]:
+    """(the absolute file, whether its colour space is data) of the Image Texture feeding ``socket``; a
+    MeshshadeError naming the material for any other node or an image that is not a file on disk."""
+    src = socket.links[0].from_node
+    if src.type != "TEX_IMAGE" or src.image is None:
+        raise MeshshadeError(f"material {mat.name!r}: its {what} comes from a {src.type} node; meshshade reads "
+                             f"{instead} or an Image Texture")
+    img = src.image
+    path = bpy.path.abspath(img.filepath, library=img.library)
+    if img.packed_file is not None or not path or not Path(path).is_file():
+        raise MeshshadeError(f"material {mat.name!r}: the image {img.name!r} is not a file on disk (unpack or "
+                             "save it)")
+    space = str(getattr(getattr(img, "colorspace_settings", None), "name", "Non-Color"))
+    return path, space in ("Non-Color", "Linear", "Linear Rec.709", "Linear CIE-XYZ D65", "Raw")
 
 
 def material_settings(ob, settings: BakeSettings, mm_per_unit: float) -> tuple[BakeSettings, list[str], object]:
@@ -299,9 +315,10 @@ def material_settings(ob, settings: BakeSettings, mm_per_unit: float) -> tuple[B
     distinct = [k for k, (m, _) in zip(used, media) if m != medium]
     if not distinct:
         return replace(settings, preset=None, sigma_s_prime=medium["sigma_s_prime"], sigma_a=medium["sigma_a"],
-                       eta=medium["eta"], albedo_map=medium["albedo_map"]), notes, None
+                       eta=medium["eta"], albedo_map=medium["albedo_map"],
+                       radius_map=medium["radius_map"]), notes, None
     names = [slots[k].name for k in used]
-    if any(m["albedo_map"] for m, _ in media):
+    if any(m["albedo_map"] or m["radius_map"] for m, _ in media):
         raise MeshshadeError(f"{ob.name}: its faces use {len(used)} materials of different media ({', '.join(names)})"
                              " and one is painted by an image; bake the painted one as an object of its own")
     if any(m["eta"] != medium["eta"] for m, _ in media):
@@ -346,7 +363,7 @@ def prepare(context, ob, settings, *, python: str | None = None) -> tuple[BakeJo
         bake_settings, more, face_part = material_settings(ob, bake_settings, mpu)
         notes += more
     uv = None
-    if settings.texture or bake_settings.albedo_map:
+    if settings.texture or bake_settings.albedo_map or bake_settings.radius_map:
         uv = corner_uv(ob)
         if np.linalg.det(M[:3, :3]) < 0.0:   # world_faces flips the winding of a mirrored object: so its corners
             uv = uv[:, [0, 2, 1]]

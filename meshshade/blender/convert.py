@@ -41,8 +41,10 @@ Material (a slot's Principled BSDF)
     medium must have, inverted per channel into the reduced albedo with the model's own total reflectance
     (:func:`meshshade.kernels.painted_reflectance.albedo_for_reflectance`) at the slot's *IOR* as eta
     (:func:`principled_medium`). A Base Color fed by an Image Texture is a colour map over the UVs
-    (``--albedo-map``); its medium's own albedo is then the map's, per point. A Subsurface Weight of 0 is an opaque
-    slot (refused); a weight below 1 is noted (meshshade bakes the subsurface part alone).
+    (``--albedo-map``); its medium's own albedo is then the map's, per point. An Image Texture feeding the Radius
+    or the Scale is a radius map (``--radius-map``, eq. (132)): its values take the place of that socket's. A
+    Subsurface Weight of 0 is an opaque slot (refused); a weight below 1 is noted (meshshade bakes the subsurface
+    part alone).
 
 World
     The World's Background shader emits radiance ``strength x colour`` W/(m² sr) from every direction. Fed by an
@@ -283,7 +285,8 @@ def colour_groups(converted) -> list[tuple[np.ndarray, list]]:
 class PrincipledSlot:
     """A material slot's Principled BSDF as the add-on reads it: ``name`` (the material's), ``base_colour`` (3,)
     linear RGB (None when an image feeds it), ``image`` (the Image Texture's file, absolute, or None), ``radius``
-    (3,) Subsurface Radius, ``scale`` Subsurface Scale (scene units), ``ior`` and ``weight`` (Subsurface Weight)."""
+    (3,) Subsurface Radius, ``scale`` Subsurface Scale (scene units), ``ior`` and ``weight`` (Subsurface Weight);
+    ``radius_image`` / ``scale_image``: an Image Texture feeding the radius or the scale (a radius map, eq. (132))."""
 
     name: str
     base_colour: tuple | None
@@ -292,19 +295,34 @@ class PrincipledSlot:
     scale: float
     ior: float
     weight: float = 1.0
+    #: an Image Texture's file feeding Subsurface Radius, or Subsurface Scale (absolute), or None
+    radius_image: str | None = None
+    scale_image: str | None = None
+    #: whether that image's colour space is data (Non-Color, or linear): read as its values, as Blender does
+    radius_image_is_data: bool = True
 
 
 def principled_medium(slot: PrincipledSlot, mm_per_unit: float) -> tuple[dict, list[str]]:
     """(medium, notes): ``slot``'s medium in meshshade's terms (module docstring, "Material"): ``sigma_s_prime`` and
-    ``sigma_a`` (3,) 1/mm, ``eta``, and ``albedo_map`` (the image's path, or None). With an image the painted colour
-    sets the albedo per point and only sigma_t' = sigma_s' + sigma_a matters: the base is given the albedo 1/2.
-    MaterialError (naming the slot) for an opaque slot, a radius x scale that is not positive and finite, or a
-    colour no medium of that index reflects."""
+    ``sigma_a`` (3,) 1/mm, ``eta``, ``albedo_map`` (the image's path, or None) and ``radius_map`` (the image
+    feeding the radius or the scale, or None). With an image the painted colour sets the albedo per point and only
+    sigma_t' = sigma_s' + sigma_a matters: the base is given the albedo 1/2. With a radius map the image's value
+    takes the place of the socket it feeds (Blender ignores a linked socket's own value): Radius from an image,
+    1/sigma_t' = image x Scale x mm per unit, the base at a radius of 1; Scale from an image, 1/sigma_t' = Radius x
+    image x mm per unit, the base at a scale of 1 (read per channel: a grey mask is its value, as Blender's
+    luminance of a grey image is).
+    MaterialError (naming the slot) for an opaque slot, a radius x scale that is not positive and finite, a colour
+    no medium of that index reflects, or both the radius and the scale from images."""
     where = f"material {slot.name!r}"
     if not slot.weight > 0.0:
         raise MaterialError(f"{where}: Subsurface Weight is 0 (an opaque material): nothing to bake; raise it or "
                             "choose a preset")
-    ell = np.asarray(slot.radius, dtype=np.float64) * float(slot.scale) * float(mm_per_unit)
+    if slot.radius_image and slot.scale_image:
+        raise MaterialError(f"{where}: both Subsurface Radius and Subsurface Scale come from images; meshshade reads "
+                            "one radius map (feed one of them, or multiply the two into one image)")
+    radius = np.ones(3) if slot.radius_image else np.asarray(slot.radius, dtype=np.float64)
+    scale = 1.0 if slot.scale_image else float(slot.scale)
+    ell = radius * scale * float(mm_per_unit)
     if ell.shape != (3,) or not np.all(np.isfinite(ell) & (ell > 0.0)):
         raise MaterialError(f"{where}: Subsurface Radius x Scale must be positive in every channel, got "
                             f"{np.round(ell, 6).tolist()} mm")
@@ -312,6 +330,10 @@ def principled_medium(slot: PrincipledSlot, mm_per_unit: float) -> tuple[dict, l
     notes = []
     if slot.weight < 1.0:
         notes.append(f"{where}: Subsurface Weight {slot.weight:g}: meshshade bakes the subsurface part alone")
+    radius_map = slot.radius_image or slot.scale_image
+    if radius_map and not slot.radius_image_is_data:
+        notes.append(f"{where}: the Subsurface {'Radius' if slot.radius_image else 'Scale'} image is read as data "
+                     "(its values); set its colour space to Non-Color for Cycles to read the same")
     if slot.image is not None:
         albedo = np.full(3, 0.5)
     else:
@@ -322,4 +344,5 @@ def principled_medium(slot: PrincipledSlot, mm_per_unit: float) -> tuple[dict, l
             raise MaterialError(f"{where}: Base Color {np.round(colour, 4).tolist()}: {e}") from None
     st = 1.0 / ell
     return {"sigma_s_prime": tuple(float(x) for x in albedo * st),
-            "sigma_a": tuple(float(x) for x in (1.0 - albedo) * st), "eta": eta, "albedo_map": slot.image}, notes
+            "sigma_a": tuple(float(x) for x in (1.0 - albedo) * st), "eta": eta, "albedo_map": slot.image,
+            "radius_map": radius_map}, notes

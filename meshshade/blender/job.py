@@ -86,7 +86,9 @@ class BakeSettings:
     (RGB, 1/mm) with ``eta``; ``model``, ``cutoff_tol``, ``geodesic``, ``transport`` as ``meshshade bake``;
     ``albedo_map``: a colour map over the mesh's UVs painting the medium (``--albedo-map``; the job then needs
     ``uv``), its colours that no medium reflects moved into the reachable range with ``albedo_clamp``
-    (``--albedo-clamp``, noted); ``parts``: ``((name, sigma_s_prime, sigma_a), ...)``, the media of the faces a
+    (``--albedo-clamp``, noted); ``radius_map``: a map over the UVs scaling the mean free path (``--radius-map``,
+    eq. (132); the job then needs ``uv``); ``parts``: ``((name, sigma_s_prime, sigma_a), ...)``, the media of the
+    faces a
     :class:`BakeJob`'s ``face_part`` gives to each (``--material NAME=SIGMA_S_PRIME/SIGMA_A``, one index ``eta``
     for all), the material above the rest."""
 
@@ -100,6 +102,7 @@ class BakeSettings:
     transport: str = "auto"
     albedo_map: str | None = None
     albedo_clamp: bool = True
+    radius_map: str | None = None
     parts: tuple = ()
 
     def cli_args(self) -> list[str]:
@@ -113,6 +116,8 @@ class BakeSettings:
             material += ["--material", f"{name}={_vec(ss)}/{_vec(sa)}"]
         if self.albedo_map:
             material += ["--albedo-map", str(self.albedo_map)] + (["--albedo-clamp"] if self.albedo_clamp else [])
+        if self.radius_map:
+            material += ["--radius-map", str(self.radius_map)]
         return material + ["--model", self.model, "--cutoff-tol", _num(self.cutoff_tol), "--geodesic",
                            self.geodesic, "--transport", self.transport]
 
@@ -156,9 +161,10 @@ class BakeJob:
         self.radiance: np.ndarray | None = None
         self.uv = None if uv is None else np.asarray(uv, dtype=np.float64)
         self.texture_size, self.padding = texture_size, int(padding)
-        needs_uv = texture_size is not None or settings.albedo_map
+        needs_uv = texture_size is not None or settings.albedo_map or settings.radius_map
         if needs_uv and (self.uv is None or self.uv.shape != (self.faces.shape[0], 3, 2)):
-            raise BakeJobError(("a texture bake" if texture_size is not None else "a colour map (albedo map)")
+            raise BakeJobError(("a texture bake" if texture_size is not None else
+                                "a colour map (albedo map)" if settings.albedo_map else "a radius map")
                                + " needs a UV map: one (u, v) per face corner")
         self.face_part = None
         if settings.parts:
@@ -185,7 +191,7 @@ class BakeJob:
             raise BakeJobError(f"the Python for bakes does not exist: {self.python}")
         self._dir = io.scratch_folder("meshshade-blender-")
         textured = self.texture_size is not None
-        with_uv = textured or bool(self.settings.albedo_map)
+        with_uv = textured or bool(self.settings.albedo_map) or bool(self.settings.radius_map)
         groups = None
         if self.face_part is not None:     # each part a usemtl of its own, the rest "rest"
             groups = (["rest", *(name for name, _ss, _sa in self.settings.parts)], self.face_part + 1)

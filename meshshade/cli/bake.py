@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import sys
 
-from meshshade.cli.options import bake_options_from_args, lights_from_args, mesh_and_material, painted_material
+from meshshade.cli.options import (bake_options_from_args, is_painted, lights_from_args, mesh_and_material,
+                                   painted_material)
 from meshshade.asset_cache import AssetCache
 from meshshade.errors import ParameterError
 from meshshade.io import check_output_path, read_uv_map
@@ -45,7 +46,7 @@ def run_bake(args) -> int:
     options = bake_options_from_args(args, progress=not args.quiet)
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args, parts_allowed=True)
-    if args.albedo_map:
+    if is_painted(args):
         material = painted_material(args, mesh, material)
     texture = None
     if args.texture:

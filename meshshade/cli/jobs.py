@@ -4,7 +4,7 @@ values), run by :func:`meshshade.batch.runner.run_batch`.
 A job here is exactly one ``meshshade bake | render | compare | mc | profile`` invocation: its options are the
 command's long options without the dashes (``cutoff-tol`` or ``cutoff_tol``), ``mesh`` for the input mesh, and
 output options (``out``, ``npz``, ``texture``, ``summary``, ``csv``, ``plot``) as plain file names (an ``albedo-map``
-file, as the mesh, relative to the job file), which are
+or ``radius-map`` file, as the mesh, relative to the job file), which are
 written inside the job's own folder (a texture's PNG and atlas beside it). A job therefore produces the same files
 as the command run by hand.
 
@@ -175,7 +175,8 @@ def _normalise(command: str, options: dict, where: str, base: Path) -> dict:
                 value = value[0]        # one material as it was before the key was repeatable (same job hash)
         else:
             value = _scalar_text(value, f"{where}: {key}")
-        if key == "mesh" or (key == "albedo-map" and value not in ("mtl", "vertex")):   # beside the job file
+        beside = key in ("mesh", "radius-map") or (key == "albedo-map" and value not in ("mtl", "vertex"))
+        if beside:                                                                           # beside the job file
             value = str((base / value).resolve()) if not Path(value).is_absolute() else value
         if key == "light":   # an environment map's file is relative to the job file, as the mesh
             value = [_resolve_map(v, base) for v in value]

@@ -1,7 +1,8 @@
 """``meshshade mc``: Monte Carlo reference random walk inside a mesh (thin layer over
 :func:`meshshade.montecarlo.simulation.simulate` and :func:`meshshade.output.mc_file.write_mc`); with
 ``--workers N`` or ``--scheduler ADDRESS`` the photons are split across Dask workers (the same result);
-``--albedo-map`` paints the material as ``meshshade bake`` does (a varying medium, walked in this process).
+``--albedo-map`` and ``--radius-map`` paint the material as ``meshshade bake`` does (a varying medium, walked in
+this process).
 
 Its help and arguments are in :mod:`meshshade.cli.arguments.mc`; :mod:`meshshade.cli.main` imports this module
 only once they are parsed."""
@@ -10,7 +11,7 @@ from __future__ import annotations
 import contextlib
 
 from meshshade.batch.dask_cluster import check_cluster_options, open_client
-from meshshade.cli.options import lights_from_args, mesh_and_material, painted_material
+from meshshade.cli.options import is_painted, lights_from_args, mesh_and_material, painted_material
 from meshshade.errors import MeshshadeError
 from meshshade.io import check_output_path
 from meshshade.montecarlo import MCOptions, describe_mc, simulate
@@ -31,7 +32,7 @@ def run_mc(args) -> int:
                              "give --photons without --time-budget")
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args)
-    if args.albedo_map:        # the same painting as meshshade bake's
+    if is_painted(args):        # the same painting as meshshade bake's
         material = painted_material(args, mesh, material)
     with contextlib.ExitStack() as stack:
         client = stack.enter_context(open_client(args.scheduler, args.workers, quiet=args.quiet)) if split else None

@@ -11,10 +11,12 @@ import math
 import sys
 from dataclasses import dataclass
 
+import numpy as np
+
 from meshshade.cli.arguments.common import LIGHT_HELP
 from meshshade.errors import LightError, MeshshadeError, ParameterError
 from meshshade.geometry.mesh import Mesh
-from meshshade.io import (load_mesh, mtl_colour_map, read_colour_map, read_face_names, read_uv_map,
+from meshshade.io import (load_mesh, mtl_colour_map, read_colour_map, read_data_map, read_face_names, read_uv_map,
                           read_vertex_colours)
 from meshshade.light import AreaLight, EnvironmentLight, parse_light_spec
 from meshshade.materials import Material, material_from_options
@@ -128,25 +130,52 @@ def mesh_and_material(args, *, parts_allowed: bool = False) -> tuple[Mesh, Mater
     return mesh, material
 
 
+def is_painted(args) -> bool:
+    """Whether the command's options paint the material (``--albedo-map`` or ``--radius-map``), and a one-line
+    error for ``--radius-scale`` or ``--albedo-clamp`` without the map they act on."""
+    if getattr(args, "radius_scale", None) is not None and not args.radius_map:
+        raise ParameterError("--radius-scale multiplies the radius map: give --radius-map FILE with it")
+    return bool(args.albedo_map or getattr(args, "radius_map", None))
+
+
 def painted_material(args, mesh, material) -> PaintedMaterial:
     """``material`` painted as ``--albedo-map`` says (a file over the UVs, the OBJ's map_Kd, the PLY's vertex
-    colours); a one-line error for a map that cannot be read, a mesh without UVs or a colour no medium has (unless
-    ``--albedo-clamp``, which says how many it moved). ``meshshade bake``, ``render`` and ``mc`` read it."""
+    colours) and ``--radius-map`` / ``--radius-scale`` (its mean free path scaled per point, eq. (132)); a one-line
+    error for a map that cannot be read, a mesh without UVs, a colour no medium has (unless ``--albedo-clamp``,
+    which says how many it moved) or a radius of 0. ``meshshade bake``, ``render`` and ``mc`` read it."""
+    option = "--albedo-map" if args.albedo_map else "--radius-map"
     if not isinstance(material, Material):
-        raise ParameterError("--albedo-map paints one material; it cannot be given with --material PART=NAME")
+        raise ParameterError(f"{option} paints one material; it cannot be given with --material PART=NAME")
     if getattr(args, "model", "volume") != "volume":   # meshshade mc has no model: its walk takes any medium
-        raise ParameterError(f"--albedo-map needs the volume model (model {args.model!r} takes one medium)")
+        raise ParameterError(f"{option} needs the volume model (model {args.model!r} takes one medium)")
     kind = args.albedo_map
     clamp = bool(args.albedo_clamp)
+    paint = {}
+    uv = None
     if kind == "vertex":
-        painted = PaintedMaterial(material, colour=read_vertex_colours(args.mesh, mesh), clamp=clamp)
-    else:
+        paint["colour"] = read_vertex_colours(args.mesh, mesh)
+    elif kind:
         image_path = mtl_colour_map(args.mesh) if kind == "mtl" else kind
-        image = read_colour_map(image_path)
+        paint["image"] = read_colour_map(image_path)
         uv = read_uv_map(args.mesh, mesh)
         if uv is None:
             raise ParameterError(f"{args.mesh}: has no texture coordinates (UVs), so --albedo-map cannot be laid on it")
-        painted = PaintedMaterial(material, image=image, uv=uv, clamp=clamp)
+    if getattr(args, "radius_map", None):
+        scale = 1.0 if args.radius_scale is None else float(args.radius_scale)
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise ParameterError(f"--radius-scale must be a finite number above 0, got {args.radius_scale!r}")
+        factors = read_data_map(args.radius_map) * scale
+        if not np.all(factors > 0.0):
+            bad = int(np.sum(np.any(factors <= 0.0, axis=2)))
+            raise ParameterError(f"{args.radius_map}: the radius map holds {bad} texel(s) of 0 or below (no medium "
+                                 "has a mean free path of 0)")
+        uv = read_uv_map(args.mesh, mesh) if uv is None else uv
+        if uv is None:
+            raise ParameterError(f"{args.mesh}: has no texture coordinates (UVs), so --radius-map cannot be laid on it")
+        paint["radius_image"] = factors
+        if kind == "vertex":
+            raise ParameterError("--radius-map is an image over the UVs; it cannot be given with --albedo-map vertex")
+    painted = PaintedMaterial(material, uv=uv, clamp=clamp, **paint)
     if painted.clamped and not args.quiet:
         lo, hi = painted.clamp_range
         print(f"meshshade: note: --albedo-clamp moved {painted.clamped} painted values into [{lo:.4f}, {hi:.4f}]",
@@ -224,7 +253,7 @@ def image_scene_from_args(args, *, varying: bool = False) -> ImageScene:
     (render) the material may have parts (``--material PART=NAME``) or be painted (``--albedo-map``), as bake's."""
     lights = lights_from_args(args)
     mesh, material = mesh_and_material(args, parts_allowed=varying)
-    if varying and args.albedo_map:
+    if varying and is_painted(args):
         material = painted_material(args, mesh, material)
     camera = parse_camera(args.camera, mesh, mesh.mm_per_unit)
     bg = background_from_args(args)

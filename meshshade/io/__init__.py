@@ -16,8 +16,9 @@ Every name of ``__all__`` is importable from ``meshshade.io``; each submodule ho
   ``output_dir``), ``discard_stdout``;
 * :mod:`meshshade.io.writers`: text, JSON, NPZ, figures, bytes, USD and OBJ written; TOML, JSON and JSON lines read;
 * :mod:`meshshade.io.images`: EXR and PNG through OpenImageIO (``write_exr``, ``write_png``, ``read_exr``);
-* :mod:`meshshade.io.colour_maps`: painted colours read linear: a colour map image, an OBJ's MTL ``map_Kd``, a
-  PLY's vertex colours (``read_colour_map``, ``mtl_colour_map``, ``read_vertex_colours``);
+* :mod:`meshshade.io.colour_maps`: painted colours read linear (and data maps read raw): a colour map image, an
+  OBJ's MTL ``map_Kd``, a PLY's vertex colours, a radius map (``read_colour_map``, ``mtl_colour_map``,
+  ``read_vertex_colours``, ``read_data_map``);
 * :mod:`meshshade.io.environment_maps`: equirectangular HDR environment maps read and checked
   (``read_environment_map``);
 * :mod:`meshshade.io.jobs`: a batch's job folders (``job_folder``, ``remove_stale_parts``), file lists and hashes,
@@ -28,7 +29,7 @@ What the readers share (text encodings, polygons) is in ``meshshade.io._reading`
 """
 from __future__ import annotations
 
-from meshshade.io.colour_maps import mtl_colour_map, read_colour_map, read_vertex_colours
+from meshshade.io.colour_maps import mtl_colour_map, read_colour_map, read_data_map, read_vertex_colours
 from meshshade.io.environment_maps import read_environment_map
 from meshshade.io.images import read_exr, write_exr, write_png
 from meshshade.io.jobs import (append_text, file_sha256, folder_files, job_folder, remove_folder, remove_stale_parts,
@@ -49,4 +50,5 @@ __all__ = ["SUPPORTED_MESH_FORMATS", "load_mesh", "read_mesh_arrays", "read_bake
            "write_exr", "write_png", "read_exr", "read_toml", "read_json", "read_json_lines", "write_json_lines",
            "file_sha256", "folder_files", "job_folder", "remove_stale_parts", "detached", "write_bytes", "write_usd",
            "write_obj", "scratch_folder", "remove_folder", "temp_path", "append_text", "read_uv_map",
-           "read_environment_map", "read_colour_map", "mtl_colour_map", "read_vertex_colours", "read_face_names"]
+           "read_environment_map", "read_colour_map", "read_data_map", "mtl_colour_map", "read_vertex_colours",
+           "read_face_names"]

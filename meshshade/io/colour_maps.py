@@ -1,5 +1,5 @@
 """Painted colours read from files (docs/physics.md §17): a colour map image, the OBJ's MTL ``map_Kd``, or a PLY's
-vertex colours, all returned linear.
+vertex colours, all returned linear; and a data map (a radius map, eq. (132)) read without any transfer function.
 
 * an image through OpenImageIO: OpenEXR and Radiance HDR are read as linear; 8- and 16-bit images (PNG, JPEG,
   TIFF, TGA...) are sRGB-encoded colours and are decoded with the sRGB transfer function (IEC 61966-2-1);
@@ -22,7 +22,8 @@ from meshshade.io._messages import _one_line
 from meshshade.io.images import UnreadableImage, read_pixels
 from meshshade.io.ply import _parse_ply_header, _ply_data
 
-__all__ = ["read_colour_map", "mtl_colour_map", "read_vertex_colours", "srgb_to_linear", "LINEAR_FORMATS"]
+__all__ = ["read_colour_map", "read_data_map", "mtl_colour_map", "read_vertex_colours", "srgb_to_linear",
+           "LINEAR_FORMATS"]
 
 #: image formats whose values are linear (the rest are sRGB-encoded)
 LINEAR_FORMATS = (".exr", ".hdr")
@@ -38,19 +39,30 @@ def read_colour_map(path) -> np.ndarray:
     """(H, W, 3) linear float64 colours of the image at ``path`` (module docstring; a grey image is repeated into
     three channels, alpha dropped)."""
     path = Path(path)
+    px = _read_three_channels(path, "colour map")
+    return px if path.suffix.lower() in LINEAR_FORMATS else srgb_to_linear(px)
+
+
+def read_data_map(path, what: str = "radius map") -> np.ndarray:
+    """(H, W, 3) float64 values of the image at ``path`` read as data, not colour (Blender's Non-Color): no sRGB
+    decoding, an 8-bit value v read as v / 255; a grey image repeated into three channels, alpha dropped."""
+    return _read_three_channels(Path(path), what)
+
+
+def _read_three_channels(path: Path, what: str) -> np.ndarray:
     if not path.is_file():
-        raise MeshValidationError(f"{path}: colour map not found")
+        raise MeshValidationError(f"{path}: {what} not found")
     try:
         px, spec = read_pixels(path)
     except UnreadableImage as exc:
-        raise MeshValidationError(f"{path}: cannot read the colour map: {_one_line(str(exc))}") from None
+        raise MeshValidationError(f"{path}: cannot read the {what}: {_one_line(str(exc))}") from None
     px = px.astype(np.float64)
     if spec.nchannels < 3:
         px = np.repeat(px[:, :, :1], 3, axis=2)
     px = px[:, :, :3]
     if not np.all(np.isfinite(px)):
-        raise MeshValidationError(f"{path}: the colour map holds values that are not finite")
-    return px if path.suffix.lower() in LINEAR_FORMATS else srgb_to_linear(px)
+        raise MeshValidationError(f"{path}: the {what} holds values that are not finite")
+    return px
 
 
 def mtl_colour_map(obj_path) -> Path:

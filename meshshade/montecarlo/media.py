@@ -158,7 +158,8 @@ def _empty_paint():
     z3 = np.zeros((0, 3))
     zi = np.zeros(1, dtype=np.int64)
     return (z3, z3, z3, zi, zi, np.full(1, -1, dtype=np.int64), np.zeros((1, 6)), zi, np.zeros((0, 3), np.int64),
-            np.zeros(0), np.zeros((0, 3, 2)), np.zeros((0, 0)), np.zeros(2), np.zeros(2), np.zeros(2, np.int64))
+            np.zeros(0), np.zeros((0, 3, 2)), np.zeros((0, 0)), np.zeros(2), np.zeros(2), np.zeros(2, np.int64),
+            np.zeros(0), np.zeros((0, 0)))
 
 
 def _empty_parts():
@@ -175,33 +176,32 @@ def medium_at(x, y, z, kind, fp, paint, parts, stack):
 
     fp[0] majorant, fp[1] 1 if sigma_t is constant (then the majorant is returned as sigma_t);
     painted: fp[2] sigma_t', fp[3] g, fp[4] 1 for an image (else vertex colours), fp[5], fp[6] the table's bucket
-    origin and 1/width; parts: fp[2:5] the label grid's origin, fp[5] 1/voxel, fp[6] the winding accuracy beta.
+    origin and 1/width, fp[7] the radius map (0 none, 1 per vertex, 2 an image: sigma_t' over its factor, eq.
+    (132)); parts: fp[2:5] the label grid's origin, fp[5] 1/voxel, fp[6] the winding accuracy beta.
     ``stack``: an int64 work array of 256.
     """
     if kind == PAINTED:
-        TA, TB, TC, Tlo, Thi, Tchild, Tbox, Torder, MF, col, uv, img, nodes, alb, start = paint
+        TA, TB, TC, Tlo, Thi, Tchild, Tbox, Torder, MF, col, uv, img, nodes, alb, start, rcol, rimg = paint
         t, v, w, _d2 = closest_on(x, y, z, TA, TB, TC, Tlo, Thi, Tchild, Tbox, stack)
         f = Torder[t]
         b0 = 1.0 - v - w
-        if fp[4] > 0.0:
+        uu = vv = 0.0
+        if fp[4] > 0.0 or fp[7] == 2.0:
             uu = b0 * uv[f, 0, 0] + v * uv[f, 1, 0] + w * uv[f, 2, 0]
             vv = b0 * uv[f, 0, 1] + v * uv[f, 1, 1] + w * uv[f, 2, 1]
-            H, W = img.shape[0], img.shape[1]
-            px = (uu - math.floor(uu)) * W - 0.5
-            py = (1.0 - (vv - math.floor(vv))) * H - 0.5
-            x0, y0 = math.floor(px), math.floor(py)
-            fx, fy = px - x0, py - y0
-            xa, xb = int(x0) % W, int(x0 + 1) % W
-            ya, yb = min(max(int(y0), 0), H - 1), min(max(int(y0) + 1, 0), H - 1)
-            C = (1 - fy) * ((1 - fx) * img[ya, xa] + fx * img[ya, xb]) + fy * ((1 - fx) * img[yb, xa]
-                                                                               + fx * img[yb, xb])
+        if fp[4] > 0.0:
+            C = _bilinear(img, uu, vv)
         else:
             C = b0 * col[MF[f, 0]] + v * col[MF[f, 1]] + w * col[MF[f, 2]]
         a = min(1.0, max(0.0, _table_albedo(C, nodes, alb, start, fp[5], fp[6])))
         g = fp[3]
-        if fp[1] > 0.0:        # g = 0: sigma_t = sigma_t', the albedo is alpha'
+        if fp[1] > 0.0:        # g = 0 and no radius map: sigma_t = sigma_t', the albedo is alpha'
             return fp[0], a, g
         st_p = fp[2]
+        if fp[7] == 1.0:
+            st_p /= b0 * rcol[MF[f, 0]] + v * rcol[MF[f, 1]] + w * rcol[MF[f, 2]]
+        elif fp[7] == 2.0:
+            st_p /= _bilinear(rimg, uu, vv)
         ss = a * st_p / (1.0 - g)
         st = ss + (1.0 - a) * st_p
         return st, ss / st, g
@@ -232,6 +232,20 @@ def medium_at(x, y, z, kind, fp, paint, parts, stack):
     return st, coef[k, 1], coef[k, 2]
 
 
+@numba.njit(inline="always", **_OPTS)
+def _bilinear(img, uu, vv):
+    """One channel's image ``img`` (H, W) read bilinearly at texture coordinates (uu, vv) (wrapped in u, clamped
+    in v, v up), as :meth:`PaintedMaterial.colour_at <meshshade.painted.PaintedMaterial.colour_at>` reads it."""
+    H, W = img.shape[0], img.shape[1]
+    px = (uu - math.floor(uu)) * W - 0.5
+    py = (1.0 - (vv - math.floor(vv))) * H - 0.5
+    x0, y0 = math.floor(px), math.floor(py)
+    fx, fy = px - x0, py - y0
+    xa, xb = int(x0) % W, int(x0 + 1) % W
+    ya, yb = min(max(int(y0), 0), H - 1), min(max(int(y0) + 1, 0), H - 1)
+    return (1 - fy) * ((1 - fx) * img[ya, xa] + fx * img[ya, xb]) + fy * ((1 - fx) * img[yb, xa] + fx * img[yb, xb])
+
+
 @numba.njit(**_OPTS)
 def _at_points(P, kind, fp, paint, parts, out):
     stack = np.empty(256, np.int64)
@@ -253,13 +267,21 @@ def _paint_channel_data(material: PaintedMaterial, c: int) -> np.ndarray:
     return material.colour[:, c] if material.colour is not None else material.image[:, :, c]
 
 
+def _radius_channel_data(material: PaintedMaterial, c: int):
+    if material.radius is not None:
+        return material.radius[:, c]
+    return None if material.radius_image is None else material.radius_image[:, :, c]
+
+
 def painted_groups(material: PaintedMaterial) -> list:
-    """``[(key, [channels]), ...]``: channels share a walk when the base's sigma_t' and the paint's channel are
-    equal."""
+    """``[(key, [channels]), ...]``: channels share a walk when the base's sigma_t', the paint's channel and the
+    radius map's channel are equal."""
     groups: dict = {}
     for c in range(3):
         data = np.ascontiguousarray(_paint_channel_data(material, c))
-        groups.setdefault((float(material.base.sigma_t_prime[c]), data.tobytes()), []).append(c)
+        rad = _radius_channel_data(material, c)
+        rad = b"" if rad is None else np.ascontiguousarray(rad).tobytes()
+        groups.setdefault((float(material.base.sigma_t_prime[c]), data.tobytes(), rad), []).append(c)
     return list(groups.items())
 
 
@@ -273,20 +295,27 @@ def painted_field(material: PaintedMaterial, mesh, c: int, tree: TriangleTree | 
     nodes, alb, start, (c0, inv), err = albedo_table(lo, hi, eta, g)
     tree = TriangleTree(mesh.vertices, mesh.faces) if tree is None else tree
     image = material.image is not None
+    rad = _radius_channel_data(material, c)
+    radius_kind = 0.0 if rad is None else (1.0 if material.radius is not None else 2.0)
     # writable copies: a read-only array is another type to numba, which would compile the walk once more
     col = np.zeros(0) if image else np.array(data, dtype=np.float64)
     img = np.array(data, dtype=np.float64) if image else np.zeros((0, 0))
-    uv = np.array(material.uv, dtype=np.float64) if image else np.zeros((0, 3, 2))
+    uv = np.array(material.uv, dtype=np.float64) if material.uv is not None else np.zeros((0, 3, 2))
+    rcol = np.array(rad, dtype=np.float64) if radius_kind == 1.0 else np.zeros(0)
+    rimg = np.array(rad, dtype=np.float64) if radius_kind == 2.0 else np.zeros((0, 0))
     paint = (tree.A, tree.B, tree.C, tree.lo, tree.hi, tree.child, tree.box, tree.order,
-             np.array(mesh.faces, dtype=np.int64), col, uv, img, nodes, alb, start)
+             np.array(mesh.faces, dtype=np.int64), col, uv, img, nodes, alb, start, rcol, rimg)
+    # the largest sigma_t' over the paint: the base's over the radius map's least factor (interpolation stays
+    # within the values, eq. (132))
+    st_max = st_p / (1.0 if rad is None else float(np.min(rad)))
     if g == 0.0:
-        majorant, constant = st_p, True
+        majorant, constant = st_max, rad is None
     else:      # sigma_t = sigma_t' (1 + alpha' g / (1 - g)): largest at the largest alpha' for g > 0
         a = np.clip(alb, 0.0, 1.0)
-        majorant, constant = float(np.max(a * st_p / (1.0 - g) + (1.0 - a) * st_p)), False
+        majorant, constant = float(np.max(a * st_max / (1.0 - g) + (1.0 - a) * st_max)), False
     majorant *= MAJORANT_FACTOR
     constant = constant and MAJORANT_FACTOR == 1.0
-    fp = np.array([majorant, 1.0 if constant else 0.0, st_p, g, 1.0 if image else 0.0, c0, inv])
+    fp = np.array([majorant, 1.0 if constant else 0.0, st_p, g, 1.0 if image else 0.0, c0, inv, radius_kind])
     return MediumField(PAINTED, majorant, constant, fp, paint, _empty_parts(), table_error=err,
                        notes={"table_nodes": int(nodes.size), "colour_range": (lo, hi)})
 

@@ -60,12 +60,12 @@ def ewald_weight(kappa, spread):
 
 
 @numba.njit(cache=True, nogil=True)
-def _loads(pos, refracted, normal, power, t, w, gx, gw, spread, h0, index, lo, level, ijk, cell_nodes, out,
+def _loads(pos, refracted, normal, power, scale, t, w, gx, gw, spread, h0, index, lo, level, ijk, cell_nodes, out,
            dropped, p_lo, p_hi):
-    """Nodal loads (N, k) of the sources of entries p_lo:p_hi: per channel c, depth points t[c] (mm) with
-    strengths w[c] (times the entry's power), each spread over the Gauss-Hermite nodes gx (weights gw) in the
-    plane normal to ``normal``; ``power`` (p, k): each entry's power per channel; ``dropped[c]`` collects power
-    that fell outside the lattice."""
+    """Nodal loads (N, k) of the sources of entries p_lo:p_hi: per channel c, depth points t[c] (mm) times the
+    entry's ``scale[p, c]`` with strengths w[c] (times the entry's power), each spread over the Gauss-Hermite nodes
+    gx (weights gw) in the plane normal to ``normal``; ``power`` (p, k): each entry's power per channel;
+    ``dropped[c]`` collects power that fell outside the lattice."""
     k_ch, n_t = t.shape
     n_g = gx.size
     for p in range(p_lo, p_hi):
@@ -81,9 +81,10 @@ def _loads(pos, refracted, normal, power, t, w, gx, gw, spread, h0, index, lo, l
         e2x, e2y, e2z = ny * e1z - nz * e1y, nz * e1x - nx * e1z, nx * e1y - ny * e1x
         for c in range(k_ch):
             for j in range(n_t):
-                cx = pos[p, 0] + t[c, j] * refracted[p, 0]
-                cy = pos[p, 1] + t[c, j] * refracted[p, 1]
-                cz = pos[p, 2] + t[c, j] * refracted[p, 2]
+                tj = t[c, j] * scale[p, c]
+                cx = pos[p, 0] + tj * refracted[p, 0]
+                cy = pos[p, 1] + tj * refracted[p, 1]
+                cz = pos[p, 2] + tj * refracted[p, 2]
                 for a in range(n_g):
                     for b in range(n_g):
                         q = power[p, c] * w[c, j] * gw[a] * gw[b]
@@ -115,12 +116,13 @@ def _find(px, py, pz, h0, index, lo):
     return -1
 
 
-def lattice_loads(lattice, positions, refracted, normals, power, depths_mm, strengths, spread_mm):
+def lattice_loads(lattice, positions, refracted, normals, power, depths_mm, strengths, spread_mm, depth_scale=None):
     """(N, k) nodal loads W and (k,) power dropped outside the lattice, for entries at ``positions`` (p, 3) mm
     entering along ``refracted`` (p, 3) with ``power`` (p,) W, or (p, k) per channel (a medium that varies from
-    entry to entry): per channel, points at ``depths_mm`` (k, n) along the ray with ``strengths`` (k, n) (the
-    rule's weights times each channel's Ewald weight), spread sideways by a Gaussian of ``spread_mm`` in the plane
-    normal to ``normals``."""
+    entry to entry): per channel, points at ``depths_mm`` (k, n) along the ray (times each entry's ``depth_scale``
+    (p, k) where given: a mean free path that varies from entry to entry) with ``strengths`` (k, n) (the rule's
+    weights times each channel's Ewald weight), spread sideways by a Gaussian of ``spread_mm`` in the plane normal
+    to ``normals``."""
     depths_mm = np.ascontiguousarray(np.atleast_2d(depths_mm), dtype=np.float64)
     strengths = np.ascontiguousarray(np.atleast_2d(strengths), dtype=np.float64)
     if depths_mm.shape != strengths.shape:
@@ -140,6 +142,10 @@ def lattice_loads(lattice, positions, refracted, normals, power, depths_mm, stre
     if power.shape[0] != n or power.shape[1] not in (1, k):
         raise MeshshadeError("the entries' power must be (entries,) or (entries, channels)")
     args.append(np.ascontiguousarray(np.broadcast_to(power, (n, k))))
+    scale = np.ones((n, k)) if depth_scale is None else np.asarray(depth_scale, dtype=np.float64)
+    if scale.shape != (n, k):
+        raise MeshshadeError("the entries' depth scale must be (entries, channels)")
+    args.append(np.ascontiguousarray(scale))
     # LOAD_BLOCKS fixed ranges of entries, each into its own nodal array, summed in order: the same loads for any
     # number of threads
     blocks = min(LOAD_BLOCKS, max(1, n // 4096))

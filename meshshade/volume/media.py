@@ -3,7 +3,7 @@ two kinds.
 
 The volume transport (:mod:`meshshade.volume.transport`) of one homogeneous :class:`~meshshade.materials.Material`
 keeps its own path (constants in the operator's coefficients, one table of the near field). A varying medium is
-read through a :class:`VaryingMedium`, which answers the five questions the transport asks:
+read through a :class:`VaryingMedium`, which answers the questions the transport asks:
 
 * :meth:`~VaryingMedium.resolution_material`: what the lattice must resolve (its fastest and slowest decays);
 * :meth:`~VaryingMedium.attach`: the medium at the sampling surface's vertices (the receivers) and the near
@@ -11,17 +11,21 @@ read through a :class:`VaryingMedium`, which answers the five questions the tran
 * :meth:`~VaryingMedium.cube_media`: D and sigma_a per cube of the lattice (eq. (107));
 * :meth:`~VaryingMedium.entry_loads`: the lattice's line sources of each entry, in the medium where it enters;
 * :meth:`~VaryingMedium.near_field` / :meth:`~VaryingMedium.point_near_field`: eq. (103) with the receiver's
-  medium.
+  medium;
+* :meth:`~VaryingMedium.extinction` / :meth:`~VaryingMedium.extinction_at` / :meth:`~VaryingMedium.least_extinction`:
+  what the light crossing unscattered sees (eq. (130)).
 
-Two kinds: :class:`PaintedMedium` (a :class:`~meshshade.painted.PaintedMaterial`: the albedo painted on the
-surface, each point of the volume the medium of the nearest sampled surface point, the near field tabulated at a
-few albedos and interpolated, eq. (108)) and :class:`PartsMedium` (a :class:`~meshshade.parts.PartedMaterial`:
-each point the medium of the part owning it, the near field tabulated per distinct medium, §17 "Parts").
+Two kinds: :class:`PaintedMedium` (a :class:`~meshshade.painted.PaintedMaterial`: the albedo, and with a radius
+map the mean free path, painted on the surface, each point of the volume the medium of the nearest sampled surface
+point, the near field tabulated at a few albedos and mean free paths and interpolated, eqs. (108), (133)) and
+:class:`PartsMedium` (a :class:`~meshshade.parts.PartedMaterial`: each point the medium of the part owning it,
+the near field tabulated per distinct medium, §17 "Parts").
 
 Pure array work; no I/O.
 """
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -39,6 +43,12 @@ __all__ = ["VaryingMedium", "PaintedMedium", "PartsMedium", "varying_medium", "N
 #: a painted medium's near field is tabulated at this many reduced albedos per channel (spread evenly in
 #: log10(1 - alpha') over the paint's range) and interpolated at each receiver (docs/physics.md eq. (108))
 NEAR_FIELD_NODES = 3
+#: with a radius map, the near field's nodes in ln sigma_t' are at most this far apart (and at least
+#: NEAR_FIELD_NODES, at most MFP_NODES_MAX): a 15 mm ball of skin1 whose mean free path runs 0.6-1.5x its own across
+#: it (a ratio of 2.5) bakes 0.46 / 0.11 % off (90th percentile over the lit vertices) with 3 / 5 nodes against 9,
+#: eq. (133)'s error falling as the square of the spacing (2 nodes: 2.1 %)
+MFP_NODE_STEP = math.log(1.25)
+MFP_NODES_MAX = 9
 
 
 def varying_medium(material):
@@ -102,84 +112,124 @@ class VaryingMedium:
         """(p, 3) 1/mm: the reduced extinction sigma_t' at ``points`` (p, 3) of the volume."""
         raise NotImplementedError
 
+    def least_extinction(self):
+        """(3,) 1/mm: the least reduced extinction sigma_t' anywhere in the medium, per channel."""
+        raise NotImplementedError
+
 
 # ------------------------------------------------------------------------------------------------ painted
 class PaintedMedium(VaryingMedium):
     """A painted material's medium (docs/physics.md §17): the reduced albedo at each sampling vertex (eq. (106)
-    of the colour there), each cube and entry the medium of the nearest sampling vertex, the near field at
-    NEAR_FIELD_NODES albedos per channel interpolated at the receiver's (eq. (108))."""
+    of the colour there) and its reduced extinction (the base's over the radius map's factor there, eq. (132)),
+    each cube and entry the medium of the nearest sampling vertex, the near field at NEAR_FIELD_NODES albedos per
+    channel (and as many mean free paths, with a radius map) interpolated at the receiver's (eqs. (108), (133))."""
 
     def __init__(self, material: PaintedMaterial):
         self.material = material
         self.boundary = material.base
 
     def resolution_material(self):
-        # the lattice resolves the paint's fastest-decaying medium (its least albedo per channel)
-        return self.material.material_of(self.material.albedo_range()[0], "the paint's darkest colour")
+        # the lattice resolves the paint's fastest-decaying medium: its least albedo at its shortest mean free path
+        # per channel (the two taken together wherever they lie: the decay grows with both)
+        return self.material.material_of(self.material.albedo_range()[0], "the paint's darkest colour",
+                                         sigma_t_prime=self.material.sigma_t_prime_range()[1])
 
     def attach(self, mesh, surface, spread):
         p, surf = self.material, surface
         F = surf.samples.faces
         colour = np.zeros((surf.samples.n_vertices, 3))
+        radius = np.ones((surf.samples.n_vertices, 3))
         for k in range(3):                                   # each corner's point on its input face
             colour[F[:, k]] = p.colour_at(surf._origin, mesh.faces, surf._bary[:, k, :])
+            if p.has_radius:
+                radius[F[:, k]] = p.radius_at(surf._origin, mesh.faces, surf._bary[:, k, :])
         self.sample_albedo = albedo_for_reflectance(np.clip(colour, 0.0, None), p.eta, p.g)
+        self.sample_st = np.asarray(p.sigma_t_prime, dtype=np.float64) / radius
         self._tree = cKDTree(surf.samples.vertices)
-        x = np.log10(1.0 - self.sample_albedo)
-        lo, hi = x.min(axis=0), x.max(axis=0)
-        k = 1 if np.all(hi - lo < 1e-12) else NEAR_FIELD_NODES
-        self._node_x = np.linspace(lo, hi, k)                                          # (k, 3)
-        self.tables_at = [RemainderTables(p.material_of(1.0 - 10.0 ** xn, f"painted node {j}"), spread)
-                          for j, xn in enumerate(self._node_x)]
+        # the tables' nodes: evenly in log10(1 - alpha') and in ln sigma_t' over the sampled paint, per channel
+        self._node_x = _nodes(np.log10(1.0 - self.sample_albedo))                   # (ka, 3)
+        self._node_y = _nodes(np.log(self.sample_st), MFP_NODE_STEP, MFP_NODES_MAX)  # (ks, 3)
+        self.tables_at = [RemainderTables(p.material_of(1.0 - 10.0 ** xn, f"painted node {i},{j}",
+                                                        sigma_t_prime=np.exp(yn)), spread)
+                          for i, xn in enumerate(self._node_x) for j, yn in enumerate(self._node_y)]
         return self.tables_at[0]
 
     def medium_at(self, points):
-        """(alpha' (p, 3), D (p, 3) mm, sigma_a (p, 3) 1/mm) at ``points``: that of the nearest sampling vertex
-        (d'Eon's D = (2 - alpha') / (3 sigma_t'))."""
+        """(alpha' (p, 3), D (p, 3) mm, sigma_a (p, 3) 1/mm, sigma_t' (p, 3) 1/mm) at ``points``: that of the
+        nearest sampling vertex (d'Eon's D = (2 - alpha') / (3 sigma_t'))."""
         _, i = self._tree.query(points, workers=default_threads())
         a = self.sample_albedo[i]
-        st = self.material.sigma_t_prime
-        return a, (2.0 - a) / (3.0 * st), (1.0 - a) * st
+        st = self.sample_st[i]
+        return a, (2.0 - a) / (3.0 * st), (1.0 - a) * st, st
 
     def cube_media(self, centres):
-        _, D, sig_a = self.medium_at(centres)
+        _, D, sig_a, _ = self.medium_at(centres)
         return D, sig_a
 
     def entry_loads(self, lattice, samples, w, spread):
-        a, D, sig_a = self.medium_at(samples.positions)
-        st = np.asarray(self.material.sigma_t_prime, dtype=np.float64)
+        a, D, sig_a, st = self.medium_at(samples.positions)
+        base = np.asarray(self.material.sigma_t_prime, dtype=np.float64)
         x, q = line_rule(1.0)
         power = samples.power[:, None] * a * ewald_weight(np.sqrt(sig_a / D), spread)     # (p, 3): per channel
-        return lattice_loads(lattice, samples.positions, w, samples.normals, power, x[None, :] / st[:, None],
-                             np.broadcast_to(q, (3, q.size)), spread)
+        scale = base / st if self.material.has_radius else None                             # eq. (132)
+        return lattice_loads(lattice, samples.positions, w, samples.normals, power, x[None, :] / base[:, None],
+                             np.broadcast_to(q, (3, q.size)), spread, depth_scale=scale)
 
     def near_field(self, src, rec, spacing_mm):
         return remainder_exitance(self.tables_at, src, rec, spacing_mm=spacing_mm,
-                                  blend=self._blend(self.sample_albedo))
+                                  blend=self._blend(self.sample_albedo, self.sample_st))
 
     def point_near_field(self, src, rec, points):
-        return remainder_exitance(self.tables_at, src, rec, blend=self._blend(self.medium_at(points)[0]))[0]
+        a, _, _, st = self.medium_at(points)
+        return remainder_exitance(self.tables_at, src, rec, blend=self._blend(a, st))[0]
 
     def extinction(self):
-        # the paint keeps the base's mean free path (eq. (106)): sigma_t' is the base's everywhere
+        # the paint keeps the base's mean free path (eq. (106)) unless a radius map scales it (eq. (132))
+        if self.material.has_radius:
+            return None
         return np.asarray(self.material.sigma_t_prime, dtype=np.float64)
 
     def extinction_at(self, points):
+        if self.material.has_radius:
+            return self.medium_at(points)[3]
         return np.broadcast_to(self.extinction(), (len(points), 3))
 
-    def _blend(self, albedo):
-        """(node (p, 3), weight (p, 3)): each receiver's place between the tabulated albedos per channel, linear in
-        log10(1 - alpha') (eq. (108)); the near field is summed with both tables in one pass
+    def least_extinction(self):
+        return self.material.sigma_t_prime_range()[0]
+
+    def _blend(self, albedo, sigma_t_prime):
+        """(tables (p, 3, Q), weights (p, 3, Q)): each receiver's tables and weights per channel, linear in
+        log10(1 - alpha') between the albedo nodes (eq. (108)) and in ln sigma_t' between the mean free paths'
+        (eq. (133)), Q = 2 or 4 corners; the near field is summed with them in one pass
         (:func:`meshshade.volume.remainder.remainder_exitance`). None for a uniform paint (one table: the
         homogeneous sum)."""
-        k = len(self.tables_at)
-        if k == 1:
+        ka, ks = len(self._node_x), len(self._node_y)
+        if ka * ks == 1:
             return None
-        x = np.log10(1.0 - albedo)
-        index = np.arange(k, dtype=np.float64)
-        u = np.stack([np.interp(x[:, c], self._node_x[:, c], index) for c in range(3)], axis=1)
-        node = np.minimum(np.floor(u).astype(np.int64), k - 2)      # the nodes increase in x (albedo falling)
-        return node, u - node
+        axes = []
+        for nodes, v in ((self._node_x, np.log10(1.0 - albedo)), (self._node_y, np.log(sigma_t_prime))):
+            k = len(nodes)
+            if k == 1:
+                axes.append([(np.zeros(v.shape, dtype=np.int64), np.ones(v.shape))])
+                continue
+            index = np.arange(k, dtype=np.float64)
+            u = np.stack([np.interp(v[:, c], nodes[:, c], index) for c in range(3)], axis=1)
+            node = np.minimum(np.floor(u).astype(np.int64), k - 2)
+            axes.append([(node, 1.0 - (u - node)), (node + 1, u - node)])
+        corners = [(ia * ks + js, wa * ws) for ia, wa in axes[0] for js, ws in axes[1]]
+        return (np.stack([t for t, _ in corners], axis=2), np.stack([w for _, w in corners], axis=2))
+
+
+def _nodes(values, step=None, most=NEAR_FIELD_NODES):
+    """(k, 3): values spread evenly over each channel's range of ``values`` (p, 3): NEAR_FIELD_NODES, or with
+    ``step`` as many as keep them at most ``step`` apart (at most ``most``); its one value (k = 1) where no channel
+    varies."""
+    lo, hi = values.min(axis=0), values.max(axis=0)
+    span = float(np.max(hi - lo))
+    if span < 1e-12:
+        return lo[None, :]
+    k = NEAR_FIELD_NODES if step is None else int(np.clip(math.ceil(span / step) + 1, NEAR_FIELD_NODES, most))
+    return np.linspace(lo, hi, k)
 
 
 # ------------------------------------------------------------------------------------------------ parts
@@ -284,6 +334,9 @@ class PartsMedium(VaryingMedium):
     def extinction_at(self, points):
         st = np.stack([np.asarray(m.sigma_t_prime, dtype=np.float64) for m in self.media])
         return st[self.medium_at(points)]
+
+    def least_extinction(self):
+        return np.min([np.asarray(m.sigma_t_prime, dtype=np.float64) for m in self.media], axis=0)
 
     def entry_medium(self, samples):
         """(k,) int: the medium where each entry enters (its sampling vertex's; a beam's nearest vertex's)."""

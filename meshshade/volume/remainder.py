@@ -360,18 +360,18 @@ def _kernel3(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog
 def _kernel3_blend(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, rec_node,
                    rec_blend, r):
     """:func:`_kernel3` over several tables (their arrays with a leading table axis): channel c of receiver r
-    reads table rec_node[r, c], blended with the next table by the weight rec_blend[r, c] (a painted receiver's
-    albedo between two tabulated ones, eq. (108)); the logarithms and the disc table's cell are shared by the
-    channels and the tables."""
+    reads the tables rec_node[r, c, q] with the weights rec_blend[r, c, q] (a painted receiver's albedo, and mean
+    free path, between tabulated ones, eqs. (108), (133)); the logarithms and the disc table's cell are shared by
+    the channels and the tables."""
     k0 = k1 = k2 = 0.0
     if d <= 0.0 and a <= 0.0:
         return k0, k1, k2
     disc, i, wi, j, wj, ld = _pair_cell(d, a, patch_radii, log_a0, dlog_a, dtab.shape[3], dtab.shape[4] - 1)
     for c in range(3):
         val = 0.0
-        for q in range(2):
-            t = rec_node[r, c] + q
-            wq = 1.0 - rec_blend[r, c] if q == 0 else rec_blend[r, c]
+        for q in range(rec_node.shape[2]):
+            t = rec_node[r, c, q]
+            wq = rec_blend[r, c, q]
             if wq == 0.0 or d > radius[t, c]:
                 continue
             g = cosg[t, c]
@@ -555,7 +555,9 @@ def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: flo
     ``tables``: a :class:`RemainderTables`, or a sequence of them with ``blend`` = (node (n, 3) int, weight (n, 3)):
     receiver r's channel c then takes (1 - w) f_node + w f_node+1 (a painted medium's receiver albedo between two
     tabulated ones, eq. (108)), every pair evaluated with both in one pass over the entries (the same sums as one
-    pass per table interpolated afterwards, to rounding, at the cost of one pass).
+    pass per table interpolated afterwards, to rounding, at the cost of one pass). Or ``blend`` = (tables (n, 3, Q)
+    int, weights (n, 3, Q)): channel c of receiver r takes sum_q w_q f_{t_q} (a bilinear blend over albedo and
+    mean free path, eq. (133)).
 
     ``src``: dict of entry arrays ``pos`` (k, 3) mm, ``normal`` (k, 3), ``power`` (k,) W, ``area`` (k,) mm^2
     (0 for point entries), ``cos_t`` (k,), ``light`` (k,) int. ``rec``: ``pos`` (n, 3), ``normal`` (n, 3),
@@ -591,10 +593,19 @@ def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: flo
         node = weight = None
     else:
         node, weight = _arg(blend[0], np.int64), _arg(blend[1])
-        if node.shape != (n, 3) or weight.shape != (n, 3) or node.min(initial=0) < 0 or \
-                node.max(initial=0) > max(len(tables) - 2, 0) or (len(tables) == 1 and np.any(weight != 0.0)):
-            raise ValueError("blend: node (n, 3) in 0..len(tables) - 2 and weight (n, 3), 0 with one table")
-        if len(tables) == 1:              # every weight 0: the one-table sum
+        if node.ndim == 2:                # a node and the next: the corners' form
+            if node.shape != (n, 3) or weight.shape != (n, 3) or node.min(initial=0) < 0 or \
+                    node.max(initial=0) > max(len(tables) - 2, 0) or (len(tables) == 1 and np.any(weight != 0.0)):
+                raise ValueError("blend: node (n, 3) in 0..len(tables) - 2 and weight (n, 3), 0 with one table")
+            if len(tables) == 1:          # every weight 0: the one-table sum
+                node = weight = None
+            else:
+                node = _arg(np.stack([node, node + 1], axis=2), np.int64)
+                weight = _arg(np.stack([1.0 - weight, weight], axis=2))
+        elif node.ndim != 3 or node.shape[:2] != (n, 3) or weight.shape != node.shape or \
+                node.min(initial=0) < 0 or node.max(initial=0) > len(tables) - 1:
+            raise ValueError("blend: tables (n, 3, Q) in 0..len(tables) - 1 and weights of the same shape")
+        elif len(tables) == 1:            # every corner the one table: the one-table sum
             node = weight = None
     out = np.zeros((n, 3))
     E, rc = _arg(rec["E"]), np.asarray(rec["cos_t"], dtype=np.float64)
@@ -605,10 +616,8 @@ def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: flo
                 T = tables[0].totals(rc[lit, l])
             else:
                 Tk = np.stack([tb.totals(rc[lit, l]) for tb in tables])            # (K, p, 3)
-                nl, wl, rows = node[lit], weight[lit], np.arange(int(lit.sum()))
-                T = np.stack([(1.0 - wl[:, c]) * Tk[nl[:, c], rows, c]
-                              + wl[:, c] * Tk[np.minimum(nl[:, c] + 1, len(tables) - 1), rows, c]
-                              for c in range(3)], axis=1)
+                nl, wl, rows = node[lit], weight[lit], np.arange(int(lit.sum()))[:, None]
+                T = np.stack([np.sum(wl[:, c] * Tk[nl[:, c], rows, c], axis=1) for c in range(3)], axis=1)
             out[lit] += E[lit, l, None] * T
     k = src["pos"].shape[0]
     if k == 0:

@@ -292,7 +292,7 @@ class VolumeTransport:
             scene = make_scene(surf.vertices, surf.faces)
         ext = self.medium.extinction() if self.medium is not None else np.asarray(self.material.sigma_t_prime)
         depth = None
-        if ext is None:                      # parts of different extinction: a midpoint rule along each segment
+        if ext is None:                      # a varying extinction: a midpoint rule along each segment
             medium = self.medium
 
             def depth(o, d, L):
@@ -300,7 +300,7 @@ class VolumeTransport:
                 pts = o[:, None, :] + (L[:, None] * u[None, :])[:, :, None] * d[:, None, :]
                 sig = medium.extinction_at(pts.reshape(-1, 3)).reshape(len(o), DEPTH_POINTS, 3)
                 return sig.mean(axis=1) * L[:, None]
-            depth.sigma_min = np.min([np.asarray(m.sigma_t_prime) for m in self.medium.media], axis=0)
+            depth.sigma_min = medium.least_extinction()
         closed = bool(self.mesh.defects.is_closed) and self.mesh.defects.n_components == 1
         sides = None if closed else (lambda p: self.inside.winding(p) > 0.5)
         eta = float(self.material.eta)

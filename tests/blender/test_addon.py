@@ -28,6 +28,7 @@ pytestmark = pytest.mark.blender
 
 import meshshade.blender  # noqa: E402
 from meshshade.blender import addon  # noqa: E402
+from meshshade.io import write_exr  # noqa: E402
 
 MM_PER_BU = 10.0   # the scenes use 1 Blender unit = 1 cm
 
@@ -368,7 +369,6 @@ def test_world_and_area_light_bake_equals_the_cli_bake_with_the_same_exr(registe
     """Issue 43: a scene lit by its World (an Environment Texture of an EXR through a Mapping node rotated about Z,
     strength 2) and an area light bakes as ``meshshade bake --light env:FILE:2e-6:ROT:z --light area:...`` of the
     same world-space mesh (Blender's W/(m^2 sr) -> W/(mm^2 sr); the add-on's meshes are Blender's world, Z up)."""
-    from meshshade.io import write_exr
     ob = build_scene()
     for name in ("Sun", "Lamp", "Spot"):
         bpy.data.objects.remove(bpy.data.objects[name])
@@ -445,6 +445,55 @@ def test_spot_textured_from_its_material_bakes_as_the_cli(registered, tmp_path, 
     assert bpy.ops.object.meshshade_bake(material="MATERIAL") == {"FINISHED"}
     got = attribute(ob.data, "meshshade_radiance")[:, :3]
 
+    mm_per_unit = 1000.0 * bpy.context.scene.unit_settings.scale_length     # 0.001 as Blender's float32
+    ell = np.array(bsdf.inputs["Subsurface Radius"].default_value) * 0.5 * mm_per_unit   # Blender's float32 values
+    path = bpy.path.abspath(image.filepath, library=image.library)
+    expected = _painted_cli_bake(tmp_path, ob, 1.0 / ell, "--albedo-map", path, "--albedo-clamp")
+    assert expected.max() > 0 and len(np.unique(np.round(got[:, 0] / got[:, 0].max(), 3))) > 50   # painted, lit
+    np.testing.assert_allclose(got, expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())
+
+
+def test_spot_textured_with_a_radius_image_bakes_as_the_cli(registered, tmp_path, shared_meshes):
+    """Issue 49: spot_textured with an Image Texture (Non-Color) feeding the Principled BSDF's Subsurface Radius
+    besides its map_Kd on the Base Color, baked "From the object's material", equals the command-line bake with
+    --albedo-map of its map_Kd and --radius-map of that image, the base's mean free path 1 x Scale x mm per unit
+    (the image takes the radius's place, as in Cycles)."""
+    bpy.context.scene.world = None
+    bpy.context.scene.unit_settings.scale_length = 0.001               # 1 unit = 1 mm
+    bpy.ops.wm.obj_import(filepath=str(shared_meshes / "spot_textured.obj"))
+    ob = bpy.context.selected_objects[0]
+    bpy.context.view_layer.objects.active = ob
+    ob.scale = (40.0, 40.0, 40.0)
+    new_light("Sun", "SUN", 1000.0, rotation=(0.6, 0.2, 0.3))
+    bpy.context.view_layer.update()
+    yy, xx = np.mgrid[0:32, 0:64]
+    radius = (0.5 + xx / 63.0)[..., None] * np.array([1.6, 1.0, 0.7])          # mm at a scale of 1 mm per unit
+    radius_path = tmp_path / "radius.exr"
+    write_exr(radius_path, radius.astype(np.float32))
+    mat = ob.material_slots[0].material
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(str(radius_path))
+    tex.image.colorspace_settings.name = "Non-Color"
+    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Subsurface Radius"])
+    bsdf.inputs["Subsurface Weight"].default_value = 1.0
+    bsdf.inputs["Subsurface Scale"].default_value = 0.8
+    bsdf.inputs["IOR"].default_value = 1.3
+    assert bpy.ops.object.meshshade_bake(material="MATERIAL") == {"FINISHED"}
+    got = attribute(ob.data, "meshshade_radiance")[:, :3]
+    image = bsdf.inputs["Base Color"].links[0].from_node.image
+    mm_per_unit = 1000.0 * bpy.context.scene.unit_settings.scale_length
+    ell = np.full(3, bsdf.inputs["Subsurface Scale"].default_value) * mm_per_unit          # the radius 1: the image's
+    expected = _painted_cli_bake(tmp_path, ob, 1.0 / ell, "--albedo-map",
+                                 bpy.path.abspath(image.filepath, library=image.library), "--albedo-clamp",
+                                 "--radius-map", str(radius_path))
+    assert expected.max() > 0
+    np.testing.assert_allclose(got, expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())
+
+
+def _painted_cli_bake(tmp_path, ob, st, *paint):
+    """The command-line bake of ``ob``'s world-space mesh and UVs (written here as an OBJ in mm) under the scene's
+    "Sun", in the medium of sigma_t' ``st`` and albedo 1/2 painted by ``paint`` (the CLI's options)."""
     me = ob.data
     M = np.array(ob.matrix_world)
     co = np.array([v.co for v in me.vertices], dtype=np.float64)
@@ -462,18 +511,13 @@ def test_spot_textured_from_its_material_bakes_as_the_cli(registered, tmp_path, 
                       for i, (a, b, c) in enumerate(F))
     sun_dir = -np.array(bpy.data.objects["Sun"].matrix_world)[:3, 2]
     vec = lambda v: ",".join(repr(float(x)) for x in v)   # noqa: E731
-    ell = np.array(bsdf.inputs["Subsurface Radius"].default_value) * 0.5 * mm_per_unit   # Blender's float32 values
-    st = 1.0 / ell
-    path = bpy.path.abspath(image.filepath, library=image.library)
     cmd = [sys.executable, "-m", "meshshade.cli", "bake", str(obj), "--units", "mm", "--sigma-s-prime",
-           vec(0.5 * st), "--sigma-a", vec(0.5 * st), "--eta", "1.3", "--albedo-map", path, "--albedo-clamp", "--quiet",
+           vec(0.5 * st), "--sigma-a", vec(0.5 * st), "--eta", "1.3", *paint, "--quiet",
            "--out", str(tmp_path / "cli.ply"), "--npz", str(tmp_path / "cli.npz"),
            "--light", f"directional:{vec(sun_dir)}:{1000 * 1e-6!r}"]
     subprocess.run(cmd, check=True, capture_output=True, text=True)
     with np.load(tmp_path / "cli.npz") as z:
-        expected = np.asarray(z["radiance"])
-    assert expected.max() > 0 and len(np.unique(np.round(got[:, 0] / got[:, 0].max(), 3))) > 50   # painted, lit
-    np.testing.assert_allclose(got, expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())
+        return np.asarray(z["radiance"])
 
 
 def principled(name, colour, radius, scale=1.0, ior=1.3):

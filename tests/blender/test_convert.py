@@ -220,3 +220,26 @@ def test_principled_medium_image_weight_and_bad_slots():
         principled_medium(PrincipledSlot("Flat", (0.5, 0.5, 0.5), None, (1, 0, 1), 1.0, 1.3), 1.0)
     with pytest.raises(MaterialError, match="'White'.*Base Color.*must lie in"):
         principled_medium(PrincipledSlot("White", (1.0, 0.5, 0.5), None, (1, 1, 1), 1.0, 1.3), 1.0)
+
+
+def test_principled_medium_radius_or_scale_from_an_image():
+    """An image feeding Subsurface Radius takes the radius's place (the base at a radius of 1: 1/sigma_t' = image x
+    Scale x mm per unit), one feeding Subsurface Scale the scale's (the base at a scale of 1); both: refused."""
+    from meshshade.blender.convert import PrincipledSlot, principled_medium
+    from meshshade.errors import MaterialError
+
+    colour = (0.5, 0.4, 0.3)
+    by_radius, notes = principled_medium(PrincipledSlot("R", colour, None, (9.0, 9.0, 9.0), 2.0, 1.3,
+                                                        radius_image="/x/r.exr"), 10.0)
+    assert by_radius["radius_map"] == "/x/r.exr" and notes == []
+    np.testing.assert_allclose(np.add(by_radius["sigma_s_prime"], by_radius["sigma_a"]), 1.0 / 20.0, rtol=1e-12)
+    by_scale, notes = principled_medium(PrincipledSlot("S", colour, None, (1.0, 0.5, 0.25), 7.0, 1.3,
+                                                       scale_image="/x/s.png", radius_image_is_data=False), 10.0)
+    assert by_scale["radius_map"] == "/x/s.png"
+    np.testing.assert_allclose(np.add(by_scale["sigma_s_prime"], by_scale["sigma_a"]), [0.1, 0.2, 0.4], rtol=1e-12)
+    assert len(notes) == 1 and "Non-Color" in notes[0]
+    plain, _ = principled_medium(PrincipledSlot("P", colour, None, (1.0, 1.0, 1.0), 1.0, 1.3), 1.0)
+    assert plain["radius_map"] is None
+    with pytest.raises(MaterialError, match="'B'.*both Subsurface Radius and Subsurface Scale"):
+        principled_medium(PrincipledSlot("B", colour, None, (1, 1, 1), 1.0, 1.3, radius_image="/a.png",
+                                         scale_image="/b.png"), 1.0)

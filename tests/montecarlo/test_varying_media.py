@@ -115,6 +115,50 @@ def test_painted_image_medium_matches_colour_at():
         np.testing.assert_allclose(got[:, 1], a_ref, rtol=2e-6)
 
 
+def test_painted_radius_map_scales_sigma_t_at_the_closest_point():
+    # eq. (132): sigma_t' is the base's over the radius map's factor at the closest surface point (per vertex and
+    # as an image over the UVs, read as colour_at reads the colour); g = 0.5 so that sigma_t != sigma_t'
+    V, F = uv_sphere(5.0, 16, 32)
+    mesh = Mesh.from_arrays(V, F)
+    uv = spherical_uv(mesh.vertices, mesh.faces)
+    base = Material.preset("skin1", g=0.5)
+    rng = np.random.default_rng(8)
+    colour = model_total_reflectance(base.albedo_prime, base.eta, base.g) * rng.uniform(0.7, 1.1, (mesh.n_vertices, 3))
+    P = _interior_points(mesh, 2000, seed=9, shrink=0.95)
+    _d, face, closest = igl.point_mesh_squared_distance(P, mesh.vertices, mesh.faces)
+    bary = _bary(closest, mesh.vertices[mesh.faces[face]])
+    for pm in (PaintedMaterial(base, colour=colour, radius=rng.uniform(0.4, 2.5, mesh.n_vertices)),
+               PaintedMaterial(base, radius_image=rng.uniform(0.4, 2.5, (8, 16, 3)), uv=uv)):
+        groups, fields = media.medium_fields(pm, mesh)
+        st_p = pm.sigma_t_prime_at(face, mesh.faces, bary)
+        a_ref = albedo_for_reflectance(pm.colour_at(face, mesh.faces, bary), base.eta, base.g)
+        for (_key, chans), fld in zip(groups, fields):
+            c = chans[0]
+            ss = a_ref[:, c] * st_p[:, c] / (1 - base.g)
+            st_ref = ss + (1 - a_ref[:, c]) * st_p[:, c]
+            got = media.medium_at_points(fld, P)
+            assert not fld.constant
+            np.testing.assert_allclose(got[:, 0], st_ref, rtol=2e-6)
+            np.testing.assert_allclose(got[:, 1], ss / st_ref, rtol=2e-6)
+            assert np.all(got[:, 0] <= fld.majorant) and fld.majorant < 1.01 * st_ref.max() * 2.5 / 0.4
+
+
+def test_a_constant_radius_map_walks_as_the_scaled_material():
+    """g = 0, the mean free path 1.5x everywhere: delta tracking at the majorant sigma_t' / 1.5, every collision
+    real; within 4 standard errors of the homogeneous walk in that medium."""
+    mesh = _sphere(5.0, 3)
+    m = Material.preset("skin1")
+    scaled = Material(m.sigma_s_prime / 1.5, m.sigma_a / 1.5, m.eta, m.g)
+    p = simulate(mesh, PaintedMaterial(m, radius=np.full(mesh.n_vertices, 1.5)), _light(),
+                 MCOptions(photons=20_000, seed=4))
+    h = simulate(mesh, scaled, _light(), MCOptions(photons=20_000, seed=5))
+    assert p.null_collisions == 0
+    _close(h, p)
+    base = simulate(mesh, m, _light(), MCOptions(photons=20_000, seed=5))
+    with pytest.raises(AssertionError):        # the walk does see the scaled path: the base's medium differs
+        _close(base, p)
+
+
 def _core_sphere(R=5.0, r=2.5, sub=4):
     Vo, Fo = icosphere(R, sub)
     Vi, Fi = icosphere(r, sub)

@@ -348,3 +348,32 @@ def test_coarser_lattice_covers_the_lattice(ball_lattice, refined_lattice, which
     common, ia, ib = np.intersect1d(lat.node_keys, coarse.node_keys, return_indices=True)
     assert common.size > 0
     np.testing.assert_array_equal(lat.depth[ia], coarse.depth[ib])
+
+
+# ------------------------------------------------------------------------------------------------ entries' sources
+def test_a_depth_scale_per_entry_is_the_same_loads_as_scaled_depths(ball_lattice, rng):
+    # eq. (132): an entry whose mean free path is m times the base's puts its line sources m times deeper; per
+    # entry and channel, the same loads as a call per entry with its depths scaled
+    from meshshade.volume.long_range import lattice_loads, line_rule
+    lat, c = ball_lattice
+    n = 40
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    pos = c + 6.3 * d
+    x, q = line_rule(0.9)
+    depths = np.stack([x / s for s in (0.8, 1.2, 2.0)])
+    strengths = np.stack([q, 0.9 * q, 0.8 * q])
+    power = rng.uniform(0.5, 1.5, size=(n, 3))
+    scale = rng.uniform(0.5, 2.0, size=(n, 3))
+    got, dropped = lattice_loads(lat, pos, -d, d, power, depths, strengths, 0.3, depth_scale=scale)
+    expected = np.zeros_like(got)
+    for i in range(n):
+        expected += lattice_loads(lat, pos[i:i + 1], -d[i:i + 1], d[i:i + 1], power[i:i + 1],
+                                  depths * scale[i][:, None], strengths, 0.3)[0]
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
+    assert np.count_nonzero(got) > 100
+    plain, _ = lattice_loads(lat, pos, -d, d, power, depths, strengths, 0.3)
+    np.testing.assert_array_equal(plain, lattice_loads(lat, pos, -d, d, power, depths, strengths, 0.3,
+                                                       depth_scale=np.ones((n, 3)))[0])
+    with pytest.raises(MeshshadeError, match="depth scale"):
+        lattice_loads(lat, pos, -d, d, power, depths, strengths, 0.3, depth_scale=np.ones((n, 2)))

@@ -111,3 +111,52 @@ def test_a_paint_for_another_mesh_is_refused(ball):
     painted = PaintedMaterial(Material.preset("skin1"), colour=np.full((ball.n_vertices + 1, 3), 0.4))
     with pytest.raises(MaterialError, match="vertex colours for a mesh of"):
         bake(ball, painted, DirectionalLight([0, 0, -1.0], 1.0))
+
+
+# ------------------------------------------------------------------------------------------------ radius maps
+def test_a_constant_radius_map_bakes_as_the_scaled_material(ball):
+    # eq. (132): the base's own colour with its mean free path times m everywhere is the homogeneous material of
+    # sigma_t' / m (a different lattice, sources and near field than the base's: all must follow the map)
+    base = Material.preset("skin1")
+    m = 1.6
+    sun = DirectionalLight([0.3, -0.2, -1.0], 1.0)
+    ref = bake(ball, Material(base.sigma_s_prime / m, base.sigma_a / m, base.eta, base.g), sun).radiance
+    got = bake(ball, PaintedMaterial(base, radius=np.full(ball.n_vertices, m)), sun).radiance
+    lit = ref > 1e-3 * ref.max(axis=0)
+    rel = np.abs(got - ref)[lit] / ref[lit]
+    assert rel.max() < 1e-6
+
+
+def test_each_half_of_a_two_radius_ball_far_from_the_border_bakes_as_its_own_medium():
+    # a 15 mm ball of skin1 whose mean free path is 0.5x where x > 0 and 1.0x where x < 0, lit from +z: the vertices
+    # more than 10 mm from the border (1/kappa <= 3.7 mm) against the two homogeneous media on the same lattice
+    # spacing; the sources' depths, the cubes' D and sigma_a and the near field's tables must take the local mean
+    # free path
+    V, F = icosphere(15.0, 3)
+    mesh = Mesh.from_arrays(V, F)
+    base = Material.preset("skin1")
+    R = np.where(mesh.vertices[:, 0] > 0, 0.5, 1.0)
+    sun = DirectionalLight([0.0, 0.0, -1.0], 1.0)
+    painted = bake(mesh, PaintedMaterial(base, radius=R), sun)
+    same_lattice = BakeOptions(volume=VolumeOptions(h0=painted.stats["volume_resolution_mm"]))
+    for m, side in ((0.5, mesh.vertices[:, 0] > 10.0), (1.0, mesh.vertices[:, 0] < -10.0)):
+        ref = bake(mesh, Material(base.sigma_s_prime / m, base.sigma_a / m, base.eta), sun, same_lattice).radiance
+        sel = side & (ref[:, 2] > 1e-2 * ref[:, 2].max())
+        assert sel.sum() >= 10
+        rel = np.abs(painted.radiance[sel] - ref[sel]) / ref[sel]
+        assert np.all(np.median(rel, axis=0) < 0.01), (m, np.median(rel, axis=0))
+
+
+@pytest.mark.parametrize("radius, needle", [(np.zeros(4), "not a finite factor above 0"),
+                                            (np.array([1.0, np.nan, 1.0, 1.0]), "not a finite factor above 0"),
+                                            (np.ones((4, 2)), "must be")])
+def test_a_radius_no_medium_has_is_refused(radius, needle):
+    with pytest.raises(MaterialError, match=needle):
+        PaintedMaterial(Material.preset("skin1"), radius=radius)
+
+
+def test_a_radius_map_without_uvs_or_for_other_vertices_is_refused(ball):
+    with pytest.raises(MaterialError, match="radius map needs the mesh's texture coordinates"):
+        PaintedMaterial(Material.preset("skin1"), radius_image=np.ones((4, 4)))
+    with pytest.raises(MaterialError, match="radius map has 5 vertex values"):
+        PaintedMaterial(Material.preset("skin1"), colour=np.full((4, 3), 0.4), radius=np.ones(5))

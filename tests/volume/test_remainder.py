@@ -125,3 +125,32 @@ def test_blended_tables_in_one_pass_are_each_tables_pass_interpolated():
     np.testing.assert_array_equal(one, parts[1])
     with pytest.raises(ValueError, match="blend"):
         remainder_exitance(tables, src, rec)
+
+
+def test_tables_of_other_mean_free_paths_blend_at_their_corners():
+    # a receiver between tabulated albedos and mean free paths (eq. (133)): four corners per channel, weights of
+    # the receiver's, in one pass; against one pass per table combined at the receiver afterwards
+    rng = np.random.default_rng(12)
+    src, rec = bumpy_lit_surface(rng)
+    corners = [(a, s) for a in (np.array([0.99, 0.95, 0.9]), np.array([0.8, 0.7, 0.6])) for s in (0.6, 1.0, 1.7)]
+    tables = [RemainderTables(Material(a * s * SKIN.sigma_t_prime, (1 - a) * s * SKIN.sigma_t_prime, SKIN.eta), 0.4)
+              for a, s in corners]
+    assert len({tuple(tb.log_r0) for tb in tables}) == 3          # the tables' distances differ with sigma_t'
+    n = rec["pos"].shape[0]
+    node = rng.integers(0, len(tables), size=(n, 3, 4))
+    weight = rng.random((n, 3, 4))
+    weight /= weight.sum(axis=2, keepdims=True)
+    weight[::5, :, 1:] = 0.0                           # some receivers on one table
+    weight[::5, :, 0] = 1.0
+    stack = np.stack([remainder_exitance(tb, src, rec)[0] for tb in tables])        # (tables, n, 3)
+    expected = np.sum(weight * stack[node, np.arange(n)[:, None, None], np.arange(3)[None, :, None]], axis=2)
+    got, pairs = remainder_exitance(tables, src, rec, blend=(node, weight))
+    assert pairs > 0
+    np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+    # the two-node form is the corners' form with the node and the next
+    node2, w2 = rng.integers(0, len(tables) - 1, size=(n, 3)), rng.random((n, 3))
+    a, _ = remainder_exitance(tables, src, rec, blend=(node2, w2))
+    b, _ = remainder_exitance(tables, src, rec, blend=(np.stack([node2, node2 + 1], 2), np.stack([1 - w2, w2], 2)))
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="blend"):
+        remainder_exitance(tables, src, rec, blend=(node + 1, weight))        # a table index past the last

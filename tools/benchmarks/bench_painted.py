@@ -7,7 +7,11 @@ path's own overhead), ``painted_map`` (spot's colour map through its MTL ``map_K
 the map clamped just inside the reachable range: the lattice then resolves the darkest paint, and the near field
 is summed at NEAR_FIELD_NODES albedos), ``painted_map_h0_one`` (the same at the lattice spacing of ``one``: what the
 finer lattice costs and changes; ``vs_painted_map``: the median and 90th percentile of |difference| / value over
-the vertices above 1e-3 of the peak, per channel). Each row: wall time (best), the ratio to ``one``, the lattice's h0 and
+the vertices above 1e-3 of the peak, per channel), ``radius_map`` (skin1's own colour with a radius map over the
+UVs, eq. (132): the factor 0.7 + 0.7 u, 0.7-1.4 across the map, as smooth as a painted thickness mask; the lattice
+resolves the shortest mean free path and the near field takes four tables per pair) and ``one_shortest`` (skin1 at
+its mean free path times 0.7, the map's shortest, homogeneous: the lattice the map needs, so ``radius_map`` over
+``one_shortest`` is the map's own cost). Each row: wall time (best), the ratio to ``one``, the lattice's h0 and
 unknowns, the stage times of the best run. spot_textured.obj from ../shared/meshes scaled to 50 mm, the sun along
 (0.3, -0.4, -0.866).
 
@@ -56,8 +60,12 @@ def main(argv=None) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         painted_map = PaintedMaterial(base, image=read_colour_map(mtl_colour_map(path)), uv=uv, clamp=True)
+    u = np.linspace(0.0, 1.0, 64)
+    radius = np.broadcast_to((0.7 + 0.7 * u)[None, :, None], (64, 64, 3))
     rows = {"one": base, "painted_const": PaintedMaterial(base, colour=np.broadcast_to(own, (mesh.n_vertices, 3))),
-            "painted_map": painted_map, "painted_map_h0_one": painted_map}
+            "painted_map": painted_map, "painted_map_h0_one": painted_map,
+            "radius_map": PaintedMaterial(base, radius_image=radius, uv=uv),
+            "one_shortest": Material(base.sigma_s_prime / 0.7, base.sigma_a / 0.7, base.eta, base.g, "skin1 x 0.7")}
     light = [DirectionalLight(SUN, 1.0)]
     best = {k: None for k in rows}
     h0_one = None
@@ -81,6 +89,8 @@ def main(argv=None) -> int:
                 "p90": [round(float(np.percentile(rel[lit[:, c], c], 90)), 4) for c in range(3)]}
         print(json.dumps({"row": name, "vertices": mesh.n_vertices, "size_mm": args.size_mm,
                           "wall_s": round(wall, 3), "ratio_to_one": round(wall / best["one"][0], 3),
+                          **({"ratio_to_one_shortest": round(wall / best["one_shortest"][0], 3)}
+                             if name == "radius_map" else {}),
                           "volume_resolution_mm": r.stats["volume_resolution_mm"],
                           "volume_unknowns": r.stats["volume_unknowns"],
                           "clamped_values": getattr(rows[name], "clamped", 0),

@@ -61,8 +61,9 @@ def integer(minimum: int | None = None):
 
 # --- material ---------------------------------------------------------------------------------------------
 def add_albedo_map_args(p: argparse.ArgumentParser, *, note: str = "") -> None:
-    """``--albedo-map FILE|mtl|vertex`` and ``--albedo-clamp`` (a painted material, docs/physics.md §17), as
-    ``meshshade bake``, ``render`` and ``mc`` read them (:func:`meshshade.cli.options.painted_material`)."""
+    """``--albedo-map FILE|mtl|vertex``, ``--albedo-clamp``, ``--radius-map FILE`` and ``--radius-scale`` (a painted
+    material, docs/physics.md §17), as ``meshshade bake``, ``render`` and ``mc`` read them
+    (:func:`meshshade.cli.options.painted_material`)."""
     p.add_argument("--albedo-map", metavar="FILE|mtl|vertex",
                    help="paint the material: the colour (diffuse reflectance) per point of the surface, over the "
                         "mesh's UVs from FILE (EXR linear; PNG, JPEG... sRGB), the OBJ's MTL map_Kd (mtl) or the "
@@ -71,6 +72,14 @@ def add_albedo_map_args(p: argparse.ArgumentParser, *, note: str = "") -> None:
     p.add_argument("--albedo-clamp", action="store_true",
                    help="move painted colours outside the range the model reaches (a 0 or a 1) just inside it, "
                         "saying how many (default: refuse them)")
+    p.add_argument("--radius-map", metavar="FILE",
+                   help="paint the mean free path: a map over the mesh's UVs whose values (read as data, not "
+                        "colour: no sRGB decoding; one channel for all three or R,G,B) times --radius-scale scale the "
+                        "material's mean free path per point; every value must be above 0 (docs/physics.md "
+                        "eq. (132)" + note + ")")
+    p.add_argument("--radius-scale", metavar="S", type=number,
+                   help="multiply the radius map's values by S (default 1; an 8-bit map holds 0-1), as Blender's "
+                        "Subsurface Scale multiplies its Radius")
 
 
 def add_material_args(p: argparse.ArgumentParser, *, with_g: bool = False) -> None:
