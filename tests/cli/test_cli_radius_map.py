@@ -106,3 +106,23 @@ def test_a_job_files_radius_map_lies_beside_it(ball):
                                     'radius-map = "radius.exr"\nradius-scale = 2.5\nlight = "directional:0,0,-1"\n')
     argv = job_argv(read_jobs(ball / "jobs.toml")[0], ball / "r")
     assert f"--radius-map={(ball / 'radius.exr').resolve()}" in argv and "--radius-scale=2.5" in argv
+
+
+def test_a_per_pixel_render_with_a_constant_radius_map_is_the_scaled_materials(cli, ball):
+    # per pixel, the near field at each pixel's point in the medium there (PaintedMedium.point_near_field, eq. (133))
+    from meshshade.io import read_exr
+    write_exr(ball / "radius.exr", np.full((4, 8, 3), 1.7, dtype=np.float32))
+    image = ["--light", SUN, "--width", "40", "--height", "40", "--spp", "1", "--per-pixel", "--quiet"]
+    b = Material.preset("skin1")
+    st = b.sigma_t_prime / np.float32(1.7)
+    runs = {"map": ["--material", "skin1", "--radius-map", ball / "radius.exr"],
+            "scaled": ["--sigma-s-prime", ",".join(repr(float(x)) for x in b.albedo_prime * st),
+                       "--sigma-a", ",".join(repr(float(x)) for x in (1 - b.albedo_prime) * st), "--eta", "1.3"],
+            "base": ["--material", "skin1"]}
+    for name, extra in runs.items():
+        rc, _, err = cli.run(["render", ball / "ball.obj", *extra, *image, "--out", ball / name])
+        assert rc == 0, err
+    got, ref, base = (read_exr(ball / f"{n}.exr")[0][..., :3] for n in runs)
+    lit = ref > 1e-3 * ref.max()
+    np.testing.assert_allclose(got[lit], ref[lit], rtol=1e-4)
+    assert np.median(np.abs(base[lit] / ref[lit] - 1)) > 0.02
