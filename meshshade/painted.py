@@ -145,6 +145,9 @@ class PaintedMaterial:
         if self.colour is not None and self.colour.shape[0] != mesh.n_vertices:
             raise MaterialError(f"the painted material has {self.colour.shape[0]} vertex colours for a mesh of "
                                 f"{mesh.n_vertices} vertices")
+        if self.radius is not None and self.radius.shape[0] != mesh.n_vertices:
+            raise MaterialError(f"the painted material has {self.radius.shape[0]} vertex radius factors for a mesh of "
+                                f"{mesh.n_vertices} vertices")
         if self.uv is not None and self.uv.shape[:2] != (mesh.n_faces, 3):
             raise MaterialError(f"the painted material's UV map is for {self.uv.shape[0]} faces, the mesh has "
                                 f"{mesh.n_faces}")

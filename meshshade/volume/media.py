@@ -131,7 +131,8 @@ class PaintedMedium(VaryingMedium):
     def resolution_material(self):
         # the lattice resolves the paint's fastest-decaying medium: its least albedo at its shortest mean free path
         # per channel (the two taken together wherever they lie: the decay grows with both)
-        return self.material.material_of(self.material.albedo_range()[0], "the paint's darkest colour",
+        name = "the paint's darkest colour" + (" at its shortest mean free path" if self.material.has_radius else "")
+        return self.material.material_of(self.material.albedo_range()[0], name,
                                          sigma_t_prime=self.material.sigma_t_prime_range()[1])
 
     def attach(self, mesh, surface, spread):

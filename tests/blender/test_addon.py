@@ -426,14 +426,7 @@ def test_spot_textured_from_its_material_bakes_as_the_cli(registered, tmp_path, 
     per unit = 1/sigma_t', docs/blender.md)."""
     from meshshade.materials import Material
 
-    bpy.context.scene.world = None
-    bpy.context.scene.unit_settings.scale_length = 0.001               # 1 unit = 1 mm
-    bpy.ops.wm.obj_import(filepath=str(shared_meshes / "spot_textured.obj"))
-    ob = bpy.context.selected_objects[0]
-    bpy.context.view_layer.objects.active = ob
-    ob.scale = (40.0, 40.0, 40.0)
-    new_light("Sun", "SUN", 1000.0, rotation=(0.6, 0.2, 0.3))
-    bpy.context.view_layer.update()
+    ob = _spot_in_the_sun(shared_meshes)
     mat = ob.material_slots[0].material
     bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
     image = bsdf.inputs["Base Color"].links[0].from_node.image
@@ -458,14 +451,7 @@ def test_spot_textured_with_a_radius_image_bakes_as_the_cli(registered, tmp_path
     besides its map_Kd on the Base Color, baked "From the object's material", equals the command-line bake with
     --albedo-map of its map_Kd and --radius-map of that image, the base's mean free path 1 x Scale x mm per unit
     (the image takes the radius's place, as in Cycles)."""
-    bpy.context.scene.world = None
-    bpy.context.scene.unit_settings.scale_length = 0.001               # 1 unit = 1 mm
-    bpy.ops.wm.obj_import(filepath=str(shared_meshes / "spot_textured.obj"))
-    ob = bpy.context.selected_objects[0]
-    bpy.context.view_layer.objects.active = ob
-    ob.scale = (40.0, 40.0, 40.0)
-    new_light("Sun", "SUN", 1000.0, rotation=(0.6, 0.2, 0.3))
-    bpy.context.view_layer.update()
+    ob = _spot_in_the_sun(shared_meshes)
     yy, xx = np.mgrid[0:32, 0:64]
     radius = (0.5 + xx / 63.0)[..., None] * np.array([1.6, 1.0, 0.7])          # mm at a scale of 1 mm per unit
     radius_path = tmp_path / "radius.exr"
@@ -489,6 +475,20 @@ def test_spot_textured_with_a_radius_image_bakes_as_the_cli(registered, tmp_path
                                  "--radius-map", str(radius_path))
     assert expected.max() > 0
     np.testing.assert_allclose(got, expected.astype(np.float32), rtol=2e-7, atol=1e-7 * expected.max())
+
+
+def _spot_in_the_sun(shared_meshes):
+    """spot_textured imported by Blender's OBJ importer at 40 units (1 unit = 1 mm, no World) under a sun: the
+    object."""
+    bpy.context.scene.world = None
+    bpy.context.scene.unit_settings.scale_length = 0.001               # 1 unit = 1 mm
+    bpy.ops.wm.obj_import(filepath=str(shared_meshes / "spot_textured.obj"))
+    ob = bpy.context.selected_objects[0]
+    bpy.context.view_layer.objects.active = ob
+    ob.scale = (40.0, 40.0, 40.0)
+    new_light("Sun", "SUN", 1000.0, rotation=(0.6, 0.2, 0.3))
+    bpy.context.view_layer.update()
+    return ob
 
 
 def _painted_cli_bake(tmp_path, ob, st, *paint):

@@ -6,7 +6,7 @@ import pytest
 
 from meshshade.errors import MaterialError, ParameterError
 from meshshade.geometry.mesh import Mesh
-from meshshade.geometry.procedural import box, icosphere
+from meshshade.geometry.procedural import box, icosphere, spherical_uv
 from meshshade.kernels.fresnel import fresnel_reflectance
 from meshshade.kernels.painted_reflectance import albedo_for_reflectance, model_total_reflectance
 from meshshade.light import DirectionalLight
@@ -160,3 +160,10 @@ def test_a_radius_map_without_uvs_or_for_other_vertices_is_refused(ball):
         PaintedMaterial(Material.preset("skin1"), radius_image=np.ones((4, 4)))
     with pytest.raises(MaterialError, match="radius map has 5 vertex values"):
         PaintedMaterial(Material.preset("skin1"), colour=np.full((4, 3), 0.4), radius=np.ones(5))
+    with pytest.raises(MaterialError, match="for a mesh of 642 vertices"):
+        bake(ball, PaintedMaterial(Material.preset("skin1"), radius=np.ones(ball.n_vertices + 1)),
+             DirectionalLight([0, 0, -1.0], 1.0))
+    uv = spherical_uv(ball.vertices, ball.faces)
+    with pytest.raises(MaterialError, match="vertex radius factors for a mesh of"):
+        bake(ball, PaintedMaterial(Material.preset("skin1"), image=np.full((2, 2, 3), 0.4), uv=uv,
+                                   radius=np.ones(ball.n_vertices - 1)), DirectionalLight([0, 0, -1.0], 1.0))
