@@ -3,6 +3,8 @@ total diffuse reflectance reproduces the preset's bake; a uniform paint on a fla
 incidence reflects its colour in the middle; the surface models refuse a painted material."""
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from meshshade.errors import MaterialError, ParameterError
 from meshshade.geometry.mesh import Mesh
@@ -167,3 +169,32 @@ def test_a_radius_map_without_uvs_or_for_other_vertices_is_refused(ball):
     with pytest.raises(MaterialError, match="vertex radius factors for a mesh of"):
         bake(ball, PaintedMaterial(Material.preset("skin1"), image=np.full((2, 2, 3), 0.4), uv=uv,
                                    radius=np.ones(ball.n_vertices - 1)), DirectionalLight([0, 0, -1.0], 1.0))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 3), st.integers(1, 9), st.floats(0.01, 0.999), st.floats(1.01, 20.0), st.integers(0, 2**31 - 1))
+def test_the_blend_weights_interpolate_each_receivers_medium(ka, ks, albedo_lo, st_ratio, seed):
+    # eqs. (108), (133): per receiver and channel the corners' weights are >= 0, sum to 1, and their weighted node
+    # coordinates give back the receiver's own log10(1 - alpha') and ln sigma_t' (bilinear interpolation is exact on
+    # linear functions); the corners are tables of the grid
+    from meshshade.volume.media import PaintedMedium, _nodes
+    rng = np.random.default_rng(seed)
+    n = 200
+    albedo = rng.uniform(albedo_lo, 0.9999, size=(n, 3)) if ka > 1 else np.full((n, 3), albedo_lo)
+    sig = np.exp(rng.uniform(0.0, np.log(st_ratio), size=(n, 3))) if ks > 1 else np.ones((n, 3))
+    pm = PaintedMedium.__new__(PaintedMedium)
+    pm._node_x = _nodes(np.log10(1.0 - albedo))
+    pm._node_y = _nodes(np.log(sig), np.log(1.25), 9)
+    blend = pm._blend(albedo, sig)
+    ka, ks = len(pm._node_x), len(pm._node_y)
+    if ka * ks == 1:
+        assert blend is None
+        return
+    t, w = blend
+    assert t.min() >= 0 and t.max() < ka * ks and np.all(w >= -1e-15)
+    np.testing.assert_allclose(w.sum(axis=2), 1.0, rtol=0, atol=1e-12)
+    chan = np.arange(3)[None, :, None]
+    x = np.sum(w * pm._node_x[t // ks, chan], axis=2)
+    y = np.sum(w * pm._node_y[t % ks, chan], axis=2)
+    np.testing.assert_allclose(x, np.log10(1.0 - albedo), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(y, np.log(sig), rtol=0, atol=1e-9)
