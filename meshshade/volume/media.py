@@ -49,6 +49,9 @@ NEAR_FIELD_NODES = 3
 #: eq. (133)'s error falling as the square of the spacing (2 nodes: 2.1 %)
 MFP_NODE_STEP = math.log(1.25)
 MFP_NODES_MAX = 9
+#: a pair of a painted medium weighs the entry's power by f in the entry's medium (eq. (134)); False: the
+#: receiver's for the whole pair (eq. (108) alone)
+ENTRY_MEDIUM = True
 
 
 def varying_medium(material):
@@ -178,11 +181,19 @@ class PaintedMedium(VaryingMedium):
 
     def near_field(self, src, rec, spacing_mm):
         return remainder_exitance(self.tables_at, src, rec, spacing_mm=spacing_mm,
-                                  blend=self._blend(self.sample_albedo, self.sample_st))
+                                  blend=self._blend(self.sample_albedo, self.sample_st), src_blend=self._src_blend(src))
 
     def point_near_field(self, src, rec, points):
         a, _, _, st = self.medium_at(points)
-        return remainder_exitance(self.tables_at, src, rec, blend=self._blend(a, st))[0]
+        return remainder_exitance(self.tables_at, src, rec, blend=self._blend(a, st),
+                                  src_blend=self._src_blend(src))[0]
+
+    def _src_blend(self, src):
+        """The entries' tables and weights (their media, the nearest sampling vertex's: eq. (134)), or None."""
+        if not ENTRY_MEDIUM or src["pos"].shape[0] == 0:
+            return None
+        a, _, _, st = self.medium_at(src["pos"])
+        return self._blend(a, st)
 
     def extinction(self):
         # the paint keeps the base's mean free path (eq. (106)) unless a radius map scales it (eq. (132))

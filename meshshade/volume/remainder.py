@@ -420,17 +420,42 @@ def _pair_kernel_typed(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, lo
     return (_kernel3 if isinstance(rec_node, types.NoneType) else _kernel3_blend).py_func
 
 
+def _entry_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, src_node,
+                  src_blend, j, v0, v1, v2):
+    """f of the pair in the entry's medium (:func:`_kernel3_blend` with the entry's tables ``src_node[j]`` and
+    weights ``src_blend[j]``), or the receiver's values (v0, v1, v2) when ``src_node`` is None (one medium, or the
+    receiver's kernel for the whole pair): chosen by type in compiled code (the overload below)."""
+    if src_node is None:
+        return v0, v1, v2
+    return _kernel3_blend(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a,
+                          src_node, src_blend, j)
+
+
+@overload(_entry_kernel, inline="always")
+def _entry_kernel_typed(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, src_node,
+                        src_blend, j, v0, v1, v2):
+    if isinstance(src_node, types.NoneType):
+        def same(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, src_node,
+                 src_blend, j, v0, v1, v2):
+            return v0, v1, v2
+        return same
+    return _entry_kernel
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_pos, src_n, src_p, src_area, src_a,
               src_cos, src_light, f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
-              rec_near, rec_node, rec_blend, theta, out, counts, r_lo, r_hi):
+              rec_near, rec_node, rec_blend, src_node, src_blend, theta, out, counts, r_lo, r_hi):
     """Receivers r_lo:r_hi: eq. (103)'s pair sum over the entries, every pair with its weight P_j - E_l(x) A_j.
     Entries within ``rec_near[r]`` of receiver r one by one; beyond, nodes whose extent over distance is below
     ``theta`` (and whose normals agree) as one entry of their total power at their power centroid less the
     receiver's irradiance times their area at their area centroid (one light: a receiver of several lights opens
     the nodes), the rest one by one. Receiver r reads the tables rec_node[r] blended by rec_blend[r]
     (:func:`_kernel3_blend`, the tables' arrays with a leading axis); ``rec_node`` None: one table
-    (:func:`_kernel3`), chosen by type (:func:`_pair_kernel`)."""
+    (:func:`_kernel3`), chosen by type (:func:`_pair_kernel`). With ``src_node`` / ``src_blend`` (the entries'
+    tables and weights, eq. (134)) a pair summed one by one weighs the entry's power by f in the entry's medium and
+    the subtraction E A_j by the receiver's (:func:`_entry_kernel`); the tree's far nodes take the receiver's for
+    both (their entries' power-weighted tables made spot's dark patches brighter still: physics eq. (134))."""
     rmax = 0.0
     for v in radius.ravel():
         rmax = max(rmax, v)
@@ -500,15 +525,23 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                 d = math.sqrt(qx * qx + qy * qy + qz * qz)
                 if d > rmax:
                     continue
-                w = src_p[j] - rec_E[r, src_light[j]] * src_area[j]
-                if w == 0.0:
+                sub = rec_E[r, src_light[j]] * src_area[j]
+                w = src_p[j] - sub
+                if w == 0.0 and (src_node is None or sub == 0.0):
                     continue
                 a = src_a[j] if src_a[j] > 0.0 else rec_a[r]
                 v0, v1, v2 = _pair_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
                                           src_cos[j], d, a, rec_node, rec_blend, r)
-                a0 += w * v0
-                a1 += w * v1
-                a2 += w * v2
+                if src_node is None:
+                    a0 += w * v0
+                    a1 += w * v1
+                    a2 += w * v2
+                else:              # the entry's power in its own medium, the subtraction in the receiver's
+                    u0, u1, u2 = _entry_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
+                                               src_cos[j], d, a, src_node, src_blend, j, v0, v1, v2)
+                    a0 += src_p[j] * u0 - sub * v0
+                    a1 += src_p[j] * u1 - sub * v1
+                    a2 += src_p[j] * u2 - sub * v2
                 n_pairs += 1
         out[r, 0] += a0
         out[r, 1] += a1
@@ -539,6 +572,17 @@ def _arg(a, dtype=np.float64):
     return np.require(a, dtype=dtype, requirements=("C", "W"))
 
 
+def _corners(blend, n, n_tables):
+    """(tables (n, 3, Q) int64, weights (n, 3, Q)) of a blend given as corners or as a node and the next (n, 3)."""
+    node, weight = np.asarray(blend[0], dtype=np.int64), np.asarray(blend[1], dtype=np.float64)
+    if node.ndim == 2:
+        node, weight = np.stack([node, node + 1], axis=2), np.stack([1.0 - weight, weight], axis=2)
+    if node.shape[:2] != (n, 3) or weight.shape != node.shape or node.min(initial=0) < 0 or \
+            node.max(initial=0) > n_tables - 1:
+        raise ValueError("blend: tables (n, 3, Q) in 0..len(tables) - 1 and weights of the same shape")
+    return node, weight
+
+
 def _stacked(tables):
     """The tables' arrays with a leading axis over ``tables`` (the kernels' reach padded to the longest)."""
     n = max(tb.f.shape[2] for tb in tables)
@@ -549,7 +593,7 @@ def _stacked(tables):
 
 
 def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: float = THETA,
-                       spacing_mm: float | None = None, blend=None):
+                       spacing_mm: float | None = None, blend=None, src_blend=None):
     """Eq. (103) at the receivers: ((n, 3) W/mm^2, pair evaluations).
 
     ``tables``: a :class:`RemainderTables`, or a sequence of them with ``blend`` = (node (n, 3) int, weight (n, 3)):
@@ -557,7 +601,9 @@ def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: flo
     tabulated ones, eq. (108)), every pair evaluated with both in one pass over the entries (the same sums as one
     pass per table interpolated afterwards, to rounding, at the cost of one pass). Or ``blend`` = (tables (n, 3, Q)
     int, weights (n, 3, Q)): channel c of receiver r takes sum_q w_q f_{t_q} (a bilinear blend over albedo and
-    mean free path, eq. (133)).
+    mean free path, eq. (133)). ``src_blend`` = (tables (k, 3, Q), weights (k, 3, Q)) of the entries, with
+    ``blend``: each pair summed one by one then weighs the entry's power by f in the entry's medium and only the
+    subtraction E A_j by the receiver's (eq. (134)); None: the receiver's for both (eq. (108)).
 
     ``src``: dict of entry arrays ``pos`` (k, 3) mm, ``normal`` (k, 3), ``power`` (k,) W, ``area`` (k,) mm^2
     (0 for point entries), ``cos_t`` (k,), ``light`` (k,) int. ``rec``: ``pos`` (n, 3), ``normal`` (n, 3),
@@ -607,6 +653,9 @@ def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: flo
             raise ValueError("blend: tables (n, 3, Q) in 0..len(tables) - 1 and weights of the same shape")
         elif len(tables) == 1:            # every corner the one table: the one-table sum
             node = weight = None
+    src_node = src_weight = None
+    if src_blend is not None and node is not None:
+        src_node, src_weight = (_arg(x, x.dtype) for x in _corners(src_blend, src["pos"].shape[0], len(tables)))
     out = np.zeros((n, 3))
     E, rc = _arg(rec["E"]), np.asarray(rec["cos_t"], dtype=np.float64)
     for l in range(E.shape[1]):
@@ -644,7 +693,7 @@ def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: flo
     counts = np.zeros(n, dtype=np.int64)
     sub = _arg(sub)
     args = (rp, rn, ra, E, perm, lo, hi, child, box, agg, pos, nrm, pw, area, disc, cos_s, light, *tabs, sub, node,
-            weight, float(theta), out, counts)
+            weight, src_node, src_weight, float(theta), out, counts)
     with warnings.catch_warnings():
         # compiled (or loaded) here, on this thread, before the workers run it: inlining the overload of
         # _pair_kernel trips numba's pedantic SSA check (NumbaIRAssumptionWarning, "variable ... is not in

@@ -154,3 +154,30 @@ def test_tables_of_other_mean_free_paths_blend_at_their_corners():
     np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="blend"):
         remainder_exitance(tables, src, rec, blend=(node + 1, weight))        # a table index past the last
+
+
+def test_entries_of_another_medium_weigh_their_power_by_their_own_kernel():
+    # eq. (134): with the entries' media, a pair weighs the entry's power by f of the entry's medium and the
+    # subtraction E A_j by the receiver's. Independently, from one-table sums (every pair one by one: theta 0):
+    # sum_j (P_j - E A_j) f_A + E T_A over all entries, plus sum_j P_j (f_B - f_A) over the entries in medium B
+    rng = np.random.default_rng(13)
+    src, rec = bumpy_lit_surface(rng)
+    tables = [RemainderTables(Material(a * SKIN.sigma_t_prime, (1 - a) * SKIN.sigma_t_prime, SKIN.eta), 0.4)
+              for a in (np.array([0.99, 0.95, 0.9]), np.array([0.8, 0.7, 0.6]))]
+    n, k = rec["pos"].shape[0], src["pos"].shape[0]
+    in_b = src["pos"][:, 0] > 1.0
+    rec_blend = (np.zeros((n, 3, 1), int), np.ones((n, 3, 1)))
+    src_blend = (np.broadcast_to(in_b[:, None, None], (k, 3, 1)).astype(int), np.ones((k, 3, 1)))
+    got, _ = remainder_exitance(tables, src, rec, theta=0.0, blend=rec_blend, src_blend=src_blend)
+    dark = {key: (v[in_b] if isinstance(v, np.ndarray) and v.shape[:1] == (k,) else v) for key, v in src.items()}
+    no_light = {**rec, "E": np.zeros_like(rec["E"])}
+    expected = (remainder_exitance(tables[0], src, rec, theta=0.0)[0]
+                + remainder_exitance(tables[1], dark, no_light, theta=0.0)[0]
+                - remainder_exitance(tables[0], dark, no_light, theta=0.0)[0])
+    np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
+    assert np.abs(got - remainder_exitance(tables[0], src, rec, theta=0.0)[0]).max() > 1e-3 * np.abs(got).max()
+    # entries all in the receivers' medium: the receivers' sum
+    same, _ = remainder_exitance(tables, src, rec, blend=rec_blend, src_blend=(np.zeros((k, 3, 1), int),
+                                                                               np.ones((k, 3, 1))))
+    np.testing.assert_allclose(same, remainder_exitance(tables, src, rec, blend=rec_blend)[0], rtol=1e-12,
+                               atol=1e-15)
