@@ -431,15 +431,17 @@ def _entry_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0,
                           src_node, src_blend, j)
 
 
+@numba.njit(cache=True, inline="always")
+def _receiver_values(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, src_node,
+                     src_blend, j, v0, v1, v2):
+    """:func:`_entry_kernel` without the entries' media: the receiver's values."""
+    return v0, v1, v2
+
+
 @overload(_entry_kernel, inline="always")
 def _entry_kernel_typed(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, src_node,
                         src_blend, j, v0, v1, v2):
-    if isinstance(src_node, types.NoneType):
-        def same(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a, cos_t, d, a, src_node,
-                 src_blend, j, v0, v1, v2):
-            return v0, v1, v2
-        return same
-    return _entry_kernel
+    return _receiver_values.py_func if isinstance(src_node, types.NoneType) else _entry_kernel
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
