@@ -342,8 +342,13 @@ def _fill_index(index, lo, level, ijk, c0, c1):
 CORNER_SNAP = 1e-4
 
 
-def snap_corner_depths(depth, h0: float):
-    """``depth`` with the corners nearer the surface than ``CORNER_SNAP * h0`` put that far outside it.
+def snap_corner_depths(depth, h0: float, points=None, side=None):
+    """``depth`` with the corners nearer the surface than ``CORNER_SNAP * h0`` put that far outside it; with the
+    corners' ``points`` and ``side`` (points -> (p,) bool, inside), a corner on a face with the medium on both
+    sides (a seam between parts) is put a hair inside instead: the eight points CORNER_SNAP h0 away along the
+    diagonals all fall inside there, where a face that bounds the medium has both sides (the
+    split sphere's two hemispheres meeting on the plane x = 0, on the lattice's planes, had been cut apart by
+    a void: 281 mm^2 of cut surface inside it and 5.3 % of its red light lost).
 
     Faces on the lattice's planes (a box at round coordinates) put corners on the surface, where the distance and
     the winding number's side are rounding: a hair outside, every cube on the inside has those corners on its cut
@@ -352,7 +357,17 @@ def snap_corner_depths(depth, h0: float):
     one dropped, and the face lost its boundary (a box of apple 100 x 100 x 20 mm at the origin read +43 % in the
     middle of its lit face, its cut surface 12,800 of 28,000 mm^2). The surface moves by at most 1e-4 h0."""
     tiny = CORNER_SNAP * float(h0)
-    return np.where(np.abs(depth) < tiny, -tiny, depth)
+    near = np.abs(depth) < tiny
+    out = np.where(near, -tiny, depth)
+    if side is not None and near.any():
+        idx = np.flatnonzero(near)
+        # the eight diagonal directions: none lies in a lattice plane through the corner, where a face on that plane
+        # would hold the probe itself
+        offsets = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)], dtype=np.float64) * tiny
+        probe = np.asarray(side((np.asarray(points)[idx][:, None, :] + offsets[None, :, :]).reshape(-1, 3)),
+                           dtype=bool).reshape(idx.size, 8)
+        out[idx[probe.all(axis=1)]] = tiny            # inside on every side: a seam inside the medium
+    return out
 
 
 def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict | None = None) -> Lattice:
@@ -444,7 +459,8 @@ def build_lattice(depth, lo, hi, grading: Grading, *, refine=None, stats: dict |
             need[ids[s8.any(axis=1) & ~s8.all(axis=1)].ravel()] = True
     if need.any():
         cd[need] = depth(pts[need], bnd, sign=np.where(inside[need], 1, -1).astype(np.int8))
-    cd = snap_corner_depths(cd, h0)          # before the cubes are kept or dropped by their corners' sides
+    cd = snap_corner_depths(cd, h0, pts, lambda q: depth(q, bnd, exact=None) > 0.0)   # before the cubes are kept
+    # or dropped by their corners' sides
     evaluated += n_corners
     keep0 = cd[fine_ids].max(axis=1) > 0.0 if fine_ids.size else np.zeros(0, dtype=bool)
     kept[0] = cand[keep0]
@@ -526,7 +542,10 @@ def _finish(grading, level, ijk, depth, known_grid, known_depth, h_cut):
     dep[np.isnan(dep)] = bound
     # a corner on the surface (faces on the lattice's planes: boxes at round coordinates) is put a hair outside,
     # so that rounding (of the distance, the winding number, a float32 file's coordinates) does not decide its side
-    dep = snap_corner_depths(dep, h0)
+    if depth is not None:
+        dep = snap_corner_depths(dep, h0, nodes, lambda q: depth(q, bound, exact=None) > 0.0)
+    else:
+        dep = snap_corner_depths(dep, h0)
     t2 = time.perf_counter()
     hanging, parents = _hanging_nodes(grid, level, ijk)
     shape = tuple(int(x) for x in hi - lo)

@@ -256,7 +256,7 @@ class PartsMedium(VaryingMedium):
     takes the medium of the part owning its centre (:meth:`~meshshade.parts.PartedMaterial.part_at`, the
     innermost part whose winding number is above 1/2), each sampling vertex that of its input face's part, each
     entry that of the sampling vertex where it enters (a beam: the nearest one), and the near field at a receiver
-    is tabulated in the receiver's medium. One index for all parts (MaterialError otherwise): the internal
+    is tabulated in the receiver's medium, each entry's power weighed in the entry's (eq. (134)). One index for all parts (MaterialError otherwise): the internal
     interfaces are index-matched."""
 
     def __init__(self, material):
@@ -350,6 +350,13 @@ class PartsMedium(VaryingMedium):
     def least_extinction(self):
         return np.min([np.asarray(m.sigma_t_prime, dtype=np.float64) for m in self.media], axis=0)
 
+    def _src_blend(self, src):
+        """The entries' media as one table each (the nearest sampling vertex's medium: eq. (134)), or None."""
+        if not ENTRY_MEDIUM or src["pos"].shape[0] == 0:
+            return None
+        _, i = self._tree.query(np.asarray(src["pos"], dtype=np.float64))
+        return _one_corner(self.sample_medium[i])
+
     def entry_medium(self, samples):
         """(k,) int: the medium where each entry enters (its sampling vertex's; a beam's nearest vertex's)."""
         k = np.empty(len(samples), dtype=np.int64)
@@ -384,33 +391,19 @@ class PartsMedium(VaryingMedium):
     def near_field(self, src, rec, spacing_mm):
         if len(self.media) == 1:
             return remainder_exitance(self.tables_at[0], src, rec, spacing_mm=spacing_mm)
-        out = np.zeros((rec["pos"].shape[0], 3))
-        pairs = 0
-        for j, tab in enumerate(self.tables_at):              # each receiver in its own medium, every entry
-            sel = np.flatnonzero(self.sample_medium == j)
-            if sel.size == 0:
-                continue
-            Mf, n = remainder_exitance(tab, src, _subset(rec, sel), spacing_mm=spacing_mm)
-            out[sel] = Mf
-            pairs += n
-        return out, pairs
+        # each receiver in its own medium's table, each entry's power in its own (eq. (134))
+        return remainder_exitance(self.tables_at, src, rec, spacing_mm=spacing_mm,
+                                  blend=_one_corner(self.sample_medium), src_blend=self._src_blend(src))
 
     def point_near_field(self, src, rec, points):
         if len(self.media) == 1:
             return remainder_exitance(self.tables_at[0], src, rec)[0]
         _, i = self._tree.query(np.asarray(points, dtype=np.float64))
-        k = self.sample_medium[i]
-        out = np.zeros((len(points), 3))
-        for j, tab in enumerate(self.tables_at):
-            sel = np.flatnonzero(k == j)
-            if sel.size:
-                out[sel] = remainder_exitance(tab, src, _subset(rec, sel))[0]
-        return out
+        return remainder_exitance(self.tables_at, src, rec, blend=_one_corner(self.sample_medium[i]),
+                                  src_blend=self._src_blend(src))[0]
 
 
-def _subset(rec, sel):
-    """The receivers ``sel`` of the receivers' dict ``rec`` (every per-receiver array taken at ``sel``)."""
-    n = rec["pos"].shape[0]
-    return {k: (v[sel] if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == n else v)
-            for k, v in rec.items()}
-
+def _one_corner(medium):
+    """(tables (n, 3, 1), weights (n, 3, 1)): each point's own medium's table, weight 1."""
+    n = len(medium)
+    return np.broadcast_to(np.asarray(medium, dtype=np.int64)[:, None, None], (n, 3, 1)).copy(), np.ones((n, 3, 1))
