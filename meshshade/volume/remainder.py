@@ -575,9 +575,12 @@ def _arg(a, dtype=np.float64):
 
 
 def _corners(blend, n, n_tables):
-    """(tables (n, 3, Q) int64, weights (n, 3, Q)) of a blend given as corners or as a node and the next (n, 3)."""
+    """(tables (n, 3, Q) int64, weights (n, 3, Q)) of a blend given as corners or as a node and the next (n, 3), a
+    ValueError naming the form for any other shape or a table past the last."""
     node, weight = np.asarray(blend[0], dtype=np.int64), np.asarray(blend[1], dtype=np.float64)
     if node.ndim == 2:
+        if node.shape != (n, 3) or weight.shape != (n, 3):
+            raise ValueError("blend: node (n, 3) in 0..len(tables) - 2 and weight (n, 3)")
         node, weight = np.stack([node, node + 1], axis=2), np.stack([1.0 - weight, weight], axis=2)
     if node.shape[:2] != (n, 3) or weight.shape != node.shape or node.min(initial=0) < 0 or \
             node.max(initial=0) > n_tables - 1:
@@ -639,22 +642,13 @@ def remainder_exitance(tables, src, rec, *, near_mm: float = NEAR_MM, theta: flo
         if len(tables) != 1:
             raise ValueError("several tables need the receivers' blend (node, weight)")
         node = weight = None
+    elif len(tables) == 1:          # one table: every weight on it, the one-table sum (checked all the same)
+        t, w = _corners(blend, n, 2 if np.ndim(blend[0]) == 2 else 1)
+        if np.any(w[t > 0] != 0.0):
+            raise ValueError("blend: with one table every weight is on it (node 0, weight 0)")
+        node = weight = None
     else:
-        node, weight = _arg(blend[0], np.int64), _arg(blend[1])
-        if node.ndim == 2:                # a node and the next: the corners' form
-            if node.shape != (n, 3) or weight.shape != (n, 3) or node.min(initial=0) < 0 or \
-                    node.max(initial=0) > max(len(tables) - 2, 0) or (len(tables) == 1 and np.any(weight != 0.0)):
-                raise ValueError("blend: node (n, 3) in 0..len(tables) - 2 and weight (n, 3), 0 with one table")
-            if len(tables) == 1:          # every weight 0: the one-table sum
-                node = weight = None
-            else:
-                node = _arg(np.stack([node, node + 1], axis=2), np.int64)
-                weight = _arg(np.stack([1.0 - weight, weight], axis=2))
-        elif node.ndim != 3 or node.shape[:2] != (n, 3) or weight.shape != node.shape or \
-                node.min(initial=0) < 0 or node.max(initial=0) > len(tables) - 1:
-            raise ValueError("blend: tables (n, 3, Q) in 0..len(tables) - 1 and weights of the same shape")
-        elif len(tables) == 1:            # every corner the one table: the one-table sum
-            node = weight = None
+        node, weight = (_arg(x, x.dtype) for x in _corners(blend, n, len(tables)))
     src_node = src_weight = None
     if src_blend is not None and node is not None:
         src_node, src_weight = (_arg(x, x.dtype) for x in _corners(src_blend, src["pos"].shape[0], len(tables)))
