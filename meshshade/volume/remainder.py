@@ -444,6 +444,37 @@ def _entry_kernel_typed(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, l
     return _receiver_values.py_func if isinstance(src_node, types.NoneType) else _entry_kernel
 
 
+def _same_medium(src_node, src_blend, j, rec_node, rec_blend, r):
+    """Whether entry j reads the same tables with the same weights as receiver r in every channel (then the pair's
+    two kernels are one); True without the entries' media (``src_node`` None): chosen by type (the overload)."""
+    if src_node is None:
+        return True
+    return _same_corners(src_node, src_blend, j, rec_node, rec_blend, r)
+
+
+@numba.njit(cache=True, inline="always")
+def _same_corners(src_node, src_blend, j, rec_node, rec_blend, r):
+    """:func:`_same_medium` for the entries' arrays."""
+    if src_node.shape[2] != rec_node.shape[2]:
+        return False
+    for c in range(3):
+        for q in range(src_node.shape[2]):
+            if src_node[j, c, q] != rec_node[r, c, q] or src_blend[j, c, q] != rec_blend[r, c, q]:
+                return False
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _always_same(src_node, src_blend, j, rec_node, rec_blend, r):
+    """:func:`_same_medium` without the entries' media."""
+    return True
+
+
+@overload(_same_medium, inline="always")
+def _same_medium_typed(src_node, src_blend, j, rec_node, rec_blend, r):
+    return (_always_same if isinstance(src_node, types.NoneType) else _same_corners).py_func
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_pos, src_n, src_p, src_area, src_a,
               src_cos, src_light, f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
@@ -529,12 +560,13 @@ def _traverse(rec_pos, rec_n, rec_a, rec_E, perm, lo, hi, child, box, agg, src_p
                     continue
                 sub = rec_E[r, src_light[j]] * src_area[j]
                 w = src_p[j] - sub
-                if w == 0.0 and (src_node is None or sub == 0.0):
+                same = _same_medium(src_node, src_blend, j, rec_node, rec_blend, r)
+                if w == 0.0 and (same or sub == 0.0):
                     continue
                 a = src_a[j] if src_a[j] > 0.0 else rec_a[r]
                 v0, v1, v2 = _pair_kernel(f, dtab, cosg, n_r, log_r0, dlog, radius, patch_radii, log_a0, dlog_a,
                                           src_cos[j], d, a, rec_node, rec_blend, r)
-                if src_node is None:
+                if same:
                     a0 += w * v0
                     a1 += w * v1
                     a2 += w * v2
