@@ -52,7 +52,9 @@ from meshshade.materials import CHANNELS, Material
 from meshshade.surface import cutoff_radii
 from meshshade.volume.inside import SurfaceVolume
 from meshshade.volume.resolution import volume_resolution
-from meshshade.volume.surface import split_long_edges
+from meshshade.raycast import make_scene
+from meshshade.volume.surface import SamplingSurface
+from meshshade.volume.thickness import surface_thickness
 from meshshade.volume.transport import BURIED_OFFSET_MM, SAMPLE_SPACING_OVER_H0
 
 __all__ = ["check_mesh", "volume_report", "format_check", "report_to_json", "VALIDITY_RHO_TOL", "PERCENTILES"]
@@ -182,9 +184,17 @@ def volume_report(mesh, material: Material | None = None) -> dict:
     if material is not None and not flat:
         res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm)
         spacing = SAMPLE_SPACING_OVER_H0 * res.h0
-        V, F, *_ = split_long_edges(mesh.vertices, mesh.faces, spacing)
+        S = SamplingSurface(mesh, spacing).samples
+        # where the lattice is finer (physics §15.2): the thin parts, and the edges of light where the material
+        # calls for it
+        thickness = surface_thickness(make_scene(S.vertices, S.faces), S.vertices, S.vertex_normals, res.h0)
+        thin = thickness < res.thin_below
+        area = S.vertex_areas
         out.update({"lattice_mm": float(res.h0), "lattice_limited_by": res.limited_by, "lattice_reason": res.reason,
-                    "sample_spacing_mm": float(spacing), "sampling_vertices": int(V.shape[0])})
+                    "sample_spacing_mm": float(spacing), "sampling_vertices": int(S.n_vertices),
+                    "thin_below_mm": float(res.thin_below),
+                    "thin_fraction": float(area[thin].sum() / max(float(area.sum()), 1e-300)),
+                    "edges_refined_mm": float(res.refine_radius)})
     return out
 
 
@@ -220,8 +230,13 @@ def format_check(report: dict) -> str:
         if v["buried_vertices"]:
             line += f", {v['buried_vertices']} vertices buried inside other parts (reported as 0)"
         if "lattice_mm" in v:
+            half = 0.5 * v["lattice_mm"]
+            finer = [f"on {100 * v['thin_fraction']:.1f}% of the surface (parts thinner than "
+                     f"{v['thin_below_mm']:.3g} mm)"]
+            if v["edges_refined_mm"] > 0:
+                finer.insert(0, f"within {v['edges_refined_mm']:.3g} mm of edges of light")
             line += (f"; lattice {v['lattice_mm']:.3g} mm ({v.get('lattice_reason', v['lattice_limited_by'])}), "
-                     "light sampled every "
+                     f"{half:.3g} mm {' and '.join(finer)}; light sampled every "
                      f"{v['sample_spacing_mm']:.3g} mm on {v['sampling_vertices']} points")
     lines.append(line)
     if "channels" not in report:

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from meshshade.pacing import run_in_blocks
-from meshshade.raycast.embree_direct import DirectEmbreeScene, occlusion_rows
-from meshshade.raycast.scene import _SceneBase
+from meshshade.raycast.embree_direct import DirectEmbreeScene, distance_rows, occlusion_rows
+from meshshade.raycast.scene import _SceneBase, _as_rays
 
 __all__ = ["EmbreeScene"]
 
@@ -106,6 +106,25 @@ class EmbreeScene(_SceneBase):
             face[keep] = out["primID"].astype(np.int64)
         face[face < 0] = -1
         return face
+
+    def first_hit_distances(self, origins, directions):
+        o, d = _as_rays(origins, directions)
+        d = d / np.linalg.norm(d, axis=1)[:, None]
+        out = np.full(o.shape[0], np.inf)
+        keep, o32, d32, t0 = self._local_rays(o, d)
+        if not o32.shape[0]:
+            return out
+        direct = self.direct
+        sub = np.empty(o32.shape[0])
+        if direct is not None:
+            run_in_blocks(lambda a, b: distance_rows(direct.intersect, direct.handle, o32, d32, sub, a, b),
+                          o32.shape[0], min_block=8192)
+        else:
+            tfar = np.full(o32.shape[0], 1e37, dtype=np.float32)
+            face = self._scene.run(o32, d32, dists=tfar)
+            sub = np.where(face >= 0, tfar.astype(np.float64), np.inf)
+        out[keep] = sub + t0[keep]
+        return out
 
     def _occluded(self, o, d, t_max):
         result = np.zeros(o.shape[0], dtype=bool)

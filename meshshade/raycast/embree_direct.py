@@ -26,7 +26,7 @@ import os
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["TFAR_MARGIN_REL", "DirectEmbreeScene", "rayhit_buffer", "trace", "occlusion_rows"]
+__all__ = ["TFAR_MARGIN_REL", "DirectEmbreeScene", "rayhit_buffer", "trace", "occlusion_rows", "distance_rows"]
 
 #: tfar margin of a boundary test, relative to the scene's scale (bbox diagonal): ``tfar = free path + margin``
 TFAR_MARGIN_REL = 1e-5
@@ -166,3 +166,14 @@ def occlusion_rows(intersect, scene, o32, d32, tfar, out, a, b):
     for j in range(a, b):
         out[j] = trace(intersect, scene, rh, rhi, o32[j, 0], o32[j, 1], o32[j, 2], d32[j, 0], d32[j, 1], d32[j, 2],
                        tfar[j]) >= 0
+
+
+@njit(nogil=True, **_NUMBA_OPTS)
+def distance_rows(intersect, scene, o32, d32, out, a, b):
+    """out[j] = the distance (mm) along the float32 ray j (relative to the scene's centre, unit direction) to the
+    first face it meets, inf where it meets none, for rays a .. b - 1, from this thread."""
+    rh, rhi = rayhit_buffer()
+    for j in range(a, b):
+        f = trace(intersect, scene, rh, rhi, o32[j, 0], o32[j, 1], o32[j, 2], d32[j, 0], d32[j, 1], d32[j, 2],
+                  np.float32(1e37))
+        out[j] = np.float64(rh[8]) if f >= 0 else np.inf

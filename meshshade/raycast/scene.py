@@ -202,6 +202,13 @@ class _SceneBase:
         face = self._brute_first_hit_faces(o, d) if exact else self._first_hit_faces(o, d)
         return self._hits_on_faces(o, d, face)
 
+    def first_hit_distances(self, origins, directions) -> np.ndarray:
+        """(n,) float64 mm: the distance along each ray (unit ``directions``) to the first face it meets, inf where
+        it meets none. The Embree scene casts them on the worker threads in float32 (about 1e-7 of the scene's
+        size); here the float64 :meth:`first_hit`."""
+        hits = self.first_hit(origins, directions)
+        return np.where(hits.hit, hits.t, np.inf)
+
     def occluded(self, origins, directions, t_max=np.inf) -> np.ndarray:
         """Whether each ray hits the mesh at a distance ``0 < t < t_max`` (mm along the unit direction).
 

@@ -115,7 +115,9 @@ def describe_result(result: BakeResult) -> str:
         why = s.get("volume_resolution_reason", s["volume_resolution_limited_by"])
         return (f"volume: {s['entry_samples']} entry samples; diffusion on {sum(cells)} cubes of "
                 f"{s['volume_resolution_mm']:.3g} mm ({why}; "
-                f"{cells[0] if cells else 0} of half that at edges of light), {s['volume_unknowns']} unknowns; "
+                f"{cells[0] if cells else 0} of half that at edges of light and in parts thinner than "
+                f"{s.get('volume_thin_below_mm', 0):.3g} mm, {100 * s.get('volume_thin_fraction', 0):.1f}% of the "
+                f"surface), {s['volume_unknowns']} unknowns; "
                 f"near field within {max(s['cutoff_mm']):.3g} mm ({s['near_field_pairs']} evaluations); entering "
                 f"{s['entering_power']:.4g} W, exitant {ex[0]:.4g}/{ex[1]:.4g}/{ex[2]:.4g} W (r/g/b); {t}")
     far = (f" (area lights: geodesic near zone within {max(s['near_mm']):.3g} mm, {s['far_field']} far field "

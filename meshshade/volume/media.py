@@ -288,10 +288,15 @@ class PartsMedium(VaryingMedium):
     def note_resolution(self, res, own) -> None:
         """Each medium's edges of light are refined as that medium alone would refine them, where the lattice's
         surface spacing does not already resolve them as finely: REFINE_EFOLDS decay lengths of its fastest
-        channel, if ``res.h0`` is coarser than half its own surface spacing (``own(medium).h0``), else not at
-        all (a marble part in a skin1 lattice: skin1's 0.84 mm is finer than marble's 1 mm at its edges)."""
+        channel, if ``res.h0`` is coarser than the spacing the medium alone has at its edges (half its own surface
+        spacing ``own(medium).h0`` where it refines them, the whole where it does not:
+        :data:`~meshshade.volume.resolution.EDGE_KAPPA_H`), else not at all (a marble part in a skin1 lattice:
+        skin1's 0.84 mm is finer than marble's own 1 mm)."""
+        def at_edges(r):
+            return r.h0 * (0.5 if r.refine_radius > 0 else 1.0)
+
         self._reach = np.array([REFINE_EFOLDS / float(np.max(m.medium.kappa))
-                                if res.h0 > 0.5 * own(m).h0 * (1.0 + 1e-9) else 0.0 for m in self.media])
+                                if res.h0 > at_edges(own(m)) * (1.0 + 1e-9) else 0.0 for m in self.media])
 
     def edge_reach(self, points):
         """(p,) mm: how far around each edge of light at ``points`` the lattice is refined (0: not at all): that of

@@ -34,11 +34,16 @@ RESOLVED_KAPPA_H = 1.0
 #: profile beyond the correction's reach: kappa h0 = LONG_KAPPA_H there, but no finer than LONG_DECAY_MM (so
 #: h0 = min(1/kappa, max(LONG_KAPPA_H/kappa, LONG_DECAY_MM)), continuous in kappa). Measured (issue 47): a pencil
 #: beam on a 100 mm sphere of sigma_s' = 1, sigma_a = 0.01 /mm (1/kappa = 5.75 mm) against the exact series, mean
-#: error over vertices above 1e-4 of the peak 0.46 at kappa h0 = 1, 0.050 at 0.5, 0.023 at 0.25; blub at 80 mm in
-#: marble under a sun against a 4e6-photon Monte Carlo, lit error 16 / 19 / 22 % at h0 = 3.4 mm, 5.9 / 6.6 / 7.4 %
-#: at 2 mm (the reference's own noise about 3 %), total power +5.6 / +8.0 / +10.2 % and -1.4 / -1.1 / -0.8 %.
-#: Skin (1/kappa 0.78 mm in skin1's blue) is unchanged.
-LONG_KAPPA_H, LONG_DECAY_MM = 0.5, 1.0
+#: error over vertices above 1e-4 of the peak 0.46 at kappa h0 = 1, 0.050 at 0.5, 0.023 at 0.25. At 0.5 with the
+#: edges of light at h0 / 2 (stop 53), marble's 2 mm lattice read 1.0-1.2x the 2e6-photon Monte Carlo's lit error on
+#: spot50 and blub80 (its thin parts +10 % at 1 mm, the sources' sideways spread h0 / 2 = 1 mm three of marble's
+#: mean free paths: docs/benchmarks.md, stop 58); at 0.25 (marble 1 mm everywhere at the surface, no finer at the
+#: edges of light: EDGE_KAPPA_H) 0.6-0.8x at 1.1-1.9x the time.
+LONG_KAPPA_H, LONG_DECAY_MM = 0.25, 1.0
+#: the edges of light are refined (h0 / 2 within REFINE_EFOLDS decay lengths) only where the fastest channel is
+#: resolved more coarsely than kappa h0 = EDGE_KAPPA_H: a lattice at kappa h0 <= 1/2 resolves an edge as finely as
+#: the refinement of one at kappa h0 = 1 does
+EDGE_KAPPA_H = 0.5
 #: a coarser level is used where the channels it does not resolve (kappa h > GRADE_KAPPA_H) have decayed by
 #: exp(-DECAY_EFOLDS)
 GRADE_KAPPA_H, DECAY_EFOLDS = 1.5, 2.0
@@ -59,14 +64,18 @@ LEVELS = 7
 #: fastest-decaying channel (2 would save 5-10 % of the 141k head's time at equal Monte Carlo errors, but the sun-lit
 #: ball's terminator reads 15.6 % off at worst instead of 10.7 %: tests/volume/test_volume_sun_ball.py)
 REFINE_EFOLDS = 3.0
+#: thin parts (docs/physics.md §15.2, eq. (135)): where the object is thinner (its shape diameter,
+#: :mod:`meshshade.volume.thickness`) than THIN_CELLS_ACROSS surface cubes h0 and than THIN_DECAYS decay lengths of
+#: the channel that reaches farthest (its light crosses the part), the lattice is twice as fine (level 0, h0 / 2)
+THIN_CELLS_ACROSS, THIN_DECAYS = 4.0, 2.0
 
 
 class VolumeResolution:
     """The lattice's surface spacing ``h0`` mm and why it is what it is (``limited_by``: "material", "object",
     "budget" or "given"); ``grading``: the lattice's levels with level 0 at h0 / 2, used only where the light
     calls for it (edges of light and shadow, beams: REFINE_EFOLDS decay lengths of the fastest channel around
-    them), level 1 (h0) at the surface elsewhere; ``spread`` mm the sources' sideways spread, ``kappa`` (3,)
-    1/mm, ``refine_radius`` mm."""
+    them) and in thin parts (thinner than ``thin_below`` mm), level 1 (h0) at the surface elsewhere; ``spread`` mm
+    the sources' sideways spread, ``kappa`` (3,) 1/mm, ``refine_radius`` mm."""
 
     def __init__(self, h0, grading, spread, kappa, limited_by, requested, reason: str = ""):
         self.h0, self.grading, self.spread, self.kappa = h0, grading, spread, kappa
@@ -74,10 +83,17 @@ class VolumeResolution:
         #: one line: what set ``h0`` (the channel and medium whose decay length it resolves, the object's thinnest
         #: extent, the budget, or the caller)
         self.reason = reason or limited_by
-        self.refine_radius = REFINE_EFOLDS / float(np.max(kappa))
+        #: mm around each edge of light refined to h0 / 2 (0: the edges are resolved at h0, EDGE_KAPPA_H)
+        self.refine_radius = (REFINE_EFOLDS / float(np.max(kappa)) if float(np.max(kappa)) * h0 > EDGE_KAPPA_H
+                              else 0.0)
+        #: mm: a part thinner than this is resolved at h0 / 2 (THIN_CELLS_ACROSS cubes of h0, and THIN_DECAYS decay
+        #: lengths of the farthest-reaching channel, whichever is less)
+        self.thin_below = min(THIN_CELLS_ACROSS * h0, THIN_DECAYS / float(np.min(kappa)))
 
     def describe(self) -> str:
-        return (f"lattice {self.h0:.3g} mm ({self.limited_by}; {0.5 * self.h0:.3g} mm at edges of light), "
+        where = ("at edges of light and in " if self.refine_radius > 0 else "in ") + "parts thinner than"
+        return (f"lattice {self.h0:.3g} mm ({self.limited_by}; {0.5 * self.h0:.3g} mm {where} "
+                f"{self.thin_below:.3g} mm), "
                 f"sideways spread {self.spread:.3g} mm, {len(self.grading.bands)} levels to "
                 f"{self.grading.depth_max:.3g} mm")
 

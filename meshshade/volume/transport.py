@@ -28,6 +28,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
+from meshshade import memo
 from meshshade.errors import MeshshadeError
 from meshshade.kernels.fresnel import refract_in
 from meshshade.progress import kernel_interrupts
@@ -42,6 +43,7 @@ from meshshade.volume.remainder import RemainderTables, longest_edges, remainder
 from meshshade.volume.options import VolumeOptions
 from meshshade.volume.resolution import volume_resolution
 from meshshade.volume.surface import SamplingSurface
+from meshshade.volume.thickness import surface_thickness
 from meshshade.volume.uncollided import DEPTH_POINTS, FLOOR, PREFILTER_MARGIN, face_entries, uncollided_exitance
 
 __all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0", "NEAR_FIELD_NODES"]
@@ -89,6 +91,8 @@ class VolumeTransport:
         self.options = VolumeOptions()   # the resolution's and the solve's (build sets the ones it was given)
         self.lattice = self.assembly = self.operator = self.multigrid = None
         self.buried = self._buried_vertices()
+        self.scene = None             # the sampling surface's ray scene (:meth:`build` makes it for the thickness)
+        self.thin = np.zeros(surface.samples.n_vertices, dtype=bool)   # sampling vertices in thin parts
         self.stats = {
             "volume_resolution_mm": round(resolution.h0, 5), "volume_resolution_limited_by": resolution.limited_by,
             "volume_resolution_reason": resolution.reason,
@@ -121,15 +125,33 @@ class VolumeTransport:
         surface = SamplingSurface(mesh, SAMPLE_SPACING_OVER_H0 * res.h0 if sample_spacing is None else sample_spacing)
         inside = SurfaceVolume(mesh.vertices, mesh.nondegenerate_faces, surface.samples.vertices,
                                surface.spacing)
+        S = surface.samples
+        scene = memo.cached("scene", (id(S), "embree"), lambda: make_scene(S.vertices, S.faces), pins=(S,))
+        thickness = surface_thickness(scene, S.vertices, S.vertex_normals, res.h0)
         _lap(timings, "volume sampling", t, on_stage)
         t = time.perf_counter()
         # a varying medium: read on the sampling surface, its near field tabulated per medium node
         tables = RemainderTables(material, res.spread) if medium is None else medium.attach(mesh, surface, res.spread)
         _lap(timings, "near-field tables", t, on_stage)
         vt = cls(mesh, material, res, surface, inside, tables, timings, medium)
+        vt.note_thickness(thickness, scene)
         vt.on_stage = on_stage
         vt.options = options
         return vt
+
+    def note_thickness(self, thickness, scene=None):
+        """The sampling surface's ``thickness`` (n_s,) mm (its shape diameter, :mod:`meshshade.volume.thickness`):
+        the parts thinner than the resolution's ``thin_below`` are resolved at h0 / 2 (physics §15.2)."""
+        surf = self.surface.samples
+        self.scene = scene
+        self.thin = np.asarray(thickness) < self.resolution.thin_below
+        area = surf.vertex_areas
+        finite = np.isfinite(thickness)
+        self.stats.update({
+            "volume_thin_below_mm": round(float(self.resolution.thin_below), 4),
+            "volume_thin_fraction": round(float(area[self.thin].sum() / max(area.sum(), 1e-300)), 4),
+            "volume_thinnest_mm": round(float(np.min(thickness[finite])), 4) if finite.any() else None})
+        self._lattice_key = None
 
     def _buried_vertices(self):
         """(n,) bool: the mesh's vertices buried in another of its parts (only a mesh of several parts has them),
@@ -162,6 +184,33 @@ class VolumeTransport:
         pts = np.unique(e[sharp].ravel())
         return np.concatenate([surf.vertices[pts], samples.positions[~at_v]])
 
+    def _refinement(self, pts):
+        """The lattice's ``refine`` (cube centres (p, 3) -> bool (p,): level 0, h0 / 2, there): within the reach of
+        the edges of light ``pts`` (the resolution's ``refine_radius``, or each edge's medium's) and in the thin
+        parts (:meth:`note_thickness`: within half the thin parts' threshold of their sampling vertices, so across
+        them); None (level 0 everywhere) where the light has no edge."""
+        if not len(pts):
+            return None
+        h1 = 2.0 * self.resolution.grading.h0
+        r1 = 0.5 * math.sqrt(3.0) * h1
+        reaches = self.medium.edge_reach(pts) if self.medium is not None else None
+        if reaches is None:
+            reach = self.resolution.refine_radius
+            groups = [(cKDTree(pts), reach)] if reach > 0 else []
+        else:                                     # a varying medium: each edge its own medium's reach
+            groups = [(cKDTree(pts[reaches == r]), float(r)) for r in np.unique(reaches) if r > 0]
+        if self.thin.any():
+            groups.append((cKDTree(self.surface.samples.vertices[self.thin]), 0.5 * self.resolution.thin_below))
+
+        def refine(centres):
+            out = np.zeros(len(centres), dtype=bool)
+            for tree, r in groups:
+                todo = np.flatnonzero(~out)
+                d, _ = tree.query(centres[todo], distance_upper_bound=r + r1)
+                out[todo] = np.isfinite(d)
+            return out
+        return refine
+
     def prepare(self, samples):
         """Build the lattice, its matrices and multigrid for ``samples``' light unless the current one fits."""
         pts = self.edges_of_light(samples)
@@ -172,26 +221,7 @@ class VolumeTransport:
         timings = {}
         on_stage = self.on_stage
         t = time.perf_counter()
-        reach = self.resolution.refine_radius
-        refine = None
-        reaches = self.medium.edge_reach(pts) if self.medium is not None and len(pts) else None
-        if len(pts) and reaches is None:
-            tree = cKDTree(pts)
-            r1 = 0.5 * math.sqrt(3.0) * h1
-
-            def refine(centres):
-                d, _ = tree.query(centres, distance_upper_bound=reach + r1)
-                return np.isfinite(d)
-        elif len(pts):                         # a varying medium: each edge its own medium's reach
-            groups = [(cKDTree(pts[reaches == r]), float(r)) for r in np.unique(reaches) if r > 0]
-            r1 = 0.5 * math.sqrt(3.0) * h1
-
-            def refine(centres):
-                out = np.zeros(len(centres), dtype=bool)
-                for tree_r, r in groups:
-                    d, _ = tree_r.query(centres, distance_upper_bound=r + r1)
-                    out |= np.isfinite(d)
-                return out
+        refine = self._refinement(pts)
         lo, hi = self.mesh.bbox
         lattice = build_lattice(self.inside.depth, lo, hi, self.resolution.grading, refine=refine)
         _lap(timings, "volume lattice", t, on_stage)
@@ -289,7 +319,7 @@ class VolumeTransport:
         its faces as the Monte Carlo's photons enter (:func:`~meshshade.volume.uncollided.face_entries`)."""
         surf = self.surface.samples
         if scene is None:
-            scene = make_scene(surf.vertices, surf.faces)
+            scene = self.scene if self.scene is not None else make_scene(surf.vertices, surf.faces)
         ext = self.medium.extinction() if self.medium is not None else np.asarray(self.material.sigma_t_prime)
         depth = None
         if ext is None:                      # a varying extinction: a midpoint rule along each segment

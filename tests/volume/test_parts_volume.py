@@ -108,8 +108,9 @@ def test_each_part_shades_as_its_own_medium_away_from_the_seam():
     """A 20 mm sphere half skin1 (x > 0), half marble: skin1's short reach (1/kappa 0.8 mm in blue, 1.5 mm in
     green, 3.7 mm in red) makes its half, beyond 6 mm from the seam, shade as an all-skin1 sphere does there:
     measured 0.56 / 0.04 / 0.00 % mean over lit vertices (red reaches the marble a little), 1.5 / 0.3 / 0.1 %
-    here. (Marble's own lattice spacing, 2 mm, needs no refining in skin1's 0.84 mm lattice, so the skin half's
-    lattice is skin1's own.) The parts' media swapped, the entries' sources or the receivers' near field in the
+    here. (Marble's own lattice spacing, 1 mm with no finer cubes at its edges, needs no refining in skin1's
+    0.84 mm lattice, so the skin half's lattice is skin1's own; planted: marble's edges refined as at 2 mm with
+    h0 / 2 at its edges, 0.5 / 0.9 / 1.1 %, fails.) The parts' media swapped, the entries' sources or the receivers' near field in the
     wrong medium fail it by far."""
     V, F, part = split_sphere(20.0, (1.0, 0.0, 0.0), 12)
     mesh = _mesh(V, F)
