@@ -51,7 +51,7 @@ from meshshade.kernels.curvature import VALIDITY_TOL, curvature_ratios, curvatur
 from meshshade.materials import CHANNELS, Material
 from meshshade.surface import cutoff_radii
 from meshshade.volume.inside import SurfaceVolume
-from meshshade.volume.resolution import volume_resolution
+from meshshade.volume.resolution import THIN_PROBE_OVER_H0, volume_resolution
 from meshshade.raycast import make_scene
 from meshshade.volume.surface import SamplingSurface
 from meshshade.volume.thickness import surface_thickness
@@ -187,7 +187,8 @@ def volume_report(mesh, material: Material | None = None) -> dict:
         S = SamplingSurface(mesh, spacing).samples
         # where the lattice is finer (physics §15.2): the thin parts, and the edges of light where the material
         # calls for it
-        thickness = surface_thickness(make_scene(S.vertices, S.faces), S.vertices, S.vertex_normals, res.h0)
+        thickness = surface_thickness(make_scene(S.vertices, S.faces), S.vertices, S.vertex_normals,
+                                      THIN_PROBE_OVER_H0 * res.h0)
         thin = thickness < res.thin_below
         area = S.vertex_areas
         out.update({"lattice_mm": float(res.h0), "lattice_limited_by": res.limited_by, "lattice_reason": res.reason,

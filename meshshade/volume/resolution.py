@@ -68,6 +68,10 @@ REFINE_EFOLDS = 3.0
 #: :mod:`meshshade.volume.thickness`) than THIN_CELLS_ACROSS surface cubes h0 and than THIN_DECAYS decay lengths of
 #: the channel that reaches farthest (its light crosses the part), the lattice is twice as fine (level 0, h0 / 2)
 THIN_CELLS_ACROSS, THIN_DECAYS = 4.0, 2.0
+#: the thickness is cast from one sampling point per cube of THIN_PROBE_OVER_H0 h0 (half the thickness a thin part
+#: may have), each point taking its nearest probe's (:func:`meshshade.volume.thickness.surface_thickness`): on the
+#: hand at 190 mm in marble 0.48 s of a 5.3 s bake at h0, 0.12 s at 2 h0
+THIN_PROBE_OVER_H0 = 2.0
 
 
 class VolumeResolution:

@@ -41,7 +41,7 @@ from meshshade.volume.media import NEAR_FIELD_NODES, varying_medium
 from meshshade.volume.multigrid import ChannelOperator, Multigrid, solve_channels
 from meshshade.volume.remainder import RemainderTables, longest_edges, remainder_exitance
 from meshshade.volume.options import VolumeOptions
-from meshshade.volume.resolution import volume_resolution
+from meshshade.volume.resolution import THIN_PROBE_OVER_H0, volume_resolution
 from meshshade.volume.surface import SamplingSurface
 from meshshade.volume.thickness import surface_thickness
 from meshshade.volume.uncollided import DEPTH_POINTS, FLOOR, PREFILTER_MARGIN, face_entries, uncollided_exitance
@@ -127,7 +127,7 @@ class VolumeTransport:
                                surface.spacing)
         S = surface.samples
         scene = memo.cached("scene", (id(S), "embree"), lambda: make_scene(S.vertices, S.faces), pins=(S,))
-        thickness = surface_thickness(scene, S.vertices, S.vertex_normals, res.h0)
+        thickness = surface_thickness(scene, S.vertices, S.vertex_normals, THIN_PROBE_OVER_H0 * res.h0)
         _lap(timings, "volume sampling", t, on_stage)
         t = time.perf_counter()
         # a varying medium: read on the sampling surface, its near field tabulated per medium node
@@ -188,13 +188,13 @@ class VolumeTransport:
         """The lattice's ``refine`` (cube centres (p, 3) -> bool (p,): level 0, h0 / 2, there): within the reach of
         the edges of light ``pts`` (the resolution's ``refine_radius``, or each edge's medium's) and in the thin
         parts (:meth:`note_thickness`: within half the thin parts' threshold of their sampling vertices, so across
-        them); None (level 0 everywhere) where the light has no edge."""
-        if not len(pts):
-            return None
+        them); level 1 elsewhere. (Until stop 58 a light with no edge left the whole surface at level 0.)"""
         h1 = 2.0 * self.resolution.grading.h0
         r1 = 0.5 * math.sqrt(3.0) * h1
-        reaches = self.medium.edge_reach(pts) if self.medium is not None else None
-        if reaches is None:
+        reaches = self.medium.edge_reach(pts) if self.medium is not None and len(pts) else None
+        if not len(pts):
+            groups = []
+        elif reaches is None:
             reach = self.resolution.refine_radius
             groups = [(cKDTree(pts), reach)] if reach > 0 else []
         else:                                     # a varying medium: each edge its own medium's reach
