@@ -5,8 +5,8 @@ The finest spacing h0 is set by the material: the channel that decays fastest (k
 d'Eon's D: the material's :class:`~meshshade.medium.Medium`) is resolved at kappa h0 = RESOLVED_KAPPA_H where its
 decay length is within the near-field correction's reach, and at LONG_KAPPA_H (no finer than LONG_DECAY_MM) where
 it is longer and the lattice carries its profile (:func:`material_spacing`; skin1's blue: h0 = 0.84 mm; marble's:
-2 mm). On
-curved or small objects that is capped by the object (no coarser than its smallest extent over MIN_CELLS_ACROSS),
+1 mm). On curved or small objects that is capped by the object (no coarser than its smallest extent over
+MIN_CELLS_ACROSS),
 and on large ones raised so that the finest level holds at most ``budget`` cubes (the bake stays affordable; the
 cost it saves and the accuracy it costs are in docs/benchmarks.md). h0 is rounded to the world lattice of
 spacings 2^(k/4) mm, so a small change of the mesh (a defect) does not move the whole lattice.
@@ -15,6 +15,10 @@ Deeper, level l (spacing 2^l h0) is used from the depth where every channel it d
 GRADE_KAPPA_H) has fallen by exp(-DECAY_EFOLDS), and where the 2:1 grading allows; nothing is kept below
 TRUNCATION_EFOLDS decay lengths of the channel that reaches farthest (a no-flux cut there changes the surface by
 exp(-2 TRUNCATION_EFOLDS)). The sources' sideways spread is SPREAD_OVER_H0 h0.
+
+The surface is at h0 except where the light or the shape calls for h0 / 2: around the edges of light where the
+fastest channel is resolved more coarsely than kappa h0 = EDGE_KAPPA_H (``refine_radius``), and in the parts
+thinner than ``thin_below`` (eq. (135); the thickness: :mod:`meshshade.volume.thickness`).
 """
 from __future__ import annotations
 
@@ -35,10 +39,10 @@ RESOLVED_KAPPA_H = 1.0
 #: h0 = min(1/kappa, max(LONG_KAPPA_H/kappa, LONG_DECAY_MM)), continuous in kappa). Measured (issue 47): a pencil
 #: beam on a 100 mm sphere of sigma_s' = 1, sigma_a = 0.01 /mm (1/kappa = 5.75 mm) against the exact series, mean
 #: error over vertices above 1e-4 of the peak 0.46 at kappa h0 = 1, 0.050 at 0.5, 0.023 at 0.25. At 0.5 with the
-#: edges of light at h0 / 2 (stop 53), marble's 2 mm lattice read 1.0-1.2x the 2e6-photon Monte Carlo's lit error on
-#: spot50 and blub80 (its thin parts +10 % at 1 mm, the sources' sideways spread h0 / 2 = 1 mm three of marble's
+#: edges of light at h0 / 2 (stop 53), marble's 2 mm lattice read 0.9-1.2x the 2e6-photon Monte Carlo's lit error on
+#: spot50 and blub80 (its thin parts 14-19 % off, the sources' sideways spread h0 / 2 = 1 mm three of marble's
 #: mean free paths: docs/benchmarks.md, stop 58); at 0.25 (marble 1 mm everywhere at the surface, no finer at the
-#: edges of light: EDGE_KAPPA_H) 0.6-0.8x at 1.1-1.9x the time.
+#: edges of light: EDGE_KAPPA_H) 0.57-0.74x on spot50, blub80, the hand and the head at 1.2-2.8x the time.
 LONG_KAPPA_H, LONG_DECAY_MM = 0.25, 1.0
 #: the edges of light are refined (h0 / 2 within REFINE_EFOLDS decay lengths) only where the fastest channel is
 #: resolved more coarsely than kappa h0 = EDGE_KAPPA_H: a lattice at kappa h0 <= 1/2 resolves an edge as finely as
