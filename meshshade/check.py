@@ -51,11 +51,10 @@ from meshshade.kernels.curvature import VALIDITY_TOL, curvature_ratios, curvatur
 from meshshade.materials import CHANNELS, Material
 from meshshade.surface import cutoff_radii
 from meshshade.volume.inside import SurfaceVolume
-from meshshade.volume.resolution import THIN_PROBE_OVER_H0, volume_resolution
 from meshshade.raycast import make_scene
+from meshshade.volume.resolution import volume_resolution
 from meshshade.volume.surface import SamplingSurface
-from meshshade.volume.thickness import surface_thickness
-from meshshade.volume.transport import BURIED_OFFSET_MM, SAMPLE_SPACING_OVER_H0
+from meshshade.volume.transport import BURIED_OFFSET_MM, SAMPLE_SPACING_OVER_H0, thin_parts
 
 __all__ = ["check_mesh", "volume_report", "format_check", "report_to_json", "VALIDITY_RHO_TOL", "PERCENTILES"]
 
@@ -185,16 +184,13 @@ def volume_report(mesh, material: Material | None = None) -> dict:
         res = volume_resolution(material, float(mesh.total_area), mesh.bbox_size_mm)
         spacing = SAMPLE_SPACING_OVER_H0 * res.h0
         S = SamplingSurface(mesh, spacing).samples
-        # where the lattice is finer (physics §15.2): the thin parts, and the edges of light where the material
-        # calls for it
-        thickness = surface_thickness(make_scene(S.vertices, S.faces), S.vertices, S.vertex_normals,
-                                      THIN_PROBE_OVER_H0 * res.h0)
-        thin = thickness < res.thin_below
-        area = S.vertex_areas
+        # where the lattice is finer (physics §15.2): the thin parts as the bake finds them, and the edges of light
+        # where the material calls for it
+        _, _, thin_fraction = thin_parts(S, res, make_scene(S.vertices, S.faces))
         out.update({"lattice_mm": float(res.h0), "lattice_limited_by": res.limited_by, "lattice_reason": res.reason,
                     "sample_spacing_mm": float(spacing), "sampling_vertices": int(S.n_vertices),
                     "thin_below_mm": float(res.thin_below),
-                    "thin_fraction": float(area[thin].sum() / max(float(area.sum()), 1e-300)),
+                    "thin_fraction": thin_fraction,
                     "edges_refined_mm": float(res.refine_radius)})
     return out
 

@@ -58,8 +58,8 @@ def shape_diameter(scene, points, normals) -> np.ndarray:
 def surface_thickness(scene, points, normals, spacing: float) -> np.ndarray:
     """(n,) mm: :func:`shape_diameter` at one of ``points`` per cube of side ``spacing`` mm (the first in each), and
     each point the value of the nearest such probe: the rays a surface sampled finer than ``spacing`` would cast
-    (a 292k-vertex sampling surface of the head scan at 1 mm: 1.8 s on 2 cores for every vertex) fall to about its
-    area over ``spacing`` squared."""
+    fall to about its area over ``spacing`` squared (the head scan's 292k-point sampling surface at 1 mm: every
+    vertex 1.56 s, one per 2 mm cube 0.29 s, on 2 threads; 2.71 / 0.42 s on one)."""
     from scipy.spatial import cKDTree
 
     points = np.asarray(points, dtype=np.float64)

@@ -46,7 +46,7 @@ from meshshade.volume.surface import SamplingSurface
 from meshshade.volume.thickness import surface_thickness
 from meshshade.volume.uncollided import DEPTH_POINTS, FLOOR, PREFILTER_MARGIN, face_entries, uncollided_exitance
 
-__all__ = ["VolumeTransport", "SAMPLE_SPACING_OVER_H0", "NEAR_FIELD_NODES"]
+__all__ = ["VolumeTransport", "thin_parts", "SAMPLE_SPACING_OVER_H0", "NEAR_FIELD_NODES"]
 
 #: the sampling surface's longest edge, in units of the lattice's spacing h0: the entries' sources are spread
 #: sideways by h0 / 2 (eq. (100)), and entries up to 2 h0 apart (4 spreads) left a ripple at the entries, where the
@@ -63,6 +63,19 @@ def _lap(timings, name, t, on_stage):
     timings[name] = time.perf_counter() - t
     if on_stage is not None:
         on_stage(name)
+
+
+def thin_parts(samples, resolution, scene):
+    """(thickness (n_s,) mm, thin (n_s,) bool, the thin share of the area) of the sampling surface ``samples`` (a
+    :class:`~meshshade.geometry.mesh.Mesh`) with its ray ``scene``: its shape diameter cast from one vertex per cube
+    of THIN_PROBE_OVER_H0 h0 (:func:`~meshshade.volume.thickness.surface_thickness`), thin below the
+    ``resolution``'s ``thin_below`` (physics §15.2, eq. (135)). What the bake refines and ``meshshade check``
+    reports."""
+    thickness = surface_thickness(scene, samples.vertices, samples.vertex_normals,
+                                  THIN_PROBE_OVER_H0 * resolution.h0)
+    thin = thickness < resolution.thin_below
+    area = samples.vertex_areas
+    return thickness, thin, float(area[thin].sum() / max(float(area.sum()), 1e-300))
 
 
 class VolumeTransport:
@@ -127,29 +140,25 @@ class VolumeTransport:
                                surface.spacing)
         S = surface.samples
         scene = memo.cached("scene", (id(S), "embree"), lambda: make_scene(S.vertices, S.faces), pins=(S,))
-        thickness = surface_thickness(scene, S.vertices, S.vertex_normals, THIN_PROBE_OVER_H0 * res.h0)
+        thin = thin_parts(S, res, scene)
         _lap(timings, "volume sampling", t, on_stage)
         t = time.perf_counter()
         # a varying medium: read on the sampling surface, its near field tabulated per medium node
         tables = RemainderTables(material, res.spread) if medium is None else medium.attach(mesh, surface, res.spread)
         _lap(timings, "near-field tables", t, on_stage)
         vt = cls(mesh, material, res, surface, inside, tables, timings, medium)
-        vt.note_thickness(thickness, scene)
+        vt._note_thin(*thin, scene)
         vt.on_stage = on_stage
         vt.options = options
         return vt
 
-    def note_thickness(self, thickness, scene=None):
-        """The sampling surface's ``thickness`` (n_s,) mm (its shape diameter, :mod:`meshshade.volume.thickness`):
-        the parts thinner than the resolution's ``thin_below`` are resolved at h0 / 2 (physics §15.2)."""
-        surf = self.surface.samples
-        self.scene = scene
-        self.thin = np.asarray(thickness) < self.resolution.thin_below
-        area = surf.vertex_areas
+    def _note_thin(self, thickness, thin, fraction, scene):
+        """The sampling surface's :func:`thin_parts`: they are resolved at h0 / 2 (:meth:`_refinement`)."""
+        self.scene, self.thin = scene, thin
         finite = np.isfinite(thickness)
         self.stats.update({
             "volume_thin_below_mm": round(float(self.resolution.thin_below), 4),
-            "volume_thin_fraction": round(float(area[self.thin].sum() / max(area.sum(), 1e-300)), 4),
+            "volume_thin_fraction": round(fraction, 4),
             "volume_thinnest_mm": round(float(np.min(thickness[finite])), 4) if finite.any() else None})
         self._lattice_key = None
 
@@ -187,7 +196,7 @@ class VolumeTransport:
     def _refinement(self, pts):
         """The lattice's ``refine`` (cube centres (p, 3) -> bool (p,): level 0, h0 / 2, there): within the reach of
         the edges of light ``pts`` (the resolution's ``refine_radius``, or each edge's medium's) and in the thin
-        parts (:meth:`note_thickness`: within half the thin parts' threshold of their sampling vertices, so across
+        parts (:func:`thin_parts`: within half the thin parts' threshold of their sampling vertices, so across
         them); level 1 elsewhere. (Until stop 58 a light with no edge left the whole surface at level 0.)"""
         h1 = 2.0 * self.resolution.grading.h0
         r1 = 0.5 * math.sqrt(3.0) * h1
